@@ -1,0 +1,1 @@
+//! Shared helpers for robcal's host tests: independent batch references.
