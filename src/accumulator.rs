@@ -251,6 +251,53 @@ impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
         Ok(())
     }
 
+    /// Adds the moments of `n` rows that all carry the same weight `w`:
+    /// `Λ += w² S`, `η += w² u`, `Σ Δpᵀ W² Δp += w² yy`, and, with `σ`,
+    /// `M += w⁴ σ² S`. `s_upper` is `S = Σ b bᵀ` (upper triangle), `u = Σ b y`,
+    /// `yy = Σ y²`. Used by [`crate::grouped`] to re-weight without raw data.
+    pub(crate) fn add_moments(
+        &mut self,
+        s_upper: &SMatrix<T, N, N>,
+        u: &SVector<T, N>,
+        yy: T,
+        n: usize,
+        w: T,
+        sigma: Option<T>,
+    ) -> Result<(), Error> {
+        if !w.is_finite() || sigma.is_some_and(|s| !s.is_finite()) {
+            return Err(Error::NonFinite { what: "weight" });
+        }
+        if w < T::zero() {
+            return Err(Error::NotPositive { what: "weight" });
+        }
+        let w2 = w * w;
+        if n == 0 || w2 == T::zero() {
+            return Ok(());
+        }
+        let m2 = sigma.map(|s| w2 * w2 * s * s);
+        let new_yy = self.yy + w2 * yy;
+        let ok = new_yy.is_finite()
+            && (0..N).all(|i| {
+                (self.info[(i, i)] + w2 * s_upper[(i, i)]).is_finite()
+                    && (self.eta[i] + w2 * u[i]).is_finite()
+                    && m2.map_or(true, |m2| {
+                        (self.middle[(i, i)] + m2 * s_upper[(i, i)]).is_finite()
+                    })
+            });
+        if !ok {
+            return Err(Error::NonFinite { what: "overflow" });
+        }
+        self.info += s_upper * w2;
+        self.eta += u * w2;
+        self.yy = new_yy;
+        self.equations += n;
+        if let Some(m2) = m2 {
+            self.middle += s_upper * m2;
+            self.sigma_rows += n;
+        }
+        Ok(())
+    }
+
     /// `Λ = Σ Bᵀ W² B` (eq. 10), the full symmetric matrix.
     #[must_use]
     pub fn information(&self) -> SMatrix<T, N, N> {
@@ -308,7 +355,13 @@ impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
                 parameters,
             });
         }
-        solve::solve(&self.information(), &self.eta, self.yy, self.equations, active)
+        solve::solve(
+            &self.information(),
+            &self.eta,
+            self.yy,
+            self.equations,
+            active,
+        )
     }
 }
 

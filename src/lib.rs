@@ -2,6 +2,9 @@
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+// Index loops mirror the matrix formulas of the paper; iterator chains over
+// three parallel arrays would hide them.
+#![allow(clippy::needless_range_loop)]
 
 // How data flows through the crate (the paper's equation numbers):
 //
@@ -23,10 +26,14 @@
 pub mod accumulator;
 pub mod chain;
 mod error;
+pub mod grouped;
+pub mod irls;
 pub mod solve;
 pub mod weights;
 
 pub use accumulator::{Accumulator, Block};
 pub use chain::{Chain, Joint, JointKind, LinkInertia};
 pub use error::Error;
+pub use grouped::GroupedStats;
+pub use irls::{Fit, IrlsSettings, Iteration};
 pub use solve::Solution;
