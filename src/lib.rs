@@ -25,10 +25,13 @@
 
 pub mod accumulator;
 pub mod chain;
+pub mod diagnose;
 mod error;
 pub mod grouped;
 pub mod irls;
+pub mod kr270;
 pub mod solve;
+pub mod stats;
 pub mod weights;
 
 pub use accumulator::{Accumulator, Block};
