@@ -22,7 +22,11 @@
 
 pub mod accumulator;
 pub mod chain;
+pub mod elastostatic;
 mod error;
+pub mod geometric;
+pub mod kinematics;
+pub mod layout;
 pub mod solve;
 pub mod weights;
 
