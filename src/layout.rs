@@ -446,6 +446,11 @@ pub struct IdentifiabilitySettings<T: RealField + Copy> {
     /// is at least this (in absolute value) are reported as absorbing it.
     /// Default 0.05.
     pub absorb_threshold: T,
+    /// A parameter whose `Λᵢᵢ ≤ negligible · maxₖ Λₖₖ` carries no
+    /// information (its column, in layout units, is below `√negligible` of
+    /// the largest: rounding noise, e.g. the torque of a vertical force on a
+    /// vertical axis) and is dropped without absorbers. Default `ε`.
+    pub negligible: T,
     /// Pivot order.
     pub pivoting: Pivoting,
 }
@@ -455,6 +460,7 @@ impl<T: RealField + Copy> Default for IdentifiabilitySettings<T> {
         Self {
             tolerance: crate::solve::pivot_tolerance(),
             absorb_threshold: nalgebra::convert(0.05),
+            negligible: T::default_epsilon(),
             pivoting: Pivoting::LayoutOrder,
         }
     }
@@ -483,7 +489,7 @@ pub struct Dropped<T: RealField + Copy> {
     pub param: usize,
     /// `1 − R²` of its scaled column regressed on all kept parameters: 0 =
     /// fully absorbed. 0 with no absorbers: the column carries no
-    /// information at all (`Λᵢᵢ = 0`).
+    /// information (`Λᵢᵢ` negligible, see [`IdentifiabilitySettings::negligible`]).
     pub residual: T,
     /// The kept parameters that absorb it, largest first (at most
     /// [`MAX_ABSORBERS`]).
@@ -542,12 +548,17 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
     // Scaling; parameters without information are dropped outright.
     let mut s = [T::zero(); N];
     let mut open = [false; N];
+    let mut dmax_info = T::zero();
+    for i in (0..N).filter(|&i| candidates[i]) {
+        dmax_info = dmax_info.max(lambda[(i, i)]);
+    }
+    let floor = settings.negligible * dmax_info;
     for i in 0..N {
         if !candidates[i] {
             continue;
         }
         let d = lambda[(i, i)];
-        if d > T::zero() {
+        if d > floor && d > T::zero() {
             s[i] = T::one() / d.sqrt();
             open[i] = true;
         } else {
@@ -613,6 +624,7 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
             absorbed_by: heapless::Vec::new(),
         };
         if s[d] > T::zero() {
+            // Regression on the kept columns (an informative column).
             let rhs =
                 nalgebra::SVector::<T, N>::from_fn(
                     |i, _| if kept[i] { a[(i, d)] } else { T::zero() },
