@@ -308,7 +308,13 @@ impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
                 parameters,
             });
         }
-        solve::solve(&self.information(), &self.eta, self.yy, self.equations, active)
+        solve::solve(
+            &self.information(),
+            &self.eta,
+            self.yy,
+            self.equations,
+            active,
+        )
     }
 }
 

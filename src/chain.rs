@@ -95,18 +95,26 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// [`Error::NonFinite`] when the joint holds a non-finite number. The
     /// chain is unchanged on error.
     pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::Error> {
-        let finite = joint.origin.translation.vector.iter().all(|v| v.is_finite())
+        let finite = joint
+            .origin
+            .translation
+            .vector
+            .iter()
+            .all(|v| v.is_finite())
             && joint.origin.rotation.coords.iter().all(|v| v.is_finite())
             && joint.axis.iter().all(|v| v.is_finite())
-            && joint
-                .link
-                .map_or(true, |l| l.mass_kg.is_finite() && l.com_m.iter().all(|v| v.is_finite()));
+            && joint.link.map_or(true, |l| {
+                l.mass_kg.is_finite() && l.com_m.iter().all(|v| v.is_finite())
+            });
         if !finite {
             return Err(crate::Error::NonFinite { what: "joint" });
         }
         self.joints
             .push(joint)
-            .map_err(|_| crate::Error::CapacityExceeded { what: "chain joints", capacity: J })
+            .map_err(|_| crate::Error::CapacityExceeded {
+                what: "chain joints",
+                capacity: J,
+            })
     }
 
     /// Sets the fixed transform from the last joint frame to the tip frame.

@@ -110,7 +110,9 @@ pub fn solve<T: RealField + Copy, const N: usize>(
     active: &Active<N>,
 ) -> Result<Solution<T, N>, Error> {
     if !(lambda.iter().all(|v| v.is_finite()) && eta.iter().all(|v| v.is_finite())) {
-        return Err(Error::NonFinite { what: "information" });
+        return Err(Error::NonFinite {
+            what: "information",
+        });
     }
     // Scale to unit diagonal; inactive parameters become decoupled unit rows.
     let mut s = SVector::<T, N>::repeat(T::one());
@@ -194,7 +196,11 @@ fn cholesky_checked<T: RealField + Copy, const N: usize>(
             d -= l[(j, k)] * l[(j, k)];
         }
         if !(d > tol) {
-            let rcond = if dmax > T::zero() { d.max(T::zero()) / dmax } else { T::zero() };
+            let rcond = if dmax > T::zero() {
+                d.max(T::zero()) / dmax
+            } else {
+                T::zero()
+            };
             return Err(Error::NotIdentifiable {
                 column: j,
                 rcond: nalgebra::try_convert::<T, f64>(rcond).unwrap_or(0.0),

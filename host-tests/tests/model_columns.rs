@@ -30,7 +30,11 @@ fn fd(f: impl Fn(f64) -> Vector3<f64>) -> Vector3<f64> {
 }
 
 fn vee(w: &Matrix3<f64>) -> Vector3<f64> {
-    Vector3::new(w[(2, 1)] - w[(1, 2)], w[(0, 2)] - w[(2, 0)], w[(1, 0)] - w[(0, 1)]) * 0.5
+    Vector3::new(
+        w[(2, 1)] - w[(1, 2)],
+        w[(0, 2)] - w[(2, 0)],
+        w[(1, 0)] - w[(0, 1)],
+    ) * 0.5
 }
 
 fn geometric_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
@@ -120,7 +124,13 @@ fn geometric_columns_match_finite_differences() {
 /// Reference joint torques by virtual work: `τⱼ = ∂(F·c(q))/∂qⱼ + M·ωⱼ`, with
 /// `c` a point fixed to the tip and `ωⱼ` the tip's angular velocity per unit
 /// `q̇ⱼ`, both by central differences of the reference model.
-fn ref_torques(robot: &RefRobot, q: &[f64], c_tip: [f64; 3], f: Vector3<f64>, m: Vector3<f64>) -> Vec<f64> {
+fn ref_torques(
+    robot: &RefRobot,
+    q: &[f64],
+    c_tip: [f64; 3],
+    f: Vector3<f64>,
+    m: Vector3<f64>,
+) -> Vec<f64> {
     let zero = Perturb::zero(robot.joints.len());
     (0..q.len())
         .map(|j| {
@@ -150,12 +160,21 @@ fn torque_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
         let frames = chain.frames(q).unwrap();
         let c = frames.point_m(&v(com));
         let mut tau = [0.0; J];
-        let w = Wrench { force_n: f, point_m: c, moment_nm: m };
+        let w = Wrench {
+            force_n: f,
+            point_m: c,
+            moment_nm: m,
+        };
         joint_torques(&frames, &w, &mut tau).unwrap();
         let r = ref_torques(robot, q, com, f, m);
         for j in 0..n {
             // FD of positions of ~3 m times forces of 2.5 kN: ~1e-9 · 2500.
-            assert!((tau[j] - r[j]).abs() < 1e-5, "joint {j}: {} vs {}", tau[j], r[j]);
+            assert!(
+                (tau[j] - r[j]).abs() < 1e-5,
+                "joint {j}: {} vs {}",
+                tau[j],
+                r[j]
+            );
         }
         // The robot's own weight: τⱼ = ∂(Σ m_l g·c_l(q))/∂qⱼ.
         let mut tg = [0.0; J];
@@ -177,7 +196,11 @@ fn torque_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
                 Vector3::new(e, 0.0, 0.0)
             }))
             .x;
-            assert!((tg[j] - r).abs() < 1e-5 * (1.0 + r.abs()), "gravity {j}: {} vs {r}", tg[j]);
+            assert!(
+                (tg[j] - r).abs() < 1e-5 * (1.0 + r.abs()),
+                "gravity {j}: {} vs {r}",
+                tg[j]
+            );
         }
     }
 }
@@ -219,7 +242,12 @@ fn compliance_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>], k: &[f6
                 assert_close(cols[j], r, TOL * (1.0 + tau[j].abs()), "compliance column");
             }
             // The exact deflected pose p(q + δq) − p(q), δqⱼ = kⱼτⱼ.
-            let qd: Vec<f64> = q.iter().zip(&tau).zip(k).map(|((q, t), k)| q + k * t).collect();
+            let qd: Vec<f64> = q
+                .iter()
+                .zip(&tau)
+                .zip(k)
+                .map(|((q, t), k)| q + k * t)
+                .collect();
             let exact = robot.point(&qd, &zero, marker) - robot.point(q, &zero, marker);
             let lin: Vector3<f64> = cols.iter().zip(k).map(|(c, k)| c * *k).sum();
             assert!(exact.norm() > 1e-9, "deflection too small to test");

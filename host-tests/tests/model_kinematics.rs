@@ -80,12 +80,21 @@ fn kr270_a2_minus_90_deg_is_upper_arm_vertical() {
 #[test]
 fn wrong_length_or_non_finite_q_is_an_error() {
     let chain: Chain<f64, 6> = kr270().chain();
-    assert!(matches!(chain.frames(&[0.0; 5]), Err(Error::Mismatch { .. })));
-    assert!(matches!(chain.frames(&[0.0; 7]), Err(Error::Mismatch { .. })));
+    assert!(matches!(
+        chain.frames(&[0.0; 5]),
+        Err(Error::Mismatch { .. })
+    ));
+    assert!(matches!(
+        chain.frames(&[0.0; 7]),
+        Err(Error::Mismatch { .. })
+    ));
     let mut q = [0.0; 6];
     q[3] = f64::NAN;
     assert!(matches!(chain.frames(&q), Err(Error::NonFinite { .. })));
-    assert!(matches!(chain.frames(&[0.0; 6]).unwrap().joint(6), Err(Error::OutOfRange { .. })));
+    assert!(matches!(
+        chain.frames(&[0.0; 6]).unwrap().joint(6),
+        Err(Error::OutOfRange { .. })
+    ));
 }
 
 #[test]
