@@ -591,7 +591,7 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
         let Some(p) = pick else { break };
         open[p] = false;
         let d = r[(p, p)];
-        if !(d > settings.tolerance) {
+        if d.partial_cmp(&settings.tolerance) != Some(core::cmp::Ordering::Greater) {
             dropped_flag[p] = true;
             continue;
         }
@@ -677,7 +677,7 @@ fn cholesky<T: RealField + Copy, const N: usize>(a: &SMatrix<T, N, N>) -> Option
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > T::zero()) {
+        if d.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) {
             return None;
         }
         let ljj = d.sqrt();

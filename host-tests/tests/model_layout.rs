@@ -98,13 +98,8 @@ fn paper_experiment_rows_recover_the_compliances() {
                 };
                 assert_close(b.column(i).into_owned(), want, 1e-15, "k2 bin column");
             }
-            for j in 2..6 {
-                assert_close(
-                    b.column(3 + j).into_owned(),
-                    si[j] * 1e-6,
-                    1e-15,
-                    "k column",
-                );
+            for (j, col) in si.iter().enumerate().skip(2) {
+                assert_close(b.column(3 + j).into_owned(), col * 1e-6, 1e-15, "k column");
             }
             acc.update(&Block::new(b, b * k)).unwrap();
         }
