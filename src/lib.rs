@@ -8,10 +8,12 @@
 
 // How data flows through the crate (the paper's equation numbers):
 //
-//   chain          robot geometry, forward kinematics        (URDF)
+//   chain,         robot geometry, forward kinematics        (URDF)
+//   kinematics
 //     ↓
 //   geometric,     identification rows  Bᵢ = [Jᵢ  Aᵢ]         (eq. 2, 3, 4)
-//   elastostatic
+//   elastostatic,  named by `layout`, which also reports what the data
+//   layout         cannot identify
 //     ↓
 //   accumulator    Λ = Σ Bᵀ W² B,  η = Σ Bᵀ W² Δp              (eq. 10)
 //     ↓
@@ -20,16 +22,25 @@
 //   grouped, irls  per-configuration, per-axis statistics and the
 //                  iteratively reweighted fit                 (eq. 14, section 5)
 //
+//   diagnose,      does an effect the model lacks explain the residuals?
+//   stats          nested F tests from the accumulated cross-products
+//
+//   kr270          the paper's published numbers (section 5)
+//
 // Everything above is no_std and allocation-free. With the `std` feature,
 // `io` reads the data contract's files (URDF, setup TOML, measurement CSV).
 
 pub mod accumulator;
 pub mod chain;
 pub mod diagnose;
+pub mod elastostatic;
 mod error;
+pub mod geometric;
 pub mod grouped;
 pub mod irls;
+pub mod kinematics;
 pub mod kr270;
+pub mod layout;
 pub mod solve;
 pub mod stats;
 pub mod weights;

@@ -1,0 +1,284 @@
+//! Geometric (eq. 2) and elastostatic (eq. 3) columns against central finite
+//! differences of the independent 4×4 reference model (`model_common`).
+
+mod model_common;
+
+use model_common::*;
+use nalgebra::{Matrix3, Vector3};
+use robcal::elastostatic::{
+    compliance_columns, deflection_m, gravity_torques, joint_torques, PointLoad, Wrench,
+};
+use robcal::geometric::{base_columns, joint_frame_columns, joint_offset_columns, marker_columns};
+use robcal::Chain;
+
+/// Central-difference step. Truncation error ~h² (1e-12 relative), rounding
+/// ~ε·|p|/h ≈ 1e-9 m on positions of a few metres.
+const H: f64 = 1e-6;
+/// Column tolerance [m per unit parameter]: rounding of the difference
+/// quotient dominates (see `H`).
+const TOL: f64 = 1e-8;
+
+fn cases() -> Vec<(RefRobot, Vec<Vec<f64>>)> {
+    vec![
+        (kr270(), PAPER_Q_DEG.iter().map(|q| rad(q)).collect()),
+        (arm7(), arm7_poses()),
+    ]
+}
+
+fn fd(f: impl Fn(f64) -> Vector3<f64>) -> Vector3<f64> {
+    (f(H) - f(-H)) / (2.0 * H)
+}
+
+fn vee(w: &Matrix3<f64>) -> Vector3<f64> {
+    Vector3::new(
+        w[(2, 1)] - w[(1, 2)],
+        w[(0, 2)] - w[(2, 0)],
+        w[(1, 0)] - w[(0, 1)],
+    ) * 0.5
+}
+
+fn geometric_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let zero = Perturb::zero(n);
+    let marker = [0.12, -0.07, 0.2];
+    for q in poses {
+        let frames = chain.frames(q).unwrap();
+        let p = frames.point_m(&v(marker));
+        // Joint offsets.
+        let mut cols = [Vector3::zeros(); J];
+        joint_offset_columns(&frames, &p, &mut cols).unwrap();
+        for j in 0..n {
+            let r = fd(|h| {
+                let mut qq = q.clone();
+                qq[j] += h;
+                robot.point(&qq, &zero, marker)
+            });
+            assert_close(cols[j], r, TOL, "joint offset");
+        }
+        // Joint-frame errors, right-multiplying origin_j.
+        for j in 0..n {
+            let six = joint_frame_columns(&frames, j, &p).unwrap();
+            for (k, col) in six.iter().enumerate() {
+                let r = fd(|h| {
+                    let mut pert = Perturb::zero(n);
+                    pert.frame[j][k] = h;
+                    robot.point(q, &pert, marker)
+                });
+                assert_close(*col, r, TOL, "joint frame");
+            }
+            // The URDF parameters of the joint: xyz (parent frame) and rpy,
+            // as combinations of the six frame columns.
+            let ro = rpy(robot.joints[j].rpy);
+            for k in 0..3 {
+                let r = fd(|h| {
+                    let mut rb = robot.clone();
+                    rb.joints[j].xyz[k] += h;
+                    rb.point(q, &zero, marker)
+                });
+                let pred = (0..3).map(|m| six[m] * ro[(k, m)]).sum::<Vector3<f64>>();
+                assert_close(pred, r, TOL, "urdf xyz");
+                let mut a = robot.joints[j].rpy;
+                let mut b = a;
+                a[k] += H;
+                b[k] -= H;
+                let omega = vee(&(ro.transpose() * (rpy(a) - rpy(b)) / (2.0 * H)));
+                let r = fd(|h| {
+                    let mut rb = robot.clone();
+                    rb.joints[j].rpy[k] += h;
+                    rb.point(q, &zero, marker)
+                });
+                let pred = (0..3).map(|m| six[3 + m] * omega[m]).sum::<Vector3<f64>>();
+                assert_close(pred, r, TOL, "urdf rpy");
+            }
+        }
+        // Base frame.
+        let base = base_columns(&p);
+        for (k, col) in base.iter().enumerate() {
+            let r = fd(|h| {
+                let mut pert = Perturb::zero(n);
+                pert.base[k] = h;
+                robot.point(q, &pert, marker)
+            });
+            assert_close(*col, r, TOL, "base");
+        }
+        // Marker position in the tip frame.
+        for (k, col) in marker_columns(&frames).iter().enumerate() {
+            let r = fd(|h| {
+                let mut pert = Perturb::zero(n);
+                pert.marker[k] = h;
+                robot.point(q, &pert, marker)
+            });
+            assert_close(*col, r, TOL, "marker");
+        }
+    }
+}
+
+#[test]
+fn geometric_columns_match_finite_differences() {
+    let c = cases();
+    geometric_case::<6>(&c[0].0, &c[0].1);
+    geometric_case::<7>(&c[1].0, &c[1].1);
+}
+
+/// Reference joint torques by virtual work: `τⱼ = ∂(F·c(q))/∂qⱼ + M·ωⱼ`, with
+/// `c` a point fixed to the tip and `ωⱼ` the tip's angular velocity per unit
+/// `q̇ⱼ`, both by central differences of the reference model.
+fn ref_torques(
+    robot: &RefRobot,
+    q: &[f64],
+    c_tip: [f64; 3],
+    f: Vector3<f64>,
+    m: Vector3<f64>,
+) -> Vec<f64> {
+    let zero = Perturb::zero(robot.joints.len());
+    (0..q.len())
+        .map(|j| {
+            let shifted = |h: f64| {
+                let mut qq = q.to_vec();
+                qq[j] += h;
+                robot.frames(&qq, &zero).1
+            };
+            let dc = fd(|h| apply(&shifted(h), v(c_tip)));
+            let ra = shifted(H).fixed_view::<3, 3>(0, 0).into_owned();
+            let rb = shifted(-H).fixed_view::<3, 3>(0, 0).into_owned();
+            let omega = vee(&((ra - rb) / (2.0 * H) * rb.transpose()));
+            f.dot(&dc) + m.dot(&omega)
+        })
+        .collect()
+}
+
+fn torque_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let zero = Perturb::zero(n);
+    let com = LOAD_COM;
+    let f = Vector3::new(30.0, -20.0, -2500.0);
+    let m = Vector3::new(15.0, 40.0, -25.0);
+    let g = Vector3::new(0.0, 0.0, -9.80665);
+    for q in poses {
+        let frames = chain.frames(q).unwrap();
+        let c = frames.point_m(&v(com));
+        let mut tau = [0.0; J];
+        let w = Wrench {
+            force_n: f,
+            point_m: c,
+            moment_nm: m,
+        };
+        joint_torques(&frames, &w, &mut tau).unwrap();
+        let r = ref_torques(robot, q, com, f, m);
+        for j in 0..n {
+            // FD of positions of ~3 m times forces of 2.5 kN: ~1e-9 · 2500.
+            assert!(
+                (tau[j] - r[j]).abs() < 1e-5,
+                "joint {j}: {} vs {}",
+                tau[j],
+                r[j]
+            );
+        }
+        // The robot's own weight: τⱼ = ∂(Σ m_l g·c_l(q))/∂qⱼ.
+        let mut tg = [0.0; J];
+        gravity_torques(&chain, &frames, &g, &mut tg).unwrap();
+        for j in 0..n {
+            let r = (fd(|h| {
+                let mut qq = q.clone();
+                qq[j] += h;
+                let (fr, _) = robot.frames(&qq, &zero);
+                let e: f64 = robot
+                    .joints
+                    .iter()
+                    .zip(&fr)
+                    .map(|(jt, t)| {
+                        let (mass, c) = jt.link.unwrap();
+                        mass * g.dot(&apply(t, v(c)))
+                    })
+                    .sum();
+                Vector3::new(e, 0.0, 0.0)
+            }))
+            .x;
+            assert!(
+                (tg[j] - r).abs() < 1e-5 * (1.0 + r.abs()),
+                "gravity {j}: {} vs {r}",
+                tg[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn joint_torques_match_virtual_work() {
+    let c = cases();
+    torque_case::<6>(&c[0].0, &c[0].1);
+    torque_case::<7>(&c[1].0, &c[1].1);
+}
+
+fn compliance_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>], k: &[f64]) {
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let zero = Perturb::zero(n);
+    // A small load (10 g): joint deflections kⱼτⱼ ≲ 1e-7, so the
+    // second-order terms of the exact deflection stay below 1e-6 relative.
+    let load = PointLoad {
+        mass_kg: 0.01,
+        com_m: v(LOAD_COM),
+        gravity_mps2: Vector3::new(0.0, 0.0, -9.80665),
+    };
+    for q in poses {
+        let frames = chain.frames(q).unwrap();
+        let mut tau = [0.0; J];
+        joint_torques(&frames, &load.wrench(&frames), &mut tau).unwrap();
+        for marker in tool_markers() {
+            let p = frames.point_m(&v(marker));
+            let mut cols = [Vector3::zeros(); J];
+            compliance_columns(&frames, &p, &tau[..n], &mut cols).unwrap();
+            // Each column: the marker's motion per unit kⱼ when joint j
+            // alone yields by kⱼτⱼ.
+            for j in 0..n {
+                let r = fd(|h| {
+                    let mut qq = q.clone();
+                    qq[j] += h * tau[j];
+                    robot.point(&qq, &zero, marker)
+                });
+                assert_close(cols[j], r, TOL * (1.0 + tau[j].abs()), "compliance column");
+            }
+            // The exact deflected pose p(q + δq) − p(q), δqⱼ = kⱼτⱼ.
+            let qd: Vec<f64> = q
+                .iter()
+                .zip(&tau)
+                .zip(k)
+                .map(|((q, t), k)| q + k * t)
+                .collect();
+            let exact = robot.point(&qd, &zero, marker) - robot.point(q, &zero, marker);
+            let lin: Vector3<f64> = cols.iter().zip(k).map(|(c, k)| c * *k).sum();
+            assert!(exact.norm() > 1e-9, "deflection too small to test");
+            let rel = (lin - exact).norm() / exact.norm();
+            assert!(rel <= 1e-6, "relative error {rel:e}");
+            let dm = deflection_m(&frames, &p, &tau[..n], k).unwrap();
+            assert_close(dm, lin, 1e-18, "deflection_m");
+        }
+    }
+}
+
+#[test]
+fn compliance_columns_match_exact_deflection() {
+    let c = cases();
+    // Compliances of the paper's size (Table 3, rad/(N·m)).
+    let k6 = [0.5e-6, 0.287e-6, 0.416e-6, 2.786e-6, 3.483e-6, 2.074e-6];
+    compliance_case::<6>(&c[0].0, &c[0].1, &k6);
+    // The arm's prismatic joint: 1e-6 m/N.
+    let k7 = [1e-6, 1e-6, 0.8e-6, 1.5e-6, 2e-6, 3e-6, 3e-6];
+    compliance_case::<7>(&c[1].0, &c[1].1, &k7);
+}
+
+#[test]
+fn short_slices_are_errors() {
+    let chain: Chain<f64, 6> = kr270().chain();
+    let frames = chain.frames(&[0.0; 6]).unwrap();
+    let mut tau = [0.0; 5];
+    let w = Wrench::force(Vector3::z(), Vector3::x());
+    assert!(joint_torques(&frames, &w, &mut tau).is_err());
+    let mut cols = [Vector3::zeros(); 5];
+    assert!(joint_offset_columns(&frames, &Vector3::x(), &mut cols).is_err());
+    assert!(compliance_columns(&frames, &Vector3::x(), &[0.0; 6], &mut cols).is_err());
+    assert!(joint_frame_columns(&frames, 6, &Vector3::x()).is_err());
+}

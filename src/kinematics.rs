@@ -1,0 +1,186 @@
+//! Forward kinematics of a [`Chain`]: joint frames, joint origins `oⱼ` and
+//! axes `zⱼ` in the base frame, the tip pose and marker positions.
+//!
+//! Convention (see [`crate::chain`]): `T_j = T_{j-1} · origin_j · motion_j(q_j)`,
+//! `T_tip = T_last · tip`. For every joint [`Frames`] keeps both the frame at
+//! zero joint value, `Z_j = T_{j-1} · origin_j` (where the joint-frame errors
+//! of [`crate::geometric`] act), and the moved frame `T_j`. All lengths in m,
+//! revolute joint values in rad, prismatic ones in m.
+//!
+//! ```
+//! use nalgebra::Vector3;
+//! use robcal::{Chain, Joint, JointKind};
+//!
+//! // A planar two-link arm, 1 m links, both joints about z.
+//! let mut chain = Chain::<f64, 2>::new();
+//! let z = Vector3::z();
+//! chain.push(Joint::from_urdf(Vector3::zeros(), Vector3::zeros(), z, JointKind::Revolute).unwrap()).unwrap();
+//! chain.push(Joint::from_urdf(Vector3::x(), Vector3::zeros(), z, JointKind::Revolute).unwrap()).unwrap();
+//! let frames = chain.frames(&[core::f64::consts::FRAC_PI_2, 0.0]).unwrap();
+//! let p = frames.point_m(&Vector3::x()); // a marker 1 m along x of the last frame
+//! assert!((p - Vector3::new(0.0, 2.0, 0.0)).norm() < 1e-12);
+//! ```
+
+use nalgebra::{Isometry3, Point3, RealField, Translation3, Unit, UnitQuaternion, Vector3};
+
+use crate::chain::{Chain, JointKind};
+use crate::Error;
+
+/// One joint of a posed chain, in the base frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct JointFrame<T: RealField + Copy> {
+    /// `Z_j = T_{j-1} · origin_j`: the joint's frame at zero joint value
+    /// (translation in m). Joint-frame errors act on this frame.
+    pub zero: Isometry3<T>,
+    /// `T_j = Z_j · motion_j(q_j)`: the moved joint frame. Its origin is
+    /// `oⱼ` [m] (for a revolute joint the same point as `Z_j`'s origin).
+    pub frame: Isometry3<T>,
+    /// `zⱼ`: the unit joint axis in the base frame.
+    pub axis: Unit<Vector3<T>>,
+    /// Revolute or prismatic.
+    pub kind: JointKind,
+}
+
+impl<T: RealField + Copy> JointFrame<T> {
+    /// `oⱼ` [m]: origin of the moved joint frame, in the base frame.
+    pub fn origin_m(&self) -> Vector3<T> {
+        self.frame.translation.vector
+    }
+
+    /// `∂p/∂qⱼ` [m/rad or m/m] of a point `p_m` [m, base frame] carried by
+    /// the joint: `zⱼ × (p − oⱼ)` for a revolute joint, `zⱼ` for a prismatic
+    /// one. This is the joint-offset column of eq. 2 and, times `τⱼ`, the
+    /// compliance column of eq. 3.
+    pub fn twist_column(&self, p_m: &Vector3<T>) -> Vector3<T> {
+        match self.kind {
+            JointKind::Revolute => self.axis.cross(&(p_m - self.origin_m())),
+            JointKind::Prismatic => self.axis.into_inner(),
+        }
+    }
+}
+
+/// The frames of a chain at one joint vector `q` (see the [module docs](self)).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Frames<T: RealField + Copy, const J: usize> {
+    joints: heapless::Vec<JointFrame<T>, J>,
+    q: heapless::Vec<T, J>,
+    tip: Isometry3<T>,
+}
+
+impl<T: RealField + Copy, const J: usize> Frames<T, J> {
+    /// The joint frames, base to tip.
+    pub fn joints(&self) -> &[JointFrame<T>] {
+        &self.joints
+    }
+
+    /// Joint `j`'s frame.
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] when `j ≥ dof`.
+    pub fn joint(&self, j: usize) -> Result<&JointFrame<T>, Error> {
+        self.joints.get(j).ok_or(Error::OutOfRange {
+            what: "joint",
+            index: j,
+            len: self.joints.len(),
+        })
+    }
+
+    /// The joint values the frames were computed at.
+    pub fn q(&self) -> &[T] {
+        &self.q
+    }
+
+    /// `T_tip`: the tip frame in the base frame (translation in m).
+    pub fn tip(&self) -> &Isometry3<T> {
+        &self.tip
+    }
+
+    /// Position [m, base frame] of a marker given at `marker_m` [m] in the
+    /// tip frame: `p = T_tip · m`.
+    pub fn point_m(&self, marker_m: &Vector3<T>) -> Vector3<T> {
+        self.tip.transform_point(&Point3::from(*marker_m)).coords
+    }
+
+    /// Number of joints.
+    pub fn dof(&self) -> usize {
+        self.joints.len()
+    }
+}
+
+impl<T: RealField + Copy, const J: usize> Chain<T, J> {
+    /// Forward kinematics: every joint frame and the tip frame at joint
+    /// values `q` (rad for revolute, m for prismatic joints).
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] when `q.len() != dof`; [`Error::NonFinite`] when
+    /// `q` holds NaN or ±∞.
+    pub fn frames(&self, q: &[T]) -> Result<Frames<T, J>, Error> {
+        if q.len() != self.dof() {
+            return Err(Error::Mismatch {
+                what: "joint vector length differs from the chain's dof",
+            });
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite { what: "q" });
+        }
+        let mut joints = heapless::Vec::new();
+        let mut t = Isometry3::identity();
+        for (joint, &qj) in self.joints().iter().zip(q) {
+            let zero = t * joint.origin;
+            let motion = match joint.kind {
+                JointKind::Revolute => Isometry3::from_parts(
+                    Translation3::identity(),
+                    UnitQuaternion::from_axis_angle(&joint.axis, qj),
+                ),
+                JointKind::Prismatic => Isometry3::from_parts(
+                    Translation3::from(joint.axis.into_inner() * qj),
+                    UnitQuaternion::identity(),
+                ),
+            };
+            t = zero * motion;
+            let axis = Unit::new_normalize(zero.rotation * joint.axis.into_inner());
+            // Capacity equals the chain's, so this cannot fail; map it anyway.
+            joints
+                .push(JointFrame {
+                    zero,
+                    frame: t,
+                    axis,
+                    kind: joint.kind,
+                })
+                .map_err(|_| Error::CapacityExceeded {
+                    what: "frames",
+                    capacity: J,
+                })?;
+        }
+        let mut qv = heapless::Vec::new();
+        qv.extend_from_slice(q)
+            .map_err(|_| Error::CapacityExceeded {
+                what: "frames",
+                capacity: J,
+            })?;
+        Ok(Frames {
+            joints,
+            q: qv,
+            tip: t * *self.tip(),
+        })
+    }
+
+    /// `T_tip` at joint values `q`.
+    ///
+    /// # Errors
+    /// As [`Chain::frames`].
+    pub fn tip_pose(&self, q: &[T]) -> Result<Isometry3<T>, Error> {
+        Ok(*self.frames(q)?.tip())
+    }
+
+    /// Position [m, base frame] of a marker at `marker_m` [m] in the tip
+    /// frame, at joint values `q`.
+    ///
+    /// # Errors
+    /// As [`Chain::frames`].
+    pub fn marker_m(&self, q: &[T], marker_m: &Vector3<T>) -> Result<Vector3<T>, Error> {
+        Ok(self.frames(q)?.point_m(marker_m))
+    }
+}
