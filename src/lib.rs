@@ -23,6 +23,8 @@
 pub mod accumulator;
 pub mod chain;
 mod error;
+#[cfg(feature = "std")]
+pub mod io;
 pub mod solve;
 pub mod weights;
 
