@@ -147,7 +147,11 @@ pub fn read_measurements(
 ) -> Result<Measurements, InputError> {
     let path = path.as_ref();
     let file = std::fs::File::open(path).map_err(|e| {
-        InputError::new(path, ErrorKind::Io, format!("cannot read the measurements: {e}"))
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot read the measurements: {e}"),
+        )
     })?;
     parse_measurements(std::io::BufReader::new(file), path, robot, setup)
 }
@@ -271,7 +275,9 @@ pub fn parse_measurements<R: std::io::Read>(
                 return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
             }
             match col {
-                Col::Config => o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?,
+                Col::Config => {
+                    o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?
+                }
                 Col::Rep => o.rep = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?,
                 Col::Marker => {
                     o.marker = cell.parse().map_err(|_| {
@@ -362,7 +368,11 @@ pub fn parse_measurements<R: std::io::Read>(
         observations.push(o);
     }
     if observations.is_empty() {
-        return Err(err(ErrorKind::InvalidValue, 1, "no measurement rows".into()));
+        return Err(err(
+            ErrorKind::InvalidValue,
+            1,
+            "no measurement rows".into(),
+        ));
     }
 
     // Pairing.
@@ -404,7 +414,11 @@ pub fn parse_measurements<R: std::io::Read>(
             ));
         };
         let b = &observations[u];
-        if o.q.iter().zip(&b.q).any(|(x, y)| (x - y).abs() > PAIR_Q_TOLERANCE) {
+        if o.q
+            .iter()
+            .zip(&b.q)
+            .any(|(x, y)| (x - y).abs() > PAIR_Q_TOLERANCE)
+        {
             let (count, _) = moved.get_or_insert((0, [o.line, b.line]));
             *count += 1;
         }
@@ -638,7 +652,11 @@ pub fn write_measurements(
         header.push("t");
     }
     let io_err = |e: &dyn std::fmt::Display| {
-        InputError::new(path, ErrorKind::Io, format!("cannot write the measurements: {e}"))
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot write the measurements: {e}"),
+        )
     };
     out.write_record(&header).map_err(|e| io_err(&e))?;
     for (i, r) in rows.iter().enumerate() {
@@ -663,7 +681,10 @@ pub fn write_measurements(
             return err(ErrorKind::NonFinite, "non-finite value".into());
         }
         if r.load_kg < 0.0 {
-            return err(ErrorKind::InvalidValue, format!("negative load {}", r.load_kg));
+            return err(
+                ErrorKind::InvalidValue,
+                format!("negative load {}", r.load_kg),
+            );
         }
         let mut fields = vec![
             r.config.to_string(),
@@ -672,7 +693,11 @@ pub fn write_measurements(
             format_real(r.load_kg, Scale::One),
         ];
         fields.extend(r.q.iter().zip(&scales).map(|(&v, &s)| format_real(v, s)));
-        fields.extend(r.p_m.iter().map(|&v| format_real(v, Scale::Length(units.length))));
+        fields.extend(
+            r.p_m
+                .iter()
+                .map(|&v| format_real(v, Scale::Length(units.length))),
+        );
         fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
         out.write_record(&fields).map_err(|e| io_err(&e))?;
     }

@@ -133,7 +133,13 @@ fn fmt_location(
 
 impl fmt::Display for InputError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt_location(f, &self.file, self.line, self.column.as_deref(), &self.message)
+        fmt_location(
+            f,
+            &self.file,
+            self.line,
+            self.column.as_deref(),
+            &self.message,
+        )
     }
 }
 
@@ -155,12 +161,22 @@ pub struct InputWarning {
 
 impl fmt::Display for InputWarning {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt_location(f, &self.file, self.line, self.column.as_deref(), &self.message)
+        fmt_location(
+            f,
+            &self.file,
+            self.line,
+            self.column.as_deref(),
+            &self.message,
+        )
     }
 }
 
 /// 1-based line of byte offset `offset` in `text`.
 pub(crate) fn line_of_offset(text: &str, offset: usize) -> usize {
     let end = offset.min(text.len());
-    text.as_bytes()[..end].iter().filter(|&&b| b == b'\n').count() + 1
+    text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
 }

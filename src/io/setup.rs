@@ -315,7 +315,10 @@ impl Setup {
         }
         if let Some(load) = &self.load {
             if non_finite(&load.com) {
-                return err(ErrorKind::NonFinite, format!("load.com: non-finite {:?}", load.com));
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("load.com: non-finite {:?}", load.com),
+                );
             }
             if non_finite(&load.gravity) {
                 return err(
@@ -326,7 +329,10 @@ impl Setup {
         }
         let n = &self.noise;
         if !n.sigma0_um.is_finite() {
-            return err(ErrorKind::NonFinite, format!("noise.sigma0_um: {}", n.sigma0_um));
+            return err(
+                ErrorKind::NonFinite,
+                format!("noise.sigma0_um: {}", n.sigma0_um),
+            );
         }
         if n.sigma0_um <= 0.0 {
             return err(
@@ -349,7 +355,10 @@ impl Setup {
         ] {
             for (i, name) in list.iter().enumerate() {
                 if list[..i].contains(name) {
-                    return err(ErrorKind::Duplicate, format!("{key}: joint '{name}' listed twice"));
+                    return err(
+                        ErrorKind::Duplicate,
+                        format!("{key}: joint '{name}' listed twice"),
+                    );
                 }
             }
         }

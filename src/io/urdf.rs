@@ -476,7 +476,9 @@ impl<'u> Tree<'u> {
                         .then_some(JointLimits { lower, upper })
                 }
             };
-            chain.push(j).map_err(|e| ctx.err_at("joint", name, ErrorKind::Robot, e.to_string()))?;
+            chain
+                .push(j)
+                .map_err(|e| ctx.err_at("joint", name, ErrorKind::Robot, e.to_string()))?;
             joint_names.push(name.to_owned());
             joint_kinds.push(kind);
             limits.push(limit);
