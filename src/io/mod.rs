@@ -15,6 +15,41 @@
 //! Suspicious but usable input (a joint value far outside its URDF limits,
 //! numbers that look like the wrong unit) is returned as [`InputWarning`]s
 //! next to the data instead.
+//!
+//! ```
+//! use robcal::io::{parse_measurements, Robot, Setup};
+//!
+//! let urdf = r#"<robot name="r">
+//!   <link name="base"/> <link name="arm"/> <link name="flange"/>
+//!   <joint name="a1" type="continuous">
+//!     <parent link="base"/> <child link="arm"/> <axis xyz="0 0 1"/>
+//!   </joint>
+//!   <joint name="tool" type="fixed">
+//!     <parent link="arm"/> <child link="flange"/> <origin xyz="0.5 0 0"/>
+//!   </joint>
+//! </robot>"#;
+//! let robot = Robot::parse(urdf, "r.urdf", Some("base"), Some("flange"))?;
+//! assert_eq!(robot.joint_names, ["a1"]);
+//! assert_eq!(robot.chain.tip().translation.vector.x, 0.5);
+//!
+//! let setup = Setup::parse(
+//!     "robot = \"r.urdf\"\n[units]\nangle = \"deg\"\nlength = \"mm\"\n[load]\n",
+//!     "s.toml",
+//! )?;
+//! let csv = "config,rep,marker,load_kg,a1,x,y,z\n\
+//!            1,0,1,0,90,500,0,0\n\
+//!            1,0,1,20,90,500,-0.25,0\n";
+//! let data = parse_measurements(csv.as_bytes(), "d.csv", &robot, &setup)?;
+//! assert_eq!(data.observations[0].q, [std::f64::consts::FRAC_PI_2]);
+//! assert_eq!(data.observations[0].p_m, [0.5, 0.0, 0.0]);
+//! assert_eq!(data.deflections[0].dp_m, [0.0, -0.00025, 0.0]);
+//!
+//! // Errors name the file, line and column.
+//! let bad = "config,rep,marker,load_kg,a1,x,y,z\n1,0,2,0,90,500,0,0\n";
+//! let e = parse_measurements(bad.as_bytes(), "d.csv", &robot, &setup).unwrap_err();
+//! assert_eq!(e.to_string(), "d.csv:2: column 'marker': marker 2 is not declared in the setup");
+//! # Ok::<(), robcal::io::InputError>(())
+//! ```
 
 use std::fmt;
 use std::path::{Path, PathBuf};

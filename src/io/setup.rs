@@ -280,8 +280,8 @@ impl Setup {
     /// The setup as TOML text ([`Setup::parse`] reads it back to an equal setup).
     ///
     /// # Panics
-    /// Never for a setup of finite numbers (TOML has no NaN-free guarantee
-    /// to break; serialization of these types cannot fail otherwise).
+    /// Does not: every field of these types has a TOML form (non-finite
+    /// numbers are written as `nan`/`inf`, which [`Setup::parse`] rejects).
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("setup serializes to TOML")
     }
