@@ -53,17 +53,17 @@ pub struct Observation {
     pub rep: i64,
     /// Marker id.
     pub marker: u32,
-    /// Hanging mass [kg]; `0` means unloaded.
+    /// Hanging mass \[kg\]; `0` means unloaded.
     pub load_kg: f64,
-    /// Joint values [rad or m], chain order.
+    /// Joint values \[rad or m\], chain order.
     pub q: Vec<f64>,
     /// Joint cells as written in the CSV (trimmed), chain order: the
     /// contract names angle-dependent compliances after them. Empty for rows
     /// not read from a file; the writer ignores it.
     pub q_written: Vec<String>,
-    /// Marker position [m].
+    /// Marker position \[m\].
     pub p_m: [f64; 3],
-    /// Time [s], when the file has a `t` column.
+    /// Time \[s\], when the file has a `t` column.
     pub t_s: Option<f64>,
     /// 1-based line in the file (header is line 1); ignored by the writer.
     pub line: usize,
@@ -79,11 +79,11 @@ pub struct Deflection {
     pub rep: i64,
     /// Marker id.
     pub marker: u32,
-    /// Hanging mass [kg], `> 0`.
+    /// Hanging mass \[kg\], `> 0`.
     pub load_kg: f64,
-    /// Joint values [rad or m] of the unloaded row (the configuration).
+    /// Joint values \[rad or m\] of the unloaded row (the configuration).
     pub q: Vec<f64>,
-    /// `p_loaded − p_unloaded` [m].
+    /// `p_loaded − p_unloaded` \[m\].
     pub dp_m: [f64; 3],
     /// Lines of the loaded and the unloaded row.
     pub lines: [usize; 2],

@@ -85,7 +85,7 @@ impl Units {
 pub struct Marker {
     /// Id used in the CSV's `marker` column.
     pub id: u32,
-    /// Nominal position [m] in `tip_link`.
+    /// Nominal position \[m\] in `tip_link`.
     #[serde(default)]
     pub xyz: [f64; 3],
 }
@@ -94,10 +94,10 @@ pub struct Marker {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Load {
-    /// Point [m] in `tip_link` where the hanging mass acts.
+    /// Point \[m\] in `tip_link` where the hanging mass acts.
     #[serde(default)]
     pub com: [f64; 3],
-    /// Gravity [m/s²] in the base frame.
+    /// Gravity \[m/s²\] in the base frame.
     #[serde(default = "default_gravity")]
     pub gravity: [f64; 3],
 }
@@ -119,7 +119,7 @@ impl Default for Load {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Noise {
-    /// `σ0` [µm], `> 0`.
+    /// `σ0` \[µm\], `> 0`.
     #[serde(default = "default_sigma0")]
     pub sigma0_um: f64,
     /// `λ`, the eq. 14 tuning factor, `≥ 0`.

@@ -86,7 +86,7 @@ pub struct OffChainBranch {
     pub parent_link: String,
     /// Index of the chain joint whose moving body carries `parent_link`.
     pub chain_joint: usize,
-    /// Total mass of the subtree below `joint` [kg].
+    /// Total mass of the subtree below `joint` \[kg\].
     pub mass_kg: f64,
 }
 
