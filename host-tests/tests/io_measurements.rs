@@ -586,3 +586,19 @@ fn writer_rejects_bad_rows_and_leaves_the_file_alone() {
     let e = write_measurements(temp("no/such/dir.csv"), &job.robot, Units::SI, &good).unwrap_err();
     assert_eq!(e.kind, ErrorKind::Io);
 }
+
+#[test]
+fn bom_and_crlf_line_ends_are_accepted() {
+    let job = job();
+    let text = format!(
+        "\u{feff}{HEADER}\r\n1,0,1,0,10,20,100,1000,0,500\r\n\r\n2,0,1,0,10,20,100,1000,0,500\r\n"
+    );
+    let m = read(&job, &text).unwrap();
+    let lines: Vec<usize> = m.observations.iter().map(|o| o.line).collect();
+    assert_eq!(lines, [2, 4], "a blank line is skipped but counted");
+    // Errors too: line 5 after a blank line, with CRLF.
+    let e = read_err(&job, &format!("{text}1,0,9,0,10,20,100,1000,0,500\r\n"));
+    assert_eq!((e.line, e.column.as_deref()), (Some(5), Some("marker")));
+    let e = read_err(&job, &format!("{text}\r\n1,0,1,0,10,20,100\r\n"));
+    assert_eq!((e.kind, e.line), (ErrorKind::Syntax, Some(6)));
+}

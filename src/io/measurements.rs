@@ -167,6 +167,30 @@ pub fn parse_measurements<R: std::io::Read>(
     setup: &Setup,
 ) -> Result<Measurements, InputError> {
     let file = file.into();
+    let mut bytes = Vec::new();
+    let mut reader = reader;
+    reader.read_to_end(&mut bytes).map_err(|e| {
+        InputError::new(
+            file.clone(),
+            ErrorKind::Io,
+            format!("cannot read the measurements: {e}"),
+        )
+    })?;
+    // Line numbers from byte offsets: the csv crate's own line count is off
+    // after CRLF line ends and does not count blank lines.
+    let newlines: Vec<usize> = bytes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &b)| (b == b'\n').then_some(i))
+        .collect();
+    let line_at = |pos: Option<&csv::Position>| {
+        let Some(pos) = pos else { return 1 };
+        let mut at = pos.byte() as usize;
+        while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
+            at += 1;
+        }
+        newlines.partition_point(|&n| n < at) + 1
+    };
     let err = |kind, line: usize, message: String| {
         InputError::new(file.clone(), kind, message).at_line(line)
     };
@@ -174,7 +198,7 @@ pub fn parse_measurements<R: std::io::Read>(
         err(kind, line, message).in_column(column)
     };
     let csv_err = |e: csv::Error| {
-        let line = e.position().map_or(1, |p| p.line() as usize);
+        let line = line_at(e.position());
         let kind = match e.kind() {
             csv::ErrorKind::Io(_) => ErrorKind::Io,
             _ => ErrorKind::Syntax,
@@ -191,7 +215,7 @@ pub fn parse_measurements<R: std::io::Read>(
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
-        .from_reader(reader);
+        .from_reader(bytes.as_slice());
     let header = rdr.headers().map_err(csv_err)?.clone();
     if header.iter().all(str::is_empty) {
         return Err(err(ErrorKind::Syntax, 1, "no header row".into()));
@@ -262,7 +286,7 @@ pub fn parse_measurements<R: std::io::Read>(
     let mut observations: Vec<Observation> = Vec::new();
     let mut record = csv::StringRecord::new();
     while rdr.read_record(&mut record).map_err(csv_err)? {
-        let line = record.position().map_or(0, |p| p.line() as usize);
+        let line = line_at(record.position());
         let mut o = Observation {
             q: vec![0.0; dof],
             q_written: vec![String::new(); dof],
