@@ -37,6 +37,8 @@ pub mod elastostatic;
 mod error;
 pub mod geometric;
 pub mod grouped;
+#[cfg(feature = "std")]
+pub mod io;
 pub mod irls;
 pub mod kinematics;
 pub mod kr270;

@@ -1,0 +1,777 @@
+//! Measurement CSV (data contract section 3): reading into SI
+//! [`Observation`]s and elastostatic [`Deflection`]s, and writing the same
+//! format back.
+//!
+//! Header `config,rep,marker,load_kg,<joint columns>,x,y,z[,t]`, columns in
+//! any order, one joint column per movable joint of the chain named by its
+//! URDF joint name. Cells are trimmed. Joint columns and `x,y,z` are in the
+//! setup's `[units]` (prismatic joints in the length unit); `load_kg` in kg,
+//! `t` in s.
+//!
+//! Conversion to SI: degrees with `f64::to_radians`; millimetres by moving
+//! the decimal point (the cell `12.5` in mm is read as the decimal `12.5e-3`
+//! m), so the conversion is correctly rounded and a written file reads back
+//! bit for bit. The writer prints the shortest text that reads back to the
+//! same `f64` (Rust's `{}`), in the file's units; it is bit-exact for rad, m
+//! and mm, and for deg whenever some decimal degree value maps back exactly
+//! under `to_radians` (else within 1 ulp).
+//!
+//! Rejected, with file, line and column: an unreadable file, a missing,
+//! unknown or duplicate column, a row of the wrong length, a cell that is
+//! empty or not a number (integer for `config`, `rep`, `marker`), a
+//! non-finite number, a negative `load_kg`, a loaded row when the setup has
+//! no `[load]`, a marker the setup does not declare, two unloaded rows (or
+//! two loaded rows of the same load) with the same `config`, `rep`,
+//! `marker`, a loaded row without its unloaded row, no data row, and
+//! numbers that contradict `[units]` beyond doubt: a limited revolute joint
+//! (limits within ±2π) beyond ±2π with `angle = "rad"`, a position more than
+//! 100 m from the origin with `length = "m"`.
+//!
+//! Warnings ([`Measurements::warnings`]): joint values outside the URDF
+//! limits by more than 10 % of the range (one warning per column, first
+//! line given), every revolute value within ±π with `angle = "deg"`, every
+//! position within ±10 with `length = "mm"`, paired rows whose joint values
+//! differ by more than [`PAIR_Q_TOLERANCE`].
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use super::setup::{AngleUnit, LengthUnit, Setup, Units};
+use super::urdf::{Robot, UrdfJointKind};
+use super::{ErrorKind, InputError, InputWarning};
+
+/// Largest difference (rad or m) between the joint values of a loaded row
+/// and its unloaded row before a warning says the robot moved in between.
+pub const PAIR_Q_TOLERANCE: f64 = 1e-3;
+
+/// One CSV row, in SI units.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Observation {
+    /// Configuration id (the group for per-axis noise estimation).
+    pub config: i64,
+    /// Repetition index within the configuration.
+    pub rep: i64,
+    /// Marker id.
+    pub marker: u32,
+    /// Hanging mass \[kg\]; `0` means unloaded.
+    pub load_kg: f64,
+    /// Joint values \[rad or m\], chain order.
+    pub q: Vec<f64>,
+    /// Joint cells as written in the CSV (trimmed), chain order: the
+    /// contract names angle-dependent compliances after them. Empty for rows
+    /// not read from a file; the writer ignores it.
+    pub q_written: Vec<String>,
+    /// Marker position \[m\].
+    pub p_m: [f64; 3],
+    /// Time \[s\], when the file has a `t` column.
+    pub t_s: Option<f64>,
+    /// 1-based line in the file (header is line 1); ignored by the writer.
+    pub line: usize,
+}
+
+/// A loaded row minus the unloaded row with the same `config`, `rep`,
+/// `marker`: one elastostatic deflection (3 equations).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Deflection {
+    /// Configuration id.
+    pub config: i64,
+    /// Repetition.
+    pub rep: i64,
+    /// Marker id.
+    pub marker: u32,
+    /// Hanging mass \[kg\], `> 0`.
+    pub load_kg: f64,
+    /// Joint values \[rad or m\] of the unloaded row (the configuration).
+    pub q: Vec<f64>,
+    /// `p_loaded − p_unloaded` \[m\].
+    pub dp_m: [f64; 3],
+    /// Lines of the loaded and the unloaded row.
+    pub lines: [usize; 2],
+    /// Indices of the loaded and the unloaded row in [`Measurements::observations`].
+    pub rows: [usize; 2],
+}
+
+/// A measurement file, read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measurements {
+    /// The file.
+    pub file: PathBuf,
+    /// Every row, in file order.
+    pub observations: Vec<Observation>,
+    /// One per loaded row, in file order.
+    pub deflections: Vec<Deflection>,
+    /// Whether the file has a `t` column.
+    pub has_time: bool,
+    /// Suspicious but accepted input.
+    pub warnings: Vec<InputWarning>,
+}
+
+impl Measurements {
+    /// The unloaded rows: absolute positions (geometric data).
+    pub fn unloaded(&self) -> impl Iterator<Item = &Observation> {
+        self.observations.iter().filter(|o| o.load_kg == 0.0)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Col {
+    Config,
+    Rep,
+    Marker,
+    Load,
+    Joint(usize),
+    Pos(usize),
+    Time,
+}
+
+const FIXED: [(&str, Col); 8] = [
+    ("config", Col::Config),
+    ("rep", Col::Rep),
+    ("marker", Col::Marker),
+    ("load_kg", Col::Load),
+    ("x", Col::Pos(0)),
+    ("y", Col::Pos(1)),
+    ("z", Col::Pos(2)),
+    ("t", Col::Time),
+];
+
+/// Reads a measurement file for `robot` and `setup` (units, markers, load).
+///
+/// # Errors
+/// See the module doc; every error names `path`, and the line and column
+/// where there is one.
+pub fn read_measurements(
+    path: impl AsRef<Path>,
+    robot: &Robot,
+    setup: &Setup,
+) -> Result<Measurements, InputError> {
+    let path = path.as_ref();
+    let file = std::fs::File::open(path).map_err(|e| {
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot read the measurements: {e}"),
+        )
+    })?;
+    parse_measurements(std::io::BufReader::new(file), path, robot, setup)
+}
+
+/// As [`read_measurements`], from any reader; `file` names it in errors.
+///
+/// # Errors
+/// See [`read_measurements`].
+pub fn parse_measurements<R: std::io::Read>(
+    reader: R,
+    file: impl Into<PathBuf>,
+    robot: &Robot,
+    setup: &Setup,
+) -> Result<Measurements, InputError> {
+    let file = file.into();
+    let mut bytes = Vec::new();
+    let mut reader = reader;
+    reader.read_to_end(&mut bytes).map_err(|e| {
+        InputError::new(
+            file.clone(),
+            ErrorKind::Io,
+            format!("cannot read the measurements: {e}"),
+        )
+    })?;
+    // Line numbers from byte offsets: the csv crate's own line count is off
+    // after CRLF line ends and does not count blank lines.
+    let newlines: Vec<usize> = bytes
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &b)| (b == b'\n').then_some(i))
+        .collect();
+    let line_at = |pos: Option<&csv::Position>| {
+        let Some(pos) = pos else { return 1 };
+        let mut at = pos.byte() as usize;
+        while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
+            at += 1;
+        }
+        newlines.partition_point(|&n| n < at) + 1
+    };
+    let err = |kind, line: usize, message: String| {
+        InputError::new(file.clone(), kind, message).at_line(line)
+    };
+    let cell_err = |kind, line: usize, column: &str, message: String| {
+        err(kind, line, message).in_column(column)
+    };
+    let csv_err = |e: csv::Error| {
+        let line = line_at(e.position());
+        let kind = match e.kind() {
+            csv::ErrorKind::Io(_) => ErrorKind::Io,
+            _ => ErrorKind::Syntax,
+        };
+        let message = match e.kind() {
+            csv::ErrorKind::UnequalLengths {
+                expected_len, len, ..
+            } => format!("row has {len} fields, the header has {expected_len}"),
+            _ => e.to_string(),
+        };
+        err(kind, line, message)
+    };
+
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .from_reader(bytes.as_slice());
+    let header = rdr.headers().map_err(csv_err)?.clone();
+    if header.iter().all(str::is_empty) {
+        return Err(err(ErrorKind::Syntax, 1, "no header row".into()));
+    }
+
+    // Header → column layout.
+    for name in &robot.joint_names {
+        if FIXED.iter().any(|(f, _)| f == name) {
+            return Err(cell_err(
+                ErrorKind::DuplicateColumn,
+                1,
+                name,
+                "a joint of the robot has the name of a fixed column".into(),
+            ));
+        }
+    }
+    let mut cols = Vec::with_capacity(header.len());
+    for (i, name) in header.iter().enumerate() {
+        let col = FIXED
+            .iter()
+            .find(|(f, _)| *f == name)
+            .map(|&(_, c)| c)
+            .or_else(|| robot.joint_index(name).map(Col::Joint))
+            .ok_or_else(|| {
+                cell_err(
+                    ErrorKind::UnknownColumn,
+                    1,
+                    name,
+                    format!(
+                        "neither a fixed column nor a movable joint of the chain \
+                         from '{}' to '{}' (joints: {})",
+                        robot.base_link,
+                        robot.tip_link,
+                        robot.joint_names.join(", ")
+                    ),
+                )
+            })?;
+        if header.iter().take(i).any(|n| n == name) {
+            return Err(cell_err(
+                ErrorKind::DuplicateColumn,
+                1,
+                name,
+                "column appears twice".into(),
+            ));
+        }
+        cols.push(col);
+    }
+    let required = FIXED[..7]
+        .iter()
+        .map(|(n, _)| *n)
+        .chain(robot.joint_names.iter().map(String::as_str));
+    for name in required {
+        if !header.iter().any(|n| n == name) {
+            return Err(cell_err(
+                ErrorKind::MissingColumn,
+                1,
+                name,
+                "missing column".into(),
+            ));
+        }
+    }
+    let has_time = cols.contains(&Col::Time);
+
+    let units = setup.units;
+    let dof = robot.dof();
+    let markers: Vec<u32> = setup.markers.iter().map(|m| m.id).collect();
+    let mut stats = Stats::new(dof);
+    let mut observations: Vec<Observation> = Vec::new();
+    let mut record = csv::StringRecord::new();
+    while rdr.read_record(&mut record).map_err(csv_err)? {
+        let line = line_at(record.position());
+        let mut o = Observation {
+            q: vec![0.0; dof],
+            q_written: vec![String::new(); dof],
+            line,
+            ..Observation::default()
+        };
+        for ((cell, &col), name) in record.iter().zip(&cols).zip(header.iter()) {
+            let cerr = |kind, message: String| cell_err(kind, line, name, message);
+            if cell.is_empty() {
+                return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
+            }
+            match col {
+                Col::Config => {
+                    o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?
+                }
+                Col::Rep => o.rep = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?,
+                Col::Marker => {
+                    o.marker = cell.parse().map_err(|_| {
+                        cerr(
+                            ErrorKind::Syntax,
+                            format!("'{cell}' is not a marker id (integer 0 to {})", u32::MAX),
+                        )
+                    })?;
+                    if !markers.contains(&o.marker) {
+                        return Err(cerr(
+                            ErrorKind::UnknownMarker,
+                            format!("marker {} is not declared in the setup", o.marker),
+                        ));
+                    }
+                }
+                Col::Load => {
+                    o.load_kg = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
+                    if o.load_kg < 0.0 {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!("negative load {} kg", o.load_kg),
+                        ));
+                    }
+                    if o.load_kg > 0.0 && setup.load.is_none() {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            "loaded row, but the setup has no [load] saying where the load acts"
+                                .into(),
+                        ));
+                    }
+                }
+                Col::Joint(j) => {
+                    let kind = robot.joint_kinds[j];
+                    let scale = if kind.is_angular() {
+                        Scale::Angle(units.angle)
+                    } else {
+                        Scale::Length(units.length)
+                    };
+                    let v = parse_real(cell, scale).map_err(|(k, m)| cerr(k, m))?;
+                    if kind.is_angular() {
+                        stats.max_angle_written = stats.max_angle_written.max(raw(cell).abs());
+                    }
+                    if let (UrdfJointKind::Revolute, AngleUnit::Rad, Some(l)) =
+                        (kind, units.angle, robot.limits[j])
+                    {
+                        let tau = std::f64::consts::TAU;
+                        if v.abs() > tau && l.lower >= -tau && l.upper <= tau {
+                            return Err(cerr(
+                                ErrorKind::Units,
+                                format!(
+                                    "{v} rad is beyond ±2π for a joint limited to [{}, {}] rad: \
+                                     is the column in degrees? ([units] angle = \"rad\")",
+                                    l.lower, l.upper
+                                ),
+                            ));
+                        }
+                    }
+                    if let Some(l) = robot.limits[j] {
+                        let margin = 0.1 * (l.upper - l.lower);
+                        if v < l.lower - margin || v > l.upper + margin {
+                            let (count, _) = stats.outside[j].get_or_insert((0, line));
+                            *count += 1;
+                        }
+                    }
+                    o.q[j] = v;
+                    o.q_written[j] = cell.to_owned();
+                }
+                Col::Pos(k) => {
+                    let v = parse_real(cell, Scale::Length(units.length))
+                        .map_err(|(k, m)| cerr(k, m))?;
+                    if units.length == LengthUnit::M && v.abs() > 100.0 {
+                        return Err(cerr(
+                            ErrorKind::Units,
+                            format!(
+                                "{v} m is more than 100 m from the origin: is the column in \
+                                 millimetres? ([units] length = \"m\")"
+                            ),
+                        ));
+                    }
+                    stats.max_pos_written = stats.max_pos_written.max(raw(cell).abs());
+                    o.p_m[k] = v;
+                }
+                Col::Time => {
+                    o.t_s = Some(parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?);
+                }
+            }
+        }
+        observations.push(o);
+    }
+    if observations.is_empty() {
+        return Err(err(
+            ErrorKind::InvalidValue,
+            1,
+            "no measurement rows".into(),
+        ));
+    }
+
+    // Pairing.
+    let mut unloaded: HashMap<(i64, i64, u32), usize> = HashMap::new();
+    let mut loaded: HashMap<(i64, i64, u32, u64), usize> = HashMap::new();
+    for (i, o) in observations.iter().enumerate() {
+        let previous = if o.load_kg > 0.0 {
+            loaded.insert((o.config, o.rep, o.marker, o.load_kg.to_bits()), i)
+        } else {
+            unloaded.insert((o.config, o.rep, o.marker), i)
+        };
+        if let Some(p) = previous {
+            return Err(err(
+                ErrorKind::Duplicate,
+                o.line,
+                format!(
+                    "config {}, rep {}, marker {}, load {} kg already at line {}",
+                    o.config, o.rep, o.marker, o.load_kg, observations[p].line
+                ),
+            ));
+        }
+    }
+    let mut deflections = Vec::new();
+    let mut moved: Option<(usize, [usize; 2])> = None;
+    for (i, o) in observations.iter().enumerate() {
+        if o.load_kg <= 0.0 {
+            continue;
+        }
+        let Some(&u) = unloaded.get(&(o.config, o.rep, o.marker)) else {
+            return Err(cell_err(
+                ErrorKind::Unpaired,
+                o.line,
+                "load_kg",
+                format!(
+                    "loaded row (config {}, rep {}, marker {}) has no unloaded row \
+                     with the same config, rep and marker",
+                    o.config, o.rep, o.marker
+                ),
+            ));
+        };
+        let b = &observations[u];
+        if o.q
+            .iter()
+            .zip(&b.q)
+            .any(|(x, y)| (x - y).abs() > PAIR_Q_TOLERANCE)
+        {
+            let (count, _) = moved.get_or_insert((0, [o.line, b.line]));
+            *count += 1;
+        }
+        deflections.push(Deflection {
+            config: o.config,
+            rep: o.rep,
+            marker: o.marker,
+            load_kg: o.load_kg,
+            q: b.q.clone(),
+            dp_m: [0, 1, 2].map(|k| o.p_m[k] - b.p_m[k]),
+            lines: [o.line, b.line],
+            rows: [i, u],
+        });
+    }
+
+    // Warnings.
+    let mut warnings = Vec::new();
+    let mut warn = |line: Option<usize>, column: Option<&str>, message: String| {
+        warnings.push(InputWarning {
+            file: file.clone(),
+            line,
+            column: column.map(str::to_owned),
+            message,
+        });
+    };
+    for (j, outside) in stats.outside.iter().enumerate() {
+        if let (Some((count, first)), Some(l)) = (outside, robot.limits[j]) {
+            warn(
+                Some(*first),
+                Some(&robot.joint_names[j]),
+                format!(
+                    "{count} value(s) outside the URDF limits [{}, {}] by more than 10 % \
+                     of the range (first here)",
+                    l.lower, l.upper
+                ),
+            );
+        }
+    }
+    let angular = robot.joint_kinds.iter().any(|k| k.is_angular());
+    if units.angle == AngleUnit::Deg
+        && angular
+        && stats.max_angle_written > 0.0
+        && stats.max_angle_written <= std::f64::consts::PI
+    {
+        warn(
+            None,
+            None,
+            "every revolute joint value is within ±π although [units] angle = \"deg\": \
+             are the joint columns in radians?"
+                .into(),
+        );
+    }
+    if units.length == LengthUnit::Mm && stats.max_pos_written > 0.0 && stats.max_pos_written < 10.0
+    {
+        warn(
+            None,
+            None,
+            "every x, y, z is within ±10 although [units] length = \"mm\": \
+             are the positions in metres?"
+                .into(),
+        );
+    }
+    if let Some((count, [a, b])) = moved {
+        warn(
+            Some(a),
+            None,
+            format!(
+                "{count} loaded row(s) whose joint values differ from their unloaded row's by \
+                 more than {PAIR_Q_TOLERANCE} (first: lines {a} and {b})"
+            ),
+        );
+    }
+
+    Ok(Measurements {
+        file,
+        observations,
+        deflections,
+        has_time,
+        warnings,
+    })
+}
+
+struct Stats {
+    /// Per joint: (values outside limits, first line).
+    outside: Vec<Option<(usize, usize)>>,
+    max_angle_written: f64,
+    max_pos_written: f64,
+}
+
+impl Stats {
+    fn new(dof: usize) -> Self {
+        Self {
+            outside: vec![None; dof],
+            max_angle_written: 0.0,
+            max_pos_written: 0.0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Scale {
+    One,
+    Angle(AngleUnit),
+    Length(LengthUnit),
+}
+
+fn parse_int(cell: &str) -> Result<i64, String> {
+    cell.parse()
+        .map_err(|_| format!("'{cell}' is not an integer"))
+}
+
+/// The cell as written (already checked to parse).
+fn raw(cell: &str) -> f64 {
+    cell.parse().unwrap_or(0.0)
+}
+
+/// A finite real in SI; see the module doc for the unit conversion.
+fn parse_real(cell: &str, scale: Scale) -> Result<f64, (ErrorKind, String)> {
+    let v: f64 = cell
+        .parse()
+        .map_err(|_| (ErrorKind::Syntax, format!("'{cell}' is not a number")))?;
+    if !v.is_finite() {
+        return Err((ErrorKind::NonFinite, format!("non-finite value '{cell}'")));
+    }
+    Ok(match scale {
+        Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => v,
+        Scale::Angle(AngleUnit::Deg) => v.to_radians(),
+        Scale::Length(LengthUnit::Mm) => milli(cell).unwrap_or(v / 1000.0),
+    })
+}
+
+/// The decimal `cell · 10⁻³`, correctly rounded.
+fn milli(cell: &str) -> Option<f64> {
+    let text = match cell.find(['e', 'E']) {
+        Some(i) => {
+            let exp: i32 = cell[i + 1..].parse().ok()?;
+            format!("{}e{}", &cell[..i], exp.checked_sub(3)?)
+        }
+        None => format!("{cell}e-3"),
+    };
+    text.parse().ok()
+}
+
+/// `s` (Rust `{}` of a finite f64: no exponent) times 1000, as decimal text.
+fn times_1000(s: &str) -> String {
+    let (sign, digits) = s.strip_prefix('-').map_or(("", s), |d| ("-", d));
+    let (int, frac) = digits.split_once('.').unwrap_or((digits, ""));
+    let frac = format!("{frac:0<3}");
+    let int = format!("{int}{}", &frac[..3]);
+    let int = match int.trim_start_matches('0') {
+        "" => "0",
+        t => t,
+    };
+    match frac[3..].trim_end_matches('0') {
+        "" => format!("{sign}{int}"),
+        f => format!("{sign}{int}.{f}"),
+    }
+}
+
+/// The next `f64` after `w` toward +∞ (`up`) or −∞.
+fn next_after(w: f64, up: bool) -> f64 {
+    if w == 0.0 {
+        let tiny = f64::from_bits(1);
+        return if up { tiny } else { -tiny };
+    }
+    let bits = w.to_bits();
+    if (w > 0.0) == up {
+        f64::from_bits(bits + 1)
+    } else {
+        f64::from_bits(bits - 1)
+    }
+}
+
+/// Text of a value in `scale` that [`parse_real`] reads back as `v` (SI).
+fn format_real(v: f64, scale: Scale) -> String {
+    match scale {
+        Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => format!("{v}"),
+        Scale::Length(LengthUnit::Mm) => times_1000(&format!("{v}")),
+        Scale::Angle(AngleUnit::Deg) => {
+            let w0 = v.to_degrees();
+            let (u1, d1) = (next_after(w0, true), next_after(w0, false));
+            let candidates = [w0, u1, d1, next_after(u1, true), next_after(d1, false)];
+            let w = candidates
+                .into_iter()
+                .find(|w| w.is_finite() && w.to_radians().to_bits() == v.to_bits())
+                .unwrap_or(w0);
+            format!("{w}")
+        }
+    }
+}
+
+/// Writes `rows` (SI) as a measurement file for `robot` in `units`:
+/// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t]`
+/// (`t` when the rows have times). [`read_measurements`] reads it back to
+/// the same values (see the module doc for deg).
+///
+/// The file is written to a temporary file next to `path` and renamed over
+/// it, so `path` is either untouched or complete.
+///
+/// # Errors
+/// A row with the wrong number of joint values, a non-finite number, a
+/// negative load, some rows with a time and some without (naming the line
+/// the row would have); or the file cannot be written. Nothing is written
+/// on error.
+pub fn write_measurements(
+    path: impl AsRef<Path>,
+    robot: &Robot,
+    units: Units,
+    rows: &[Observation],
+) -> Result<(), InputError> {
+    let path = path.as_ref();
+    let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
+    let dof = robot.dof();
+    let scales: Vec<Scale> = robot
+        .joint_kinds
+        .iter()
+        .map(|k| {
+            if k.is_angular() {
+                Scale::Angle(units.angle)
+            } else {
+                Scale::Length(units.length)
+            }
+        })
+        .collect();
+
+    let mut out = csv::Writer::from_writer(Vec::new());
+    let mut header: Vec<&str> = vec!["config", "rep", "marker", "load_kg"];
+    header.extend(robot.joint_names.iter().map(String::as_str));
+    header.extend(["x", "y", "z"]);
+    if has_time {
+        header.push("t");
+    }
+    let io_err = |e: &dyn std::fmt::Display| {
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot write the measurements: {e}"),
+        )
+    };
+    out.write_record(&header).map_err(|e| io_err(&e))?;
+    for (i, r) in rows.iter().enumerate() {
+        let line = i + 2;
+        let err = |kind, message: String| {
+            Err(InputError::new(path, kind, format!("row {i}: {message}")).at_line(line))
+        };
+        if r.q.len() != dof {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("{} joint values for {dof} joints", r.q.len()),
+            );
+        }
+        if r.t_s.is_some() != has_time {
+            return err(
+                ErrorKind::InvalidValue,
+                "some rows have a time and some do not".into(),
+            );
+        }
+        let numbers = r.q.iter().chain(&r.p_m).chain(&r.t_s).chain([&r.load_kg]);
+        if numbers.clone().any(|v| !v.is_finite()) {
+            return err(ErrorKind::NonFinite, "non-finite value".into());
+        }
+        if r.load_kg < 0.0 {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("negative load {}", r.load_kg),
+            );
+        }
+        let mut fields = vec![
+            r.config.to_string(),
+            r.rep.to_string(),
+            r.marker.to_string(),
+            format_real(r.load_kg, Scale::One),
+        ];
+        fields.extend(r.q.iter().zip(&scales).map(|(&v, &s)| format_real(v, s)));
+        fields.extend(
+            r.p_m
+                .iter()
+                .map(|&v| format_real(v, Scale::Length(units.length))),
+        );
+        fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
+        out.write_record(&fields).map_err(|e| io_err(&e))?;
+    }
+    let bytes = out.into_inner().map_err(|e| io_err(&e))?;
+
+    let name = path
+        .file_name()
+        .ok_or_else(|| InputError::new(path, ErrorKind::Io, "not a file path"))?;
+    let tmp = path.with_file_name(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let written = (|| -> std::io::Result<()> {
+        use std::io::Write;
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(&bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    written.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        io_err(&e)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_1000_moves_the_point() {
+        for (s, t) in [
+            ("0", "0"),
+            ("-0", "-0"),
+            ("1", "1000"),
+            ("0.0123", "12.3"),
+            ("-1.5", "-1500"),
+            ("0.0000001", "0.0001"),
+            ("123.456789", "123456.789"),
+        ] {
+            assert_eq!(times_1000(s), t);
+        }
+    }
+
+    #[test]
+    fn milli_is_correctly_rounded() {
+        assert_eq!(milli("12.5"), Some(0.0125));
+        assert_eq!(milli("1.5E+3"), Some(1.5));
+        assert_eq!(milli("-7e-1"), Some(-0.0007));
+        assert_eq!(milli("1e-2147483648"), None);
+    }
+}

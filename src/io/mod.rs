@@ -1,0 +1,217 @@
+//! The data contract's files (`shared/spec/data-contract.md`): the robot
+//! (URDF), the setup (TOML) and the measurements (CSV). Host only (`std`).
+//!
+//! ```text
+//!   setup.toml ──Setup::load──► Setup ─┐
+//!   robot.urdf ──Robot::load──► Robot ─┴─► Job ──read_measurements──► Measurements
+//!                                                 (Observation, Deflection)
+//! ```
+//!
+//! Everything is converted to SI on reading (rad, m, kg, s); the CSV's
+//! `[units]` apply only to its joint and position columns.
+//!
+//! Every rejected input is one [`InputError`] naming the file, and where
+//! known the line (1-based; the CSV header is line 1) and the CSV column.
+//! Suspicious but usable input (a joint value far outside its URDF limits,
+//! numbers that look like the wrong unit) is returned as [`InputWarning`]s
+//! next to the data instead.
+//!
+//! ```
+//! use robcal::io::{parse_measurements, Robot, Setup};
+//!
+//! let urdf = r#"<robot name="r">
+//!   <link name="base"/> <link name="arm"/> <link name="flange"/>
+//!   <joint name="a1" type="continuous">
+//!     <parent link="base"/> <child link="arm"/> <axis xyz="0 0 1"/>
+//!   </joint>
+//!   <joint name="tool" type="fixed">
+//!     <parent link="arm"/> <child link="flange"/> <origin xyz="0.5 0 0"/>
+//!   </joint>
+//! </robot>"#;
+//! let robot = Robot::parse(urdf, "r.urdf", Some("base"), Some("flange"))?;
+//! assert_eq!(robot.joint_names, ["a1"]);
+//! assert_eq!(robot.chain.tip().translation.vector.x, 0.5);
+//!
+//! let setup = Setup::parse(
+//!     "robot = \"r.urdf\"\n[units]\nangle = \"deg\"\nlength = \"mm\"\n[load]\n",
+//!     "s.toml",
+//! )?;
+//! let csv = "config,rep,marker,load_kg,a1,x,y,z\n\
+//!            1,0,1,0,90,500,0,0\n\
+//!            1,0,1,20,90,500,-0.25,0\n";
+//! let data = parse_measurements(csv.as_bytes(), "d.csv", &robot, &setup)?;
+//! assert_eq!(data.observations[0].q, [std::f64::consts::FRAC_PI_2]);
+//! assert_eq!(data.observations[0].p_m, [0.5, 0.0, 0.0]);
+//! assert_eq!(data.deflections[0].dp_m, [0.0, -0.00025, 0.0]);
+//!
+//! // Errors name the file, line and column.
+//! let bad = "config,rep,marker,load_kg,a1,x,y,z\n1,0,2,0,90,500,0,0\n";
+//! let e = parse_measurements(bad.as_bytes(), "d.csv", &robot, &setup).unwrap_err();
+//! assert_eq!(e.to_string(), "d.csv:2: column 'marker': marker 2 is not declared in the setup");
+//! # Ok::<(), robcal::io::InputError>(())
+//! ```
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+pub mod measurements;
+pub mod setup;
+pub mod urdf;
+
+pub use measurements::{
+    parse_measurements, read_measurements, write_measurements, Deflection, Measurements,
+    Observation,
+};
+pub use setup::{
+    AngleUnit, GeometryModel, Job, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup,
+    Units,
+};
+pub use urdf::{JointLimits, OffChainBranch, Robot, UrdfJointKind, MAX_JOINTS};
+
+/// What kind of input problem an [`InputError`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// The file cannot be read or written.
+    Io,
+    /// Malformed syntax: XML, TOML, CSV structure, or a cell that is not a
+    /// number of the expected type.
+    Syntax,
+    /// A number is NaN or ±∞.
+    NonFinite,
+    /// A value is out of its allowed domain (negative mass or load, σ0 ≤ 0, …).
+    InvalidValue,
+    /// A setup key is unknown, or a key names something that does not exist
+    /// (a joint of `[model]` that is not a movable joint of the chain).
+    UnknownKey,
+    /// A required CSV column is missing.
+    MissingColumn,
+    /// A CSV column is neither a fixed column nor a movable joint of the chain.
+    UnknownColumn,
+    /// A CSV column appears twice.
+    DuplicateColumn,
+    /// A row names a marker that the setup does not declare.
+    UnknownMarker,
+    /// A loaded row has no unloaded row with the same `config`, `rep`, `marker`.
+    Unpaired,
+    /// Two rows (or two markers) share the key that must be unique.
+    Duplicate,
+    /// The numbers contradict the declared `[units]` (e.g. 90 read as rad).
+    Units,
+    /// The URDF does not give a usable chain: unknown link, no path from base
+    /// to tip, planar/floating/spherical or mimic joint on the path, too many
+    /// joints, zero axis, no movable joint.
+    Robot,
+}
+
+/// A rejected input: which file, where, and why.
+///
+/// `Display`: `file:line: column 'x': message`, leaving out the parts that
+/// are not known (e.g. `robot.urdf: joint 'j2': zero axis`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputError {
+    /// The file at fault.
+    pub file: PathBuf,
+    /// 1-based line, if known (the CSV header is line 1).
+    pub line: Option<usize>,
+    /// CSV column name, if the error is in one column.
+    pub column: Option<String>,
+    /// What kind of problem.
+    pub kind: ErrorKind,
+    /// What is wrong, for a human.
+    pub message: String,
+}
+
+impl InputError {
+    /// An error about `file` as a whole.
+    pub fn new(file: impl Into<PathBuf>, kind: ErrorKind, message: impl Into<String>) -> Self {
+        Self {
+            file: file.into(),
+            line: None,
+            column: None,
+            kind,
+            message: message.into(),
+        }
+    }
+
+    /// The same error, located at a 1-based `line`.
+    #[must_use]
+    pub fn at_line(mut self, line: usize) -> Self {
+        self.line = Some(line);
+        self
+    }
+
+    /// The same error, located in CSV column `column`.
+    #[must_use]
+    pub fn in_column(mut self, column: impl Into<String>) -> Self {
+        self.column = Some(column.into());
+        self
+    }
+}
+
+fn fmt_location(
+    f: &mut fmt::Formatter<'_>,
+    file: &Path,
+    line: Option<usize>,
+    column: Option<&str>,
+    message: &str,
+) -> fmt::Result {
+    write!(f, "{}", file.display())?;
+    if let Some(line) = line {
+        write!(f, ":{line}")?;
+    }
+    if let Some(column) = column {
+        write!(f, ": column '{column}'")?;
+    }
+    write!(f, ": {message}")
+}
+
+impl fmt::Display for InputError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt_location(
+            f,
+            &self.file,
+            self.line,
+            self.column.as_deref(),
+            &self.message,
+        )
+    }
+}
+
+impl std::error::Error for InputError {}
+
+/// Suspicious but usable input, reported next to the data it was found in.
+/// Same `Display` as [`InputError`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputWarning {
+    /// The file.
+    pub file: PathBuf,
+    /// 1-based line of the first occurrence, if the warning is about rows.
+    pub line: Option<usize>,
+    /// CSV column, if the warning is about one column.
+    pub column: Option<String>,
+    /// What looks wrong.
+    pub message: String,
+}
+
+impl fmt::Display for InputWarning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt_location(
+            f,
+            &self.file,
+            self.line,
+            self.column.as_deref(),
+            &self.message,
+        )
+    }
+}
+
+/// 1-based line of byte offset `offset` in `text`.
+pub(crate) fn line_of_offset(text: &str, offset: usize) -> usize {
+    let end = offset.min(text.len());
+    text.as_bytes()[..end]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}

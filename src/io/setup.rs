@@ -1,0 +1,464 @@
+//! The setup file (TOML, data contract section 2) and the [`Job`] it makes
+//! together with the robot.
+//!
+//! Keys and defaults (every table rejects unknown keys, so a typo is an
+//! error naming the key):
+//!
+//! | key | default |
+//! |---|---|
+//! | `robot` | required: URDF path, relative to the setup file's directory |
+//! | `base_link` | the URDF's root link (error if there are several) |
+//! | `tip_link` | the one leaf link below `base_link` (error if the tree branches) |
+//! | `[units] angle` | `"rad"` (`"deg"` \| `"rad"`) |
+//! | `[units] length` | `"m"` (`"mm"` \| `"m"`) |
+//! | `[[marker]]` | one marker, `id = 1`, at the origin of `tip_link` |
+//! | `[[marker]] id` | required in each table; ids unique |
+//! | `[[marker]] xyz` | `[0, 0, 0]` m, in `tip_link` |
+//! | `[load]` | absent: no load (a CSV row with `load_kg > 0` is then an error) |
+//! | `[load] com` | `[0, 0, 0]` m, in `tip_link` |
+//! | `[load] gravity` | `[0, 0, -9.80665]` m/s², base frame |
+//! | `[noise] sigma0_um` | `10` µm, `> 0` |
+//! | `[noise] lambda` | `1`, `≥ 0` |
+//! | `[model] compliance` | `[]`: joint names, movable joints of the chain |
+//! | `[model] compliance_by_angle` | `[]`: revolute/continuous joints of the chain |
+//! | `[model] geometry` | `"none"` (`"none"` \| `"joint_offsets"` \| `"full"`) |
+//! | `[model] base_frame` | `false` |
+//! | `[model] markers` | `"nominal"` (`"nominal"` \| `"identify"`) |
+//!
+//! A joint may be in both `compliance` and `compliance_by_angle` (as in the
+//! contract's example); what that means is the model's business, not the
+//! reader's.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::measurements::{read_measurements, write_measurements, Measurements, Observation};
+use super::urdf::Robot;
+use super::{ErrorKind, InputError};
+
+/// Unit of the CSV's revolute joint columns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AngleUnit {
+    /// Degrees.
+    Deg,
+    /// Radians (default).
+    #[default]
+    Rad,
+}
+
+/// Unit of the CSV's `x`, `y`, `z` and prismatic joint columns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LengthUnit {
+    /// Millimetres.
+    Mm,
+    /// Metres (default).
+    #[default]
+    M,
+}
+
+/// `[units]`: units of the CSV columns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Units {
+    /// Revolute and continuous joint columns.
+    #[serde(default)]
+    pub angle: AngleUnit,
+    /// `x`, `y`, `z` and prismatic joint columns.
+    #[serde(default)]
+    pub length: LengthUnit,
+}
+
+impl Units {
+    /// SI units: rad and m.
+    pub const SI: Units = Units {
+        angle: AngleUnit::Rad,
+        length: LengthUnit::M,
+    };
+}
+
+/// `[[marker]]`: a point on the tip body that the measuring system sees.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Marker {
+    /// Id used in the CSV's `marker` column.
+    pub id: u32,
+    /// Nominal position \[m\] in `tip_link`.
+    #[serde(default)]
+    pub xyz: [f64; 3],
+}
+
+/// `[load]`: where the external load hangs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Load {
+    /// Point \[m\] in `tip_link` where the hanging mass acts.
+    #[serde(default)]
+    pub com: [f64; 3],
+    /// Gravity \[m/s²\] in the base frame.
+    #[serde(default = "default_gravity")]
+    pub gravity: [f64; 3],
+}
+
+fn default_gravity() -> [f64; 3] {
+    [0.0, 0.0, -9.80665]
+}
+
+impl Default for Load {
+    fn default() -> Self {
+        Self {
+            com: [0.0; 3],
+            gravity: default_gravity(),
+        }
+    }
+}
+
+/// `[noise]`: the measuring system's claimed precision (eq. 14).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Noise {
+    /// `σ0` \[µm\], `> 0`.
+    #[serde(default = "default_sigma0")]
+    pub sigma0_um: f64,
+    /// `λ`, the eq. 14 tuning factor, `≥ 0`.
+    #[serde(default = "default_lambda")]
+    pub lambda: f64,
+}
+
+fn default_sigma0() -> f64 {
+    10.0
+}
+
+fn default_lambda() -> f64 {
+    1.0
+}
+
+impl Default for Noise {
+    fn default() -> Self {
+        Self {
+            sigma0_um: default_sigma0(),
+            lambda: default_lambda(),
+        }
+    }
+}
+
+/// `[model] geometry`: which geometric errors are identified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GeometryModel {
+    /// None (default).
+    #[default]
+    None,
+    /// One zero offset per joint.
+    JointOffsets,
+    /// Full joint-frame errors.
+    Full,
+}
+
+/// `[model] markers`: whether marker positions are identified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MarkerModel {
+    /// Use the setup's `xyz` as exact (default).
+    #[default]
+    Nominal,
+    /// Identify each marker's position.
+    Identify,
+}
+
+/// `[model]`: the declared model.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    /// Joints with a compliance parameter.
+    #[serde(default)]
+    pub compliance: Vec<String>,
+    /// Joints with one compliance per distinct angle (compensator).
+    #[serde(default)]
+    pub compliance_by_angle: Vec<String>,
+    /// Geometric errors identified.
+    #[serde(default)]
+    pub geometry: GeometryModel,
+    /// Identify the base pose in the measurement frame.
+    #[serde(default)]
+    pub base_frame: bool,
+    /// Marker positions nominal or identified.
+    #[serde(default)]
+    pub markers: MarkerModel,
+}
+
+/// The setup file. See the module doc for keys and defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Setup {
+    /// URDF path, relative to the setup file's directory (or absolute).
+    pub robot: PathBuf,
+    /// Base frame; `None`: the URDF's root link.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_link: Option<String>,
+    /// Tip frame; `None`: the one leaf below the base.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tip_link: Option<String>,
+    /// `[units]`.
+    #[serde(default)]
+    pub units: Units,
+    /// `[[marker]]` tables.
+    #[serde(default = "default_markers", rename = "marker")]
+    pub markers: Vec<Marker>,
+    /// `[load]`, if there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<Load>,
+    /// `[noise]`.
+    #[serde(default)]
+    pub noise: Noise,
+    /// `[model]`.
+    #[serde(default)]
+    pub model: Model,
+}
+
+fn default_markers() -> Vec<Marker> {
+    vec![Marker {
+        id: 1,
+        xyz: [0.0; 3],
+    }]
+}
+
+impl Setup {
+    /// A setup with every default and the given robot path.
+    pub fn new(robot: impl Into<PathBuf>) -> Self {
+        Self {
+            robot: robot.into(),
+            base_link: None,
+            tip_link: None,
+            units: Units::default(),
+            markers: default_markers(),
+            load: None,
+            noise: Noise::default(),
+            model: Model::default(),
+        }
+    }
+
+    /// Reads and checks a setup file (without the robot; see [`Job::load`]).
+    ///
+    /// # Errors
+    /// Unreadable file, TOML syntax, unknown key, wrong type, or a value
+    /// [`Setup::validate`] rejects; the error names `path` and, for TOML
+    /// errors, the line.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, InputError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            InputError::new(path, ErrorKind::Io, format!("cannot read the setup: {e}"))
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// As [`Setup::load`], from the TOML text; `file` names it in errors.
+    ///
+    /// # Errors
+    /// As [`Setup::load`].
+    pub fn parse(text: &str, file: impl Into<PathBuf>) -> Result<Self, InputError> {
+        let file = file.into();
+        let setup: Setup = toml::from_str(text).map_err(|e| {
+            let message = e.message().trim_end();
+            let kind = if message.starts_with("unknown field") {
+                ErrorKind::UnknownKey
+            } else {
+                ErrorKind::Syntax
+            };
+            let err = InputError::new(file.clone(), kind, message);
+            match e.span() {
+                Some(span) => err.at_line(super::line_of_offset(text, span.start)),
+                None => err,
+            }
+        })?;
+        setup.validate(&file)?;
+        Ok(setup)
+    }
+
+    /// The setup as TOML text ([`Setup::parse`] reads it back to an equal setup).
+    ///
+    /// # Panics
+    /// Does not: every field of these types has a TOML form (non-finite
+    /// numbers are written as `nan`/`inf`, which [`Setup::parse`] rejects).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("setup serializes to TOML")
+    }
+
+    /// Checks what can be checked without the robot: finite numbers,
+    /// `sigma0_um > 0`, `lambda ≥ 0`, at least one marker, unique marker
+    /// ids, no joint twice in a `[model]` list. `file` names the setup in
+    /// errors.
+    ///
+    /// # Errors
+    /// The first violation, naming the key.
+    pub fn validate(&self, file: &Path) -> Result<(), InputError> {
+        let err = |kind, message: String| Err(InputError::new(file, kind, message));
+        let non_finite = |v: &[f64]| v.iter().any(|x| !x.is_finite());
+        if self.markers.is_empty() {
+            return err(ErrorKind::InvalidValue, "marker: no marker declared".into());
+        }
+        for (i, m) in self.markers.iter().enumerate() {
+            if non_finite(&m.xyz) {
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("marker[{i}].xyz: non-finite {:?}", m.xyz),
+                );
+            }
+            if let Some(j) = self.markers[..i].iter().position(|o| o.id == m.id) {
+                return err(
+                    ErrorKind::Duplicate,
+                    format!("marker[{i}].id: marker id {} is also marker[{j}]", m.id),
+                );
+            }
+        }
+        if let Some(load) = &self.load {
+            if non_finite(&load.com) {
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("load.com: non-finite {:?}", load.com),
+                );
+            }
+            if non_finite(&load.gravity) {
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("load.gravity: non-finite {:?}", load.gravity),
+                );
+            }
+        }
+        let n = &self.noise;
+        if !n.sigma0_um.is_finite() {
+            return err(
+                ErrorKind::NonFinite,
+                format!("noise.sigma0_um: {}", n.sigma0_um),
+            );
+        }
+        if n.sigma0_um <= 0.0 {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("noise.sigma0_um: must be > 0, got {}", n.sigma0_um),
+            );
+        }
+        if !n.lambda.is_finite() {
+            return err(ErrorKind::NonFinite, format!("noise.lambda: {}", n.lambda));
+        }
+        if n.lambda < 0.0 {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("noise.lambda: must be >= 0, got {}", n.lambda),
+            );
+        }
+        for (key, list) in [
+            ("model.compliance", &self.model.compliance),
+            ("model.compliance_by_angle", &self.model.compliance_by_angle),
+        ] {
+            for (i, name) in list.iter().enumerate() {
+                if list[..i].contains(name) {
+                    return err(
+                        ErrorKind::Duplicate,
+                        format!("{key}: joint '{name}' listed twice"),
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks the setup against the robot: every `[model]` joint is a
+    /// movable joint of the chain, `compliance_by_angle` joints rotate.
+    ///
+    /// # Errors
+    /// The first violation, naming the key and the joint.
+    pub fn check_robot(&self, robot: &Robot, file: &Path) -> Result<(), InputError> {
+        for (key, list) in [
+            ("model.compliance", &self.model.compliance),
+            ("model.compliance_by_angle", &self.model.compliance_by_angle),
+        ] {
+            for name in list {
+                let Some(index) = robot.joint_index(name) else {
+                    return Err(InputError::new(
+                        file,
+                        ErrorKind::UnknownKey,
+                        format!(
+                            "{key}: '{name}' is not a movable joint of the chain from '{}' to '{}' \
+                             (joints: {})",
+                            robot.base_link,
+                            robot.tip_link,
+                            robot.joint_names.join(", ")
+                        ),
+                    ));
+                };
+                if key == "model.compliance_by_angle" && !robot.joint_kinds[index].is_angular() {
+                    return Err(InputError::new(
+                        file,
+                        ErrorKind::InvalidValue,
+                        format!("{key}: '{name}' is prismatic; it has no angle"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The URDF path: `robot` resolved against the directory of `setup_path`.
+    pub fn robot_path(&self, setup_path: &Path) -> PathBuf {
+        match setup_path.parent() {
+            Some(dir) if self.robot.is_relative() => dir.join(&self.robot),
+            _ => self.robot.clone(),
+        }
+    }
+}
+
+/// A calibration job: the setup, and the robot it names.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    /// The setup file.
+    pub setup_path: PathBuf,
+    /// Its content.
+    pub setup: Setup,
+    /// The robot, read from [`Setup::robot_path`] with the setup's base and tip.
+    pub robot: Robot,
+}
+
+impl Job {
+    /// Reads the setup and the robot it names, and checks one against the other.
+    ///
+    /// # Errors
+    /// Any [`Setup::load`], [`Robot::load`] or [`Setup::check_robot`] error.
+    pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
+        let setup_path = setup_path.as_ref();
+        let setup = Setup::load(setup_path)?;
+        let robot = Robot::load(
+            setup.robot_path(setup_path),
+            setup.base_link.as_deref(),
+            setup.tip_link.as_deref(),
+        )?;
+        setup.check_robot(&robot, setup_path)?;
+        Ok(Self {
+            setup_path: setup_path.to_owned(),
+            setup,
+            robot,
+        })
+    }
+
+    /// Reads a measurement file of this job ([`read_measurements`]).
+    ///
+    /// # Errors
+    /// See [`read_measurements`].
+    pub fn read_measurements(&self, path: impl AsRef<Path>) -> Result<Measurements, InputError> {
+        read_measurements(path, &self.robot, &self.setup)
+    }
+
+    /// Writes a measurement file in this job's units ([`write_measurements`]).
+    ///
+    /// # Errors
+    /// See [`write_measurements`].
+    pub fn write_measurements(
+        &self,
+        path: impl AsRef<Path>,
+        rows: &[Observation],
+    ) -> Result<(), InputError> {
+        write_measurements(path, &self.robot, self.setup.units, rows)
+    }
+}
