@@ -13,10 +13,16 @@
 //!   reached. Every iteration's estimate and standard deviation can be kept
 //!   in a caller-provided history (the paper's Figure 3).
 //!
+//! The fits work on anything that can re-weight its rows per group and
+//! axis and report the residual σ of an estimate: [`Reweightable`].
+//! [`GroupedStats`] does it from sufficient statistics (firmware); a host
+//! program that keeps its rows can do it from them.
+//!
 //! Units: σ0 must be given in the unit of `Δp` (metres in robcal's rows).
 
 use nalgebra::{RealField, SMatrix, SVector, Vector3};
 
+use crate::accumulator::Accumulator;
 use crate::grouped::GroupedStats;
 use crate::solve::{std_devs, Active, Solution};
 use crate::weights::RobustWeight;
@@ -85,26 +91,65 @@ impl<T: RealField + Copy, const N: usize, const G: usize> Fit<T, N, G> {
     }
 }
 
-impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> {
-    /// Fit with given weights per group and axis; covariance by the sandwich
-    /// (eq. 11) with σ from this fit's residuals.
+/// Data that can be re-weighted per group (configuration) and axis.
+pub trait Reweightable<T: RealField + Copy, const N: usize> {
+    /// Number of groups.
+    fn group_count(&self) -> usize;
+
+    /// The statistics with weight `weights[g][a]` on every row of group `g`,
+    /// axis `a`; with `sigma`, the sandwich middle term `M = Σ w⁴σ² bbᵀ` too.
     ///
     /// # Errors
-    /// From [`GroupedStats::weighted`] and the solve.
-    pub fn fit_weighted(
+    /// [`Error::Mismatch`] without one entry per group; bad weights.
+    fn weighted(
+        &self,
+        weights: &[Vector3<T>],
+        sigma: Option<&[Vector3<T>]>,
+    ) -> Result<Accumulator<T, N>, Error>;
+
+    /// σ per group and axis of the residuals of `x`, with the global
+    /// degrees-of-freedom correction `m / (m − parameters)`, written to
+    /// `out` (one entry per group).
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] when `out` does not have one entry per group.
+    fn residual_sigma_into(
+        &self,
+        x: &SVector<T, N>,
+        parameters: usize,
+        out: &mut [Vector3<T>],
+    ) -> Result<(), Error>;
+
+    /// Fit with given weights per group and axis; covariance by the
+    /// sandwich (eq. 11) with σ from this fit's residuals. `G` bounds the
+    /// number of groups.
+    ///
+    /// # Errors
+    /// From [`Reweightable::weighted`] and the solve;
+    /// [`Error::CapacityExceeded`] with more than `G` groups.
+    fn fit_weighted<const G: usize>(
         &self,
         weights: &[Vector3<T>],
         active: &Active<N>,
     ) -> Result<Fit<T, N, G>, Error> {
         let acc = self.weighted(weights, None)?;
         let solution = acc.solve_active(active)?;
-        let sigma = self.residual_sigma(&solution.x, solution.parameters());
+        let mut sigma: heapless::Vec<Vector3<T>, G> = heapless::Vec::new();
+        sigma
+            .resize(self.group_count(), Vector3::zeros())
+            .map_err(|_| Error::CapacityExceeded {
+                what: "groups",
+                capacity: G,
+            })?;
+        self.residual_sigma_into(&solution.x, solution.parameters(), &mut sigma)?;
         let middle = self.weighted(weights, Some(&sigma))?.middle();
         let covariance = solution.cov_sandwich(&middle);
         let mut w = heapless::Vec::new();
         for v in weights {
-            // `weights` has one entry per group (checked by `weighted`).
-            let _ = w.push(*v);
+            w.push(*v).map_err(|_| Error::CapacityExceeded {
+                what: "groups",
+                capacity: G,
+            })?;
         }
         Ok(Fit {
             solution,
@@ -119,37 +164,15 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
     /// Ordinary least squares (eq. 6) with the sandwich covariance (eq. 8).
     ///
     /// # Errors
-    /// From the solve.
-    pub fn fit_ols(&self, active: &Active<N>) -> Result<Fit<T, N, G>, Error> {
-        let ones: heapless::Vec<Vector3<T>, G> = self
-            .groups()
-            .iter()
-            .map(|_| Vector3::repeat(T::one()))
-            .collect();
-        self.fit_weighted(&ones, active)
-    }
-
-    /// The weights of eq. 14 from a fit's residual σ.
-    ///
-    /// # Errors
-    /// [`Error::NonFinite`] for a non-finite σ.
-    pub fn robust_weights(
-        sigma: &[Vector3<T>],
-        weight: &RobustWeight<T>,
-    ) -> Result<heapless::Vec<Vector3<T>, G>, Error> {
-        let mut out = heapless::Vec::new();
-        for s in sigma {
-            let w = Vector3::new(
-                weight.weight(s.x)?,
-                weight.weight(s.y)?,
-                weight.weight(s.z)?,
-            );
-            out.push(w).map_err(|_| Error::CapacityExceeded {
+    /// As [`Reweightable::fit_weighted`].
+    fn fit_ols<const G: usize>(&self, active: &Active<N>) -> Result<Fit<T, N, G>, Error> {
+        let mut ones: heapless::Vec<Vector3<T>, G> = heapless::Vec::new();
+        ones.resize(self.group_count(), Vector3::repeat(T::one()))
+            .map_err(|_| Error::CapacityExceeded {
                 what: "groups",
                 capacity: G,
             })?;
-        }
-        Ok(out)
+        self.fit_weighted(&ones, active)
     }
 
     /// Iteratively reweighted least squares from the OLS start (section 5).
@@ -157,8 +180,8 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
     /// has room (it is cleared first); the fit goes on when it is full.
     ///
     /// # Errors
-    /// [`Error::OutOfRange`] for `max_iterations == 0`; errors of the solves.
-    pub fn fit_irls<const H: usize>(
+    /// [`Error::OutOfRange`] for `max_iterations == 0`; errors of the fits.
+    fn fit_irls<const G: usize, const H: usize>(
         &self,
         settings: &IrlsSettings<T>,
         active: &Active<N>,
@@ -172,15 +195,15 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
             });
         }
         history.clear();
-        let mut fit = self.fit_ols(active)?;
+        let mut fit: Fit<T, N, G> = self.fit_ols(active)?;
         let _ = history.push(Iteration {
             x: fit.solution.x,
             std: fit.std(),
             change: T::zero(),
         });
         for k in 1..=settings.max_iterations {
-            let weights = Self::robust_weights(&fit.sigma, &settings.weight)?;
-            let next = self.fit_weighted(&weights, active)?;
+            let weights = robust_weights::<T, G>(&fit.sigma, &settings.weight)?;
+            let next: Fit<T, N, G> = self.fit_weighted(&weights, active)?;
             let std = next.std();
             let mut change = T::zero();
             for i in 0..N {
@@ -201,5 +224,62 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
             }
         }
         Ok(fit)
+    }
+}
+
+/// The weights of eq. 14 from a fit's residual σ, per group and axis.
+///
+/// # Errors
+/// [`Error::NonFinite`] / [`Error::NotPositive`] for a bad σ;
+/// [`Error::CapacityExceeded`] with more than `G` groups.
+pub fn robust_weights<T: RealField + Copy, const G: usize>(
+    sigma: &[Vector3<T>],
+    weight: &RobustWeight<T>,
+) -> Result<heapless::Vec<Vector3<T>, G>, Error> {
+    let mut out = heapless::Vec::new();
+    for s in sigma {
+        let w = Vector3::new(
+            weight.weight(s.x)?,
+            weight.weight(s.y)?,
+            weight.weight(s.z)?,
+        );
+        out.push(w).map_err(|_| Error::CapacityExceeded {
+            what: "groups",
+            capacity: G,
+        })?;
+    }
+    Ok(out)
+}
+
+impl<T: RealField + Copy, const N: usize, const G: usize> Reweightable<T, N>
+    for GroupedStats<T, N, G>
+{
+    fn group_count(&self) -> usize {
+        self.groups().len()
+    }
+
+    fn weighted(
+        &self,
+        weights: &[Vector3<T>],
+        sigma: Option<&[Vector3<T>]>,
+    ) -> Result<Accumulator<T, N>, Error> {
+        GroupedStats::weighted(self, weights, sigma)
+    }
+
+    fn residual_sigma_into(
+        &self,
+        x: &SVector<T, N>,
+        parameters: usize,
+        out: &mut [Vector3<T>],
+    ) -> Result<(), Error> {
+        if out.len() != self.groups().len() {
+            return Err(Error::Mismatch {
+                what: "one sigma per group",
+            });
+        }
+        for (o, s) in out.iter_mut().zip(self.residual_sigma(x, parameters)) {
+            *o = s;
+        }
+        Ok(())
     }
 }

@@ -51,5 +51,5 @@ pub use accumulator::{Accumulator, Block};
 pub use chain::{Chain, Joint, JointKind, LinkInertia};
 pub use error::Error;
 pub use grouped::GroupedStats;
-pub use irls::{Fit, IrlsSettings, Iteration};
+pub use irls::{Fit, IrlsSettings, Iteration, Reweightable};
 pub use solve::Solution;

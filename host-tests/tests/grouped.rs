@@ -6,7 +6,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use robcal::{
     grouped::GroupedStats,
-    irls::{IrlsSettings, Iteration},
+    irls::{Fit, IrlsSettings, Iteration, Reweightable},
     weights::RobustWeight,
     Accumulator, Block,
 };
@@ -128,10 +128,10 @@ fn irls_recovers_sigma_and_beats_ols() {
     let d = data(3);
     let stats = grouped(&d);
     let all = [true; N];
-    let ols = stats.fit_ols(&all).unwrap();
+    let ols: Fit<f64, N, G> = stats.fit_ols(&all).unwrap();
     let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
     let mut history = heapless::Vec::<Iteration<f64, N>, 64>::new();
-    let fit = stats.fit_irls(&settings, &all, &mut history).unwrap();
+    let fit: Fit<f64, N, G> = stats.fit_irls(&settings, &all, &mut history).unwrap();
     assert!(fit.converged, "iterations {}", fit.iterations);
     assert_eq!(history.len(), fit.iterations + 1);
     assert_eq!(history[0].x, ols.solution.x);
