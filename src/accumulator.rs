@@ -44,11 +44,11 @@ use crate::Error;
 pub struct Block<T: RealField + Copy, const N: usize> {
     /// `B`: one row per equation (x, y, z).
     pub b: SMatrix<T, 3, N>,
-    /// `Δp` [m]: the measured left-hand side.
+    /// `Δp` \[m\]: the measured left-hand side.
     pub dp: Vector3<T>,
     /// `w` per row (eq. 9): finite, ≥ 0. A zero weight drops the row.
     pub w: Vector3<T>,
-    /// σ per row [m], when known: adds `w⁴σ² bbᵀ` to the sandwich middle
+    /// σ per row \[m\], when known: adds `w⁴σ² bbᵀ` to the sandwich middle
     /// term `M` (eq. 11). Finite, > 0.
     pub sigma: Option<Vector3<T>>,
     /// How many of the three rows are used (1..=3); rows past it are ignored.
@@ -74,7 +74,7 @@ impl<T: RealField + Copy, const N: usize> Block<T, N> {
         self
     }
 
-    /// The same block with a known σ per row [m] (for eq. 8 / 11).
+    /// The same block with a known σ per row \[m\] (for eq. 8 / 11).
     #[must_use]
     pub fn with_sigma(mut self, sigma: Vector3<T>) -> Self {
         self.sigma = Some(sigma);

@@ -104,7 +104,7 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
             .sum()
     }
 
-    /// Adds one measurement of group `id`: rows `b` (x, y, z) and `Δp` [m].
+    /// Adds one measurement of group `id`: rows `b` (x, y, z) and `Δp` \[m\].
     /// Weights are not given here: they are chosen later, per group and axis.
     ///
     /// # Errors
