@@ -32,7 +32,8 @@ if [ ! -x "$llvm_bin/llvm-size" ]; then
     rustup component add llvm-tools
 fi
 
-out=target/insn-count
+target_dir=${CARGO_TARGET_DIR:-target}
+out=$target_dir/insn-count
 mkdir -p "$out"
 plugin=$out/libinsnmark.so
 if [ ! -f "$plugin" ] || [ tools/insnmark.c -nt "$plugin" ]; then
@@ -46,7 +47,7 @@ for target in "${targets[@]}"; do
         *) echo "unknown target $target" >&2; exit 2 ;;
     esac
     cargo build --quiet --profile "$profile" --target "$target" --example firmware
-    elf=target/$target/$profile/examples/firmware
+    elf=$target_dir/$target/$profile/examples/firmware
     mark=$("$llvm_bin/llvm-nm" "$elf" | awk '$3 == "bench_mark" { print $1 }')
     if [ -z "$mark" ]; then
         echo "bench_mark not found in $elf" >&2
