@@ -45,7 +45,7 @@ for target in "${targets[@]}"; do
         fail "$target: firmware checks"
     fi
 
-    elf=target/$target/firmware/examples/firmware
+    elf=${CARGO_TARGET_DIR:-target}/$target/firmware/examples/firmware
     read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
         { s[$1] = $2 }
         END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
