@@ -11,8 +11,8 @@ use robcal::weights::RobustWeight;
 use robcal::{Accumulator, Block, Error, JointKind, LinkInertia};
 use semihosting::process::exit;
 
-use crate::SelfTest;
 use crate::problem::{self, check, rejects_bad_block, stream, Lcg, N};
+use crate::SelfTest;
 
 /// Exit status of a failed check (a panic exits 101, a HardFault 3).
 const EXIT_FAIL: i32 = 1;

@@ -85,7 +85,10 @@ fn main() {
     let s32 = acc32.solve().expect("f32 solve");
     let s64 = acc64.solve().expect("f64 solve");
     let v = check(&s32, &s64, &acc64, &expected_x(fault));
-    println!("robcal firmware example, host build: N = {N}, {} equations", s64.equations);
+    println!(
+        "robcal firmware example, host build: N = {N}, {} equations",
+        s64.equations
+    );
     println!("param  x (f64) [m|rad]   3 sigma     x (f32)          |err|/sigma  |f32-f64|/sigma");
     for (i, p) in v.params.iter().enumerate() {
         println!(
@@ -97,7 +100,10 @@ fn main() {
             p.f32_sigmas
         );
     }
-    println!("sigma_hat / sigma = {:.4}; bad block rejected: {:?}", v.sigma_hat_ratio, bad);
+    println!(
+        "sigma_hat / sigma = {:.4}; bad block rejected: {:?}",
+        v.sigma_hat_ratio, bad
+    );
     let ok = v.pass && bad.is_some();
     println!("{}", if ok { "PASS" } else { "FAIL" });
     std::process::exit(if ok { 0 } else { 1 });

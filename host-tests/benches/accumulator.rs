@@ -27,8 +27,8 @@ impl Lcg {
     /// `Δp = B x` with x = 1e-3 per parameter, plus 10 µm of noise.
     fn block<T: RealField + Copy, const N: usize>(&mut self) -> Block<T, N> {
         let b = SMatrix::<f64, 3, N>::from_fn(|_, _| self.uniform());
-        let dp = b * SMatrix::<f64, N, 1>::repeat(1e-3)
-            + Vector3::from_fn(|_, _| 1e-5 * self.uniform());
+        let dp =
+            b * SMatrix::<f64, N, 1>::repeat(1e-3) + Vector3::from_fn(|_, _| 1e-5 * self.uniform());
         Block::new(b.map(nalgebra::convert), dp.map(nalgebra::convert))
     }
 }
