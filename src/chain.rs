@@ -74,6 +74,7 @@ impl<T: RealField + Copy> Joint<T> {
 /// A serial chain of at most `J` movable joints from the base frame to the
 /// tip frame (`tip_link`).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Chain<T: RealField + Copy, const J: usize> {
     joints: heapless::Vec<Joint<T>, J>,
     tip: Isometry3<T>,

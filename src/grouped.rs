@@ -73,6 +73,7 @@ pub struct GroupMoments<T: RealField + Copy, const N: usize> {
 /// Grouped sufficient statistics for at most `G` groups. See the
 /// [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GroupedStats<T: RealField + Copy, const N: usize, const G: usize> {
     groups: heapless::Vec<GroupMoments<T, N>, G>,
 }
