@@ -248,7 +248,8 @@ impl Experiment {
 
     /// Gauss–Newton on the exact model: relinearise at the last estimate
     /// and refit with `fit` until no parameter moves by more than
-    /// `tolerance` of its standard deviation (at most `max_steps`).
+    /// `tolerance` of its standard deviation, or by less than 1e-12 of its
+    /// value (at most `max_steps`).
     /// Returns the final fit and the number of relinearisations.
     ///
     /// # Errors
@@ -269,8 +270,13 @@ impl Experiment {
             let f = fit(&self.exact_stats(&x)?)?;
             steps += 1;
             let std = f.std();
+            // In σ; on (nearly) noise-free data σ → 0, so a relative
+            // change of 1e-12 counts as settled too.
             let moved = (0..N)
-                .map(|i| (f.solution.x[i] - x[i]).abs() / std[i].max(f64::MIN_POSITIVE))
+                .map(|i| {
+                    let scale = std[i].max(1e-12 * f.solution.x[i].abs() / tolerance);
+                    (f.solution.x[i] - x[i]).abs() / scale.max(f64::MIN_POSITIVE)
+                })
                 .fold(0.0, f64::max);
             x = f.solution.x;
             if moved < tolerance || steps >= max_steps {
