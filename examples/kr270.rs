@@ -109,7 +109,7 @@ fn main() -> Res<()> {
     table3(&fits, &exact);
     let crb = cramer_rao(&stats)?;
     table4(&fits, &crb);
-    formula_mix(&fits, &stats, sigma0_m)?;
+    formula_mix(&fits, &stats, sigma0_m, &crb)?;
     figure3(&fits);
     residual_sigma(&fits);
     nonlinearity(&exp, &stats, &fits, &exact)?;
@@ -247,7 +247,7 @@ fn table4(f: &Fits, crb: &SVector<f64, N>) {
 }
 
 /// Which covariance formulas reproduce the paper's σ_OLS/σ_WLS = 27–42?
-fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64) -> Res<()> {
+fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64, crb: &SVector<f64, N>) -> Res<()> {
     let so = f.ols.std();
     // (13) read literally with the dimensionless weights of eq. 14 and Δp in
     // µm: (Bᵀ W² B)⁻¹ with B in µm per µrad/(N·m) = 1e-12 × Λ⁻¹ (B in m).
@@ -266,12 +266,12 @@ fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64) -> Res<()> {
     let l: Vec<SVector<f64, N>> = f.wls.iter().map(lit).collect();
     println!("Table 4, what could give the paper's 27–42: σ_OLS (8) divided by σ_WLS from");
     println!(
-        "{:<4} | {:>7} | {:>9} {:>9} {:>9} {:>9} | {:>9}",
-        "k", "paper", "A: (11)", "B: λ=0.5", "B: λ=1", "B: λ=2", "C: a=σ0"
+        "{:<4} | {:>7} | {:>9} {:>9} {:>9} {:>9} | {:>9} | {:>13}",
+        "k", "paper", "A: (11)", "B: λ=0.5", "B: λ=1", "B: λ=2", "C: a=σ0", "paper WLS/CRB"
     );
     for i in 0..N {
         println!(
-            "{:<4} | {:>7.1} | {:>9.2} {:>9.2} {:>9.2} {:>9.2} | {:>9.2}",
+            "{:<4} | {:>7.1} | {:>9.2} {:>9.2} {:>9.2} {:>9.2} | {:>9.2} | {:>13.2}",
             PAPER_SYMBOLS[i],
             kr270::SIGMA_RATIO[i],
             so[i] / f.irls.std()[i],
@@ -279,12 +279,14 @@ fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64) -> Res<()> {
             so[i] / l[1][i],
             so[i] / l[2][i],
             so[i] / s12[i],
+            kr270::WLS_CI3[i] / (3.0 * crb[i]),
         );
     }
     println!(
         "(A: the sandwich (11) of iterative WLS, the honest σ. B: (13) read as (Bᵀ W² B)⁻¹ with \
          eq. 14's dimensionless weights\n of one-step WLS and Δp in µm (iterative λ = 1: {}). \
-         C: (13) with eq. 12's weights w = σ0/σ̂, Δp in µm: = σ0[µm] × CRB-like σ, λ-free.)\n",
+         C: (13) with eq. 12's weights w = σ0/σ̂, Δp in µm: = σ0[µm] × CRB-like σ, λ-free.\n \
+         paper WLS/CRB: the paper's WLS ±3σ over 3σ of the Cramér–Rao bound of this design — below 1 is impossible for an honest σ)\n",
         (0..N)
             .map(|i| format!("{:.1}", so[i] / it[i]))
             .collect::<Vec<_>>()
