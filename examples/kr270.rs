@@ -464,6 +464,7 @@ fn plot_figure3(f: &Fits, path: &std::path::Path) -> Res<()> {
         .build_cartesian_2d(-0.5..(n as f64 - 0.5), (lo - pad)..(hi + pad))?;
     c.configure_mesh()
         .x_desc("iteration (0 = OLS)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_desc("k21 [µrad/(N·m)]")
         .draw()?;
     c.draw_series(
@@ -494,6 +495,7 @@ fn plot_figure3(f: &Fits, path: &std::path::Path) -> Res<()> {
         .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)?;
     c.configure_mesh()
         .x_desc("iteration (0 = OLS)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_desc("CI [%]")
         .draw()?;
     c.draw_series(LineSeries::new(ci.iter().copied(), BLUE))?;

@@ -16,7 +16,12 @@ const RTOL: f64 = 1e-10;
 fn assert_x(got: &SVector<f64, N>, want: &DVector<f64>, what: &str) {
     for i in 0..N {
         let e = (got[i] - want[i]).abs() / want[i].abs();
-        assert!(e <= RTOL, "{what}: x[{i}] = {} vs batch {} (rel {e:e})", got[i], want[i]);
+        assert!(
+            e <= RTOL,
+            "{what}: x[{i}] = {} vs batch {} (rel {e:e})",
+            got[i],
+            want[i]
+        );
     }
 }
 
@@ -44,7 +49,11 @@ fn grouped_fits_equal_the_dense_batch_solution() {
     let (_, exp) = experiment();
     let stats = exp.linear_stats().unwrap();
     let ids: Vec<i32> = stats.groups().iter().map(|g| g.id).collect();
-    assert_eq!(ids, (1..=15).collect::<Vec<_>>(), "groups in configuration order");
+    assert_eq!(
+        ids,
+        (1..=15).collect::<Vec<_>>(),
+        "groups in configuration order"
+    );
     let dp: Vec<_> = exp.obs.iter().map(|o| o.dp).collect();
     let s = batch(&exp, &dp);
     assert_eq!((s.b.nrows(), s.b.ncols()), (810, 9));
@@ -88,7 +97,11 @@ fn grouped_fits_equal_the_dense_batch_solution() {
         prev = next;
     }
     assert_x(&fits.irls.solution.x, &prev.x, "iterative WLS, final");
-    assert_cov(&fits.irls.covariance, &prev.cov, "iterative WLS (11), final");
+    assert_cov(
+        &fits.irls.covariance,
+        &prev.cov,
+        "iterative WLS (11), final",
+    );
     println!(
         "batch agreement within {RTOL:e}: OLS, WLS ×3, {} iterations",
         fits.history.len() - 1

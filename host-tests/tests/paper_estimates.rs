@@ -17,7 +17,11 @@ fn within_3_sigma(name: &str, fit: &Fit<f64, N, G>) {
     let s = fit.std();
     for i in 0..N {
         let z = (fit.solution.x[i] - t[i]) / s[i];
-        assert!(z.abs() <= 3.0, "{name}: {} off by {z:.2}σ", PAPER_SYMBOLS[i]);
+        assert!(
+            z.abs() <= 3.0,
+            "{name}: {} off by {z:.2}σ",
+            PAPER_SYMBOLS[i]
+        );
     }
 }
 
@@ -76,9 +80,19 @@ fn wls_never_has_a_larger_variance_than_ols() {
         let wt = true_cov(&stats, &fit.weights);
         for i in 0..N {
             // Reported σ: (11) against (8), both from the residuals.
-            assert!(sw[i] <= so[i], "{name}: reported σ of {} {} > OLS {}", PAPER_SYMBOLS[i], sw[i], so[i]);
+            assert!(
+                sw[i] <= so[i],
+                "{name}: reported σ of {} {} > OLS {}",
+                PAPER_SYMBOLS[i],
+                sw[i],
+                so[i]
+            );
             // True variance under Table 1's Σ with the weights this fit used.
-            assert!(wt[(i, i)] <= ols_true[(i, i)], "{name}: true variance of {}", PAPER_SYMBOLS[i]);
+            assert!(
+                wt[(i, i)] <= ols_true[(i, i)],
+                "{name}: true variance of {}",
+                PAPER_SYMBOLS[i]
+            );
         }
     }
 }
@@ -104,7 +118,10 @@ fn linear_model_bias_and_its_gauss_newton_refinement() {
         xm[i] -= h;
         let d = (exp.exact(o, &xp).unwrap().0 - exp.exact(o, &xm).unwrap().0) / (2.0 * h);
         let want: Vector3<f64> = jac.column(i).into();
-        assert!((d - want).norm() <= 1e-7 * want.norm().max(1e-9), "column {i}: {d:?} vs {want:?}");
+        assert!(
+            (d - want).norm() <= 1e-7 * want.norm().max(1e-9),
+            "column {i}: {d:?} vs {want:?}"
+        );
     }
 
     // Bias of the linear model: fit noise-free exact deflections.
@@ -138,7 +155,10 @@ fn linear_model_bias_and_its_gauss_newton_refinement() {
             .obs
             .iter()
             .zip(&clean)
-            .map(|(o, c)| paper::Obs { dp: *c, ..o.clone() })
+            .map(|(o, c)| paper::Obs {
+                dp: *c,
+                ..o.clone()
+            })
             .collect(),
         ..exp.clone()
     };
@@ -150,7 +170,9 @@ fn linear_model_bias_and_its_gauss_newton_refinement() {
     let e = (r.solution.x - truth).abs().max() / truth.abs().min();
     assert!(e < 1e-10, "refined OLS off the truth by {e:e}");
     let (r, _) = clean_exp
-        .refine(&start, 1e-9, 20, |s| s.fit_weighted(&f.irls.weights, &[true; N]))
+        .refine(&start, 1e-9, 20, |s| {
+            s.fit_weighted(&f.irls.weights, &[true; N])
+        })
         .unwrap();
     let e = (r.solution.x - truth).abs().max() / truth.abs().min();
     assert!(e < 1e-10, "refined WLS off the truth by {e:e}");
