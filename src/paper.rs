@@ -23,6 +23,31 @@
 //! pseudo-observations `Δp − f(x0) + J(x0) x0`, so that any fit of these
 //! statistics is one Gauss–Newton step from `x0`, and its residuals at the
 //! fixed point are the exact model's residuals.
+//!
+//! ```
+//! use robcal::io::Job;
+//! use robcal::paper::{self, Experiment};
+//!
+//! let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/kr270/");
+//! let job = Job::load(format!("{dir}setup.toml"))?;
+//! let data = job.read_measurements(format!("{dir}measurements.csv"))?;
+//! let exp = Experiment::new(&job, &data)?;
+//! let stats = exp.linear_stats()?;
+//! assert_eq!(stats.equations(), 810);
+//! let settings = robcal::IrlsSettings::new(paper::weight(10e-6, 1.0)?);
+//! let fits = paper::fits(&stats, &settings)?;
+//! // k21 [µrad/(N·m)] within 3σ of the truth (Table 3), WLS tighter than OLS.
+//! let (k21, s) = (fits.irls.solution.x[0], fits.irls.std()[0]);
+//! assert!((k21 - 0.287).abs() < 3.0 * s);
+//! assert!(s < fits.ols.std()[0]);
+//! // Gauss–Newton on the exact model moves k22 by ~+2σ (the linear bias).
+//! let (exact, _) = exp.refine(&fits.ols.solution.x, 1e-6, 20, |s| {
+//!     robcal::Reweightable::fit_ols(s, &[true; paper::N])
+//! })?;
+//! let moved = (exact.solution.x[1] - fits.ols.solution.x[1]) / fits.ols.std()[1];
+//! assert!((1.5..2.0).contains(&moved), "{moved}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::error::Error as StdError;
 
@@ -78,13 +103,13 @@ pub struct Obs {
     pub config: i32,
     /// q2 group 0…4 (which of k21…k25 acts).
     pub q2_group: usize,
-    /// Unloaded joint values [rad].
+    /// Unloaded joint values \[rad\].
     pub q: Vec<f64>,
     /// The marker.
     pub marker: Marker<f64>,
     /// The hanging load.
     pub load: PointLoad<f64>,
-    /// Measured deflection (loaded − unloaded) [m].
+    /// Measured deflection (loaded − unloaded) \[m\].
     pub dp: Vector3<f64>,
 }
 
@@ -182,14 +207,14 @@ impl Experiment {
         stats_of(&self.obs, &rows, &dp)
     }
 
-    /// Joint compliances [rad/(N·m)] of A1…A6 for a deflection of q2
-    /// group `g`, from the estimate `x` [µrad/(N·m)]; k1 = 0.
+    /// Joint compliances \[rad/(N·m)\] of A1…A6 for a deflection of q2
+    /// group `g`, from the estimate `x` \[µrad/(N·m)\]; k1 = 0.
     pub fn joint_compliances(x: &SVector<f64, N>, g: usize) -> [f64; 6] {
         [0.0, x[g], x[5], x[6], x[7], x[8]].map(|k| k * 1e-6)
     }
 
-    /// The exact deflection `p(q + δq) − p(q)` [m] of observation `o` for
-    /// compliances `x`, and its Jacobian [m per µrad/(N·m)] at `x`
+    /// The exact deflection `p(q + δq) − p(q)` \[m\] of observation `o` for
+    /// compliances `x`, and its Jacobian \[m per µrad/(N·m)\] at `x`
     /// (compliance columns at the deflected frames, torques at `q`).
     ///
     /// # Errors
@@ -302,7 +327,7 @@ pub fn stats_of(
     Ok(s)
 }
 
-/// The paper's weights (eq. 14) with σ0 [m] and λ.
+/// The paper's weights (eq. 14) with σ0 \[m\] and λ.
 ///
 /// # Errors
 /// For σ0 ≤ 0 or λ < 0.
