@@ -177,3 +177,44 @@ fn linear_model_bias_and_its_gauss_newton_refinement() {
     let e = (r.solution.x - truth).abs().max() / truth.abs().min();
     assert!(e < 1e-10, "refined WLS off the truth by {e:e}");
 }
+
+/// The Kantorovich (Bloomfield–Watson) bound: with Table 1's σ from 17 to
+/// 153 µm, no weighting can make any parameter's σ smaller than OLS's by
+/// more than `(1 + 9²)/(2·9) ≈ 4.56`. Our design: OLS's true σ over the
+/// Cramér–Rao σ is 1.3–1.7; the paper's Table 4 claims 27–42.
+#[test]
+fn kantorovich_bound_on_the_gain_of_weighting() {
+    let (_, exp) = experiment();
+    let stats = exp.linear_stats().unwrap();
+    let flat: Vec<f64> = kr270::SIGMA_UM.iter().flatten().copied().collect();
+    let (lo, hi) = flat
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), s| (l.min(*s), h.max(*s)));
+    let root_kappa = hi / lo;
+    let bound = (1.0 + root_kappa * root_kappa) / (2.0 * root_kappa);
+    assert!((bound - 4.56).abs() < 0.01, "{bound}");
+    let ones = vec![Vector3::repeat(1.0); 15];
+    let ols = true_cov(&stats, &ones);
+    let inv: Vec<Vector3<f64>> = stats
+        .groups()
+        .iter()
+        .map(|g| Vector3::from(kr270::SIGMA_UM[(g.id - 1) as usize]).map(|s| 1e6 / s))
+        .collect();
+    let crb = stats
+        .weighted(&inv, None)
+        .unwrap()
+        .solve()
+        .unwrap()
+        .lambda_inv;
+    for i in 0..N {
+        let gain = (ols[(i, i)] / crb[(i, i)]).sqrt();
+        println!("{:<4} σ_OLS/σ_CRB = {gain:.2}", PAPER_SYMBOLS[i]);
+        assert!(
+            (1.0..=bound).contains(&gain),
+            "{}: {gain}",
+            PAPER_SYMBOLS[i]
+        );
+        // The paper's claim is beyond the bound for every parameter.
+        assert!(kr270::SIGMA_RATIO[i] > 5.0 * bound);
+    }
+}
