@@ -30,6 +30,8 @@ pub trait ToF64: RealField + Copy {
     fn of_f64(v: f64) -> Self;
     /// The bit pattern, widened (distinguishes −0 and NaN payloads).
     fn bits(self) -> u64;
+    /// The smallest positive normal number of `Self`, as `f64`.
+    fn tiny() -> f64;
 }
 
 impl ToF64 for f64 {
@@ -42,6 +44,9 @@ impl ToF64 for f64 {
     fn bits(self) -> u64 {
         self.to_bits()
     }
+    fn tiny() -> f64 {
+        f64::MIN_POSITIVE
+    }
 }
 
 impl ToF64 for f32 {
@@ -53,6 +58,9 @@ impl ToF64 for f32 {
     }
     fn bits(self) -> u64 {
         u64::from(self.to_bits())
+    }
+    fn tiny() -> f64 {
+        f64::from(f32::MIN_POSITIVE)
     }
 }
 
@@ -81,7 +89,8 @@ pub struct BatchSolution {
     pub wrss: f64,
     /// Rows with a positive weight.
     pub equations: usize,
-    /// 2-norm condition number of `W B` (its square is that of `Bᵀ W² B`).
+    /// 2-norm condition number of the column-equilibrated `W B` (its
+    /// square is that of the equilibrated `Bᵀ W² B`).
     pub cond_wb: f64,
 }
 
@@ -135,15 +144,30 @@ impl Batch {
         let w = self.w_mat();
         let wb = &w * &self.b;
         let wdp = &w * &self.dp;
-        let svd = wb.clone().svd(true, true);
+        // The SVD is not invariant to column scaling (its error is ε·σ_max
+        // in every direction), so with columns of 1e3 next to 1e-15 the
+        // small columns would drown. Solve `(W B D) y = W Δp`, `X = D y`,
+        // with `D = diag(1/‖(WB)ⱼ‖)`: the same least-squares problem.
+        let d = DVector::from_fn(self.b.ncols(), |j, _| {
+            let n = wb.column(j).norm();
+            if n > 0.0 {
+                1.0 / n
+            } else {
+                1.0
+            }
+        });
+        let wbd = &wb * DMatrix::from_diagonal(&d);
+        let svd = wbd.svd(true, true);
         let smax = svd.singular_values.max();
         let smin = svd.singular_values.min();
-        let x = svd
+        let y = svd
             .solve(&wdp, 0.0)
             .expect("SVD solve with U and V computed");
-        let pinv = svd
-            .pseudo_inverse(0.0)
-            .expect("pseudo-inverse with U and V computed");
+        let x = y.component_mul(&d);
+        let pinv = DMatrix::from_diagonal(&d)
+            * svd
+                .pseudo_inverse(0.0)
+                .expect("pseudo-inverse with U and V computed");
         let lambda_inv = &pinv * pinv.transpose();
         let res = &wdp - &wb * &x;
         BatchSolution {
@@ -179,16 +203,24 @@ impl Batch {
         &p * &w * s2 * &w * p.transpose()
     }
 
-    /// Eq. 13: `(Bᵀ Σ⁻² B)⁻¹` from `Σ` alone, by SVD of `Σ⁻¹ B`.
+    /// Eq. 13: `(Bᵀ Σ⁻² B)⁻¹` from `Σ` alone, by SVD of `Σ⁻¹ B` (columns
+    /// equilibrated as in [`Batch::solve`]).
     ///
     /// # Panics
     /// Without σ.
     pub fn cov_eq13(&self) -> DMatrix<f64> {
         let sigma = self.sigma.as_ref().expect("eq. 13 needs σ");
         let sinv = DMatrix::from_diagonal(&sigma.map(|s| 1.0 / s));
-        let pinv = (sinv * &self.b)
-            .pseudo_inverse(0.0)
-            .expect("pseudo-inverse of Σ⁻¹B");
+        let sb = sinv * &self.b;
+        let d = DMatrix::from_diagonal(&DVector::from_fn(self.b.ncols(), |j, _| {
+            let n = sb.column(j).norm();
+            if n > 0.0 {
+                1.0 / n
+            } else {
+                1.0
+            }
+        }));
+        let pinv = &d * (sb * &d).pseudo_inverse(0.0).expect("pseudo-inverse of Σ⁻¹BD");
         &pinv * pinv.transpose()
     }
 }

@@ -89,6 +89,20 @@ fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), 
     let ei = cov_rel_err(&sol.cov_iid(), &batch.cov_iid(&reference));
     prop_assert!(ei <= 1e-10 + cancel, "eq. 7: {ei:e} (cancellation {cancel:e})");
     prop_assert_eq!(sol.equations, reference.equations);
+
+    // Eq. 13: with W = Σ⁻¹ the covariance is Λ⁻¹ = (Bᵀ Σ⁻² B)⁻¹, against
+    // the batch computed from Σ alone; and the sandwich agrees with it.
+    let inv: Vec<Block<f64, N>> = blocks
+        .iter()
+        .map(|b| b.with_weights(b.sigma.unwrap().map(|s| 1.0 / s)))
+        .collect();
+    let b13 = Batch::from_blocks(&inv);
+    let acc13 = accumulate(&inv);
+    let sol13 = acc13.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let e13 = cov_rel_err(&sol13.cov_information(), &b13.cov_eq13());
+    prop_assert!(e13 <= 1e-10, "eq. 13: {e13:e}");
+    let e11 = cov_rel_err(&sol13.cov_sandwich(&acc13.middle()), &b13.cov_eq13());
+    prop_assert!(e11 <= 1e-10, "eq. 11 with WΣ = I: {e11:e}");
     Ok(())
 }
 
