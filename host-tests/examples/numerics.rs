@@ -25,7 +25,11 @@ use host_tests::{convert_block, Batch, Rng, ToF64};
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 use robcal::{Accumulator, Block, Error};
 
-fn scaled_err<T: ToF64, const N: usize>(x: &SVector<T, N>, batch: &Batch, xref: &DVector<f64>) -> f64 {
+fn scaled_err<T: ToF64, const N: usize>(
+    x: &SVector<T, N>,
+    batch: &Batch,
+    xref: &DVector<f64>,
+) -> f64 {
     let wb = batch.w_mat() * &batch.b;
     let (mut num, mut den) = (0.0_f64, 0.0_f64);
     for j in 0..N {
@@ -104,7 +108,9 @@ fn scaling() {
     println!("\n## 2. Column scales: 1e3, 1, `small`, `small` (N = 4, 120 rows, unit weights)\n");
     println!("| small | f64 | f32 |");
     println!("|---|---|---|");
-    for e in [0, 3, 6, 9, 12, 15, 18, 19, 20, 21, 22, 25, 30, 40, 100, 150, 160] {
+    for e in [
+        0, 3, 6, 9, 12, 15, 18, 19, 20, 21, 22, 25, 30, 40, 100, 150, 160,
+    ] {
         let small = 10f64.powi(-e);
         let scale = [1e3, 1.0, small, small];
         let mut rng = Rng::new(7);
@@ -198,7 +204,10 @@ impl SqrtInfo {
 }
 
 fn solve_ref(l: &DMatrix<f64>, e: &DVector<f64>) -> DVector<f64> {
-    l.clone().cholesky().expect("reference Λ is positive definite").solve(e)
+    l.clone()
+        .cholesky()
+        .expect("reference Λ is positive definite")
+        .solve(e)
 }
 
 /// Table 4: `m` measurements (3 rows each) streamed, N = 6.
@@ -263,7 +272,13 @@ fn streaming(m: usize) {
         e
     };
     let vec_err = |v: DVector<f64>, r: &DVector<f64>| (v - r).amax() / r.amax();
-    let row = |name: &str, l: DMatrix<f64>, e: DVector<f64>, x: DVector<f64>, rl: &DMatrix<f64>, re: &DVector<f64>, rx: &DVector<f64>| {
+    let row = |name: &str,
+               l: DMatrix<f64>,
+               e: DVector<f64>,
+               x: DVector<f64>,
+               rl: &DMatrix<f64>,
+               re: &DVector<f64>,
+               rx: &DVector<f64>| {
         println!(
             "| {name} | {:.1e} | {:.1e} | {:.1e} |",
             lam_err(l, rl),
@@ -276,7 +291,15 @@ fn streaming(m: usize) {
     let dm = |a: SMatrix<f64, NS, NS>| DMatrix::from_fn(NS, NS, |i, j| a[(i, j)]);
     let dv = |a: &SVector<f64, NS>| DVector::from_fn(NS, |i, _| a[i]);
     let x64 = a64.solve().unwrap().x;
-    row("f64 naive (robcal)", dm(a64.information()), dv(a64.eta()), dv(&x64), &rl64, &re64, &rx64);
+    row(
+        "f64 naive (robcal)",
+        dm(a64.information()),
+        dv(a64.eta()),
+        dv(&x64),
+        &rl64,
+        &re64,
+        &rx64,
+    );
     let x32 = a32.solve().unwrap().x.map(f64::from);
     row(
         "f32 naive (robcal)",
@@ -327,7 +350,10 @@ fn cancellation() {
         let blocks: Vec<Block<f64, 4>> = (0..100)
             .map(|_| {
                 let b = SMatrix::<f64, 3, 4>::from_fn(|_, _| rng.normal());
-                Block::new(b, b * x_true + Vector3::from_fn(|_, _| noise * rng.normal()))
+                Block::new(
+                    b,
+                    b * x_true + Vector3::from_fn(|_, _| noise * rng.normal()),
+                )
             })
             .collect();
         let b32: Vec<Block<f32, 4>> = blocks.iter().map(convert_block).collect();

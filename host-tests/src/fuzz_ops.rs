@@ -281,11 +281,17 @@ fn check_solution<T: ToF64>(
         a_inf = a_inf.max(row);
     }
     let eps = T::default_epsilon().f64();
-    // Plus an absolute floor for values in the subnormal range of `T`,
-    // where "relative" rounding does not hold (scaled values are O(1) in
-    // any problem that is not at the edge of the range).
+    // Plus absolute floors for results in the subnormal range of `T`,
+    // where "relative" rounding does not hold: in the scaled system, and
+    // for the unscaled `x = S xs`, whose components can underflow when
+    // `Λⱼⱼ` is huge (`xⱼ = 1e-337` is not representable; 0 is the right
+    // answer — fuzz finding `f64-tiny-estimate`). Both floors are
+    // ~1e-290 for problems away from the edges of the range.
+    let smax = s.iter().fold(0.0_f64, |a, &v| a.max(1.0 / v));
+    let floor = 1e8 * (n.max(1) as f64) * T::tiny();
     let bound = 64.0 * (n.max(1) as f64) * eps * (a_inf * xs_inf + rhs_inf)
-        + 1e8 * (n.max(1) as f64) * T::tiny() * (1.0 + a_inf);
+        + floor * (1.0 + a_inf)
+        + floor * a_inf * smax;
     assert!(
         res_inf <= bound || !(xs_inf.is_finite() && rhs_inf.is_finite()),
         "garbage estimate: scaled residual {res_inf:e} > {bound:e} (x = {x:?})"

@@ -182,11 +182,7 @@ impl Batch {
     /// Eq. 7 generalised to weights: `σ̂² (BᵀW²B)⁻¹`, `σ̂² = wrss / (m − n)`.
     pub fn cov_iid(&self, sol: &BatchSolution) -> DMatrix<f64> {
         let dof = self.rows().saturating_sub(self.b.ncols());
-        let s2 = if dof == 0 {
-            0.0
-        } else {
-            sol.wrss / dof as f64
-        };
+        let s2 = if dof == 0 { 0.0 } else { sol.wrss / dof as f64 };
         &sol.lambda_inv * s2
     }
 
@@ -220,7 +216,10 @@ impl Batch {
                 1.0
             }
         }));
-        let pinv = &d * (sb * &d).pseudo_inverse(0.0).expect("pseudo-inverse of Σ⁻¹BD");
+        let pinv = &d
+            * (sb * &d)
+                .pseudo_inverse(0.0)
+                .expect("pseudo-inverse of Σ⁻¹BD");
         &pinv * pinv.transpose()
     }
 }
@@ -382,7 +381,8 @@ pub fn random_blocks<const N: usize>(
     let mut out = Vec::with_capacity(spec.blocks);
     for _ in 0..spec.blocks {
         let b = SMatrix::<f64, 3, N>::from_fn(|_, j| rng.normal() * col_scale[j]);
-        let sigma = Vector3::from_fn(|_, _| rng.log_uniform(spec.sigma.0.log10(), spec.sigma.1.log10()));
+        let sigma =
+            Vector3::from_fn(|_, _| rng.log_uniform(spec.sigma.0.log10(), spec.sigma.1.log10()));
         let noise = Vector3::from_fn(|i, _| rng.normal() * sigma[i]);
         let w = if spec.weight_decades > 0.0 {
             Vector3::from_fn(|_, _| rng.log_uniform(-spec.weight_decades, spec.weight_decades))

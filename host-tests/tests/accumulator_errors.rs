@@ -45,7 +45,11 @@ fn rejects<T: ToF64>(acc: &mut Accumulator<T, N>, block: &Block<T, N>, expected:
 }
 
 fn non_finite_values<T: ToF64>() -> [T; 3] {
-    [T::of_f64(f64::NAN), T::of_f64(f64::INFINITY), T::of_f64(f64::NEG_INFINITY)]
+    [
+        T::of_f64(f64::NAN),
+        T::of_f64(f64::INFINITY),
+        T::of_f64(f64::NEG_INFINITY),
+    ]
 }
 
 /// `big`: a value whose square overflows `T`; `half`: `√max / 2`, whose

@@ -24,8 +24,7 @@
 //!   with that bound added (see `docs/numerics.md`).
 
 use host_tests::{
-    accumulate, convert_block, cov_rel_err, random_blocks, scaled_rel_err, Batch,
-    Rng, Spec, ToF64,
+    accumulate, convert_block, cov_rel_err, random_blocks, scaled_rel_err, Batch, Rng, Spec, ToF64,
 };
 use nalgebra::{DMatrix, SMatrix};
 use proptest::prelude::*;
@@ -75,19 +74,27 @@ fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), 
     let batch = Batch::from_blocks(&blocks);
     let reference = batch.solve();
     let acc = accumulate(&blocks);
-    let sol = acc.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let sol = acc
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let ex = scaled_rel_err(&sol.x, &batch, &reference);
     prop_assert!(ex <= 1e-10, "estimate: {ex:e}");
     let el = cov_rel_err(&sol.lambda_inv, &reference.lambda_inv);
     prop_assert!(el <= 1e-10, "Λ⁻¹: {el:e}");
     // Sandwich (eq. 11) against P W Σ² W Pᵀ.
-    let es = cov_rel_err(&sol.cov_sandwich(&acc.middle()), &batch.cov_sandwich(&reference));
+    let es = cov_rel_err(
+        &sol.cov_sandwich(&acc.middle()),
+        &batch.cov_sandwich(&reference),
+    );
     prop_assert!(es <= 1e-10, "sandwich: {es:e}");
     // Eq. 7, with the cancellation bound of σ̂² (module docs).
     let yy = acc.weighted_yy();
     let cancel = 64.0 * f64::EPSILON * yy / reference.wrss.max(f64::MIN_POSITIVE);
     let ei = cov_rel_err(&sol.cov_iid(), &batch.cov_iid(&reference));
-    prop_assert!(ei <= 1e-10 + cancel, "eq. 7: {ei:e} (cancellation {cancel:e})");
+    prop_assert!(
+        ei <= 1e-10 + cancel,
+        "eq. 7: {ei:e} (cancellation {cancel:e})"
+    );
     prop_assert_eq!(sol.equations, reference.equations);
 
     // Eq. 13: with W = Σ⁻¹ the covariance is Λ⁻¹ = (Bᵀ Σ⁻² B)⁻¹, against
@@ -98,7 +105,9 @@ fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), 
         .collect();
     let b13 = Batch::from_blocks(&inv);
     let acc13 = accumulate(&inv);
-    let sol13 = acc13.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let sol13 = acc13
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let e13 = cov_rel_err(&sol13.cov_information(), &b13.cov_eq13());
     prop_assert!(e13 <= 1e-10, "eq. 13: {e13:e}");
     let e11 = cov_rel_err(&sol13.cov_sandwich(&acc13.middle()), &b13.cov_eq13());
@@ -123,7 +132,9 @@ fn check_f32_scaled<const N: usize>(seed: u64, blocks: usize) -> Result<(), Test
     prop_assume!(equilibrated_cond(&batch) <= 100.0);
     let reference = batch.solve();
     let acc = accumulate(&blocks);
-    let sol = acc.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let sol = acc
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let ex = scaled_rel_err(&sol.x, &batch, &reference);
     prop_assert!(ex <= 1e-4, "f32 estimate: {ex:e}");
     // Each component on its own scale, too (no parameter is ~0 here).
@@ -136,7 +147,10 @@ fn check_f32_scaled<const N: usize>(seed: u64, blocks: usize) -> Result<(), Test
     }
     let el = cov_rel_err(&sol.lambda_inv, &reference.lambda_inv);
     prop_assert!(el <= 1e-4, "f32 Λ⁻¹: {el:e}");
-    let es = cov_rel_err(&sol.cov_sandwich(&acc.middle()), &batch.cov_sandwich(&reference));
+    let es = cov_rel_err(
+        &sol.cov_sandwich(&acc.middle()),
+        &batch.cov_sandwich(&reference),
+    );
     prop_assert!(es <= 1e-4, "f32 sandwich: {es:e}");
     Ok(())
 }
@@ -174,13 +188,18 @@ fn check_order<const N: usize>(seed: u64, blocks: usize, split: f64) -> Result<(
     let batch = Batch::from_blocks(&blocks);
     let reference = batch.solve();
     let seq = accumulate(&blocks);
-    let sol = seq.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let sol = seq
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
 
     // Permutation invariance.
     let perm = accumulate(&shuffled(&blocks, seed));
     same_up_to_rounding(&seq, &perm)?;
-    let sp = perm.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
-    let d = scaled_rel_err(&sp.x, &batch, &reference).max(scaled_rel_err(&sol.x, &batch, &reference));
+    let sp = perm
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let d =
+        scaled_rel_err(&sp.x, &batch, &reference).max(scaled_rel_err(&sol.x, &batch, &reference));
     prop_assert!(d <= 1e-10, "permuted estimate: {d:e}");
 
     // Merge == sequential, split at a random point, merged both ways.
@@ -188,10 +207,12 @@ fn check_order<const N: usize>(seed: u64, blocks: usize, split: f64) -> Result<(
     let (left, right) = blocks.split_at(k);
     let mut a = accumulate(left);
     let b = accumulate(right);
-    a.merge(&b).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    a.merge(&b)
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     same_up_to_rounding(&seq, &a)?;
     let mut b2 = b.clone();
-    b2.merge(&accumulate(left)).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    b2.merge(&accumulate(left))
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     same_up_to_rounding(&seq, &b2)?;
     let sm = a.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let d = scaled_rel_err(&sm.x, &batch, &reference);

@@ -18,7 +18,9 @@ use robcal::{Accumulator, Block};
 #[test]
 fn scalar_example_of_section_4() {
     let x = [0.3, -1.2, 2.5, 0.9, -0.4, 1.7, 3.1, -2.2, 0.05, 1.1];
-    let sigma = [1e-5, 3e-5, 2e-5, 8e-5, 1e-5, 5e-5, 2.5e-5, 1.5e-5, 4e-5, 6e-5];
+    let sigma = [
+        1e-5, 3e-5, 2e-5, 8e-5, 1e-5, 5e-5, 2.5e-5, 1.5e-5, 4e-5, 6e-5,
+    ];
     let m = x.len() as f64;
     let tol = 16.0 * m * f64::EPSILON;
     let rel = |a: f64, b: f64| ((a - b) / b).abs();
@@ -48,7 +50,11 @@ fn scalar_example_of_section_4() {
     }
     let sol = ols.solve().unwrap();
     let c = sol.cov_sandwich(&ols.middle());
-    assert!(rel(c[(0, 0)], var_ols) <= tol, "OLS {} vs {var_ols}", c[(0, 0)]);
+    assert!(
+        rel(c[(0, 0)], var_ols) <= tol,
+        "OLS {} vs {var_ols}",
+        c[(0, 0)]
+    );
     assert!(rel(sol.lambda_inv[(0, 0)], 1.0 / sxx) <= tol);
     assert!((sol.x[0] - 0.7).abs() < 1e-14);
 
@@ -60,9 +66,17 @@ fn scalar_example_of_section_4() {
     }
     let sol = wls.solve().unwrap();
     let c13 = sol.cov_information();
-    assert!(rel(c13[(0, 0)], var_wls) <= tol, "eq. 13 {} vs {var_wls}", c13[(0, 0)]);
+    assert!(
+        rel(c13[(0, 0)], var_wls) <= tol,
+        "eq. 13 {} vs {var_wls}",
+        c13[(0, 0)]
+    );
     let c11 = sol.cov_sandwich(&wls.middle());
-    assert!(rel(c11[(0, 0)], var_wls) <= tol, "eq. 11 {} vs {var_wls}", c11[(0, 0)]);
+    assert!(
+        rel(c11[(0, 0)], var_wls) <= tol,
+        "eq. 11 {} vs {var_wls}",
+        c11[(0, 0)]
+    );
 
     // w = a/σ with a ≠ 1: Λ⁻¹ is scaled by 1/a², the sandwich is not (the
     // variance of the estimate does not depend on the unit of the weights).

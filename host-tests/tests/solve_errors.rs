@@ -10,7 +10,12 @@ const N: usize = 4;
 
 /// Random blocks whose column `dup` is a copy of column `of` (times
 /// `factor`), or of the combination `col0 + col1` when `of == usize::MAX`.
-fn with_dependent_column<T: ToF64>(dup: usize, of: usize, factor: f64, blocks: usize) -> Accumulator<T, N> {
+fn with_dependent_column<T: ToF64>(
+    dup: usize,
+    of: usize,
+    factor: f64,
+    blocks: usize,
+) -> Accumulator<T, N> {
     let mut rng = Rng::new(3 + dup as u64);
     let mut acc = Accumulator::new();
     for _ in 0..blocks {
@@ -80,7 +85,8 @@ fn zero_column_is_not_identifiable() {
     for _ in 0..4 {
         let mut b = SMatrix::<f64, 3, N>::from_fn(|_, _| rng.normal());
         b.set_column(2, &Vector3::zeros());
-        acc.update(&Block::new(b, Vector3::new(1.0, 2.0, 3.0))).unwrap();
+        acc.update(&Block::new(b, Vector3::new(1.0, 2.0, 3.0)))
+            .unwrap();
     }
     assert_eq!(
         acc.solve(),
@@ -142,8 +148,11 @@ fn near_collinear_is_refused_with_the_condition_seen() {
             let c0 = Vector3::from_fn(|_, _| rng.normal());
             let c1 = c0 + Vector3::from_fn(|_, _| delta * rng.normal());
             let b = SMatrix::<f64, 3, 2>::from_columns(&[c0, c1]);
-            acc.update(&Block::new(b.map(T::of_f64), (b * nalgebra::Vector2::new(1.0, 1.0)).map(T::of_f64)))
-                .unwrap();
+            acc.update(&Block::new(
+                b.map(T::of_f64),
+                (b * nalgebra::Vector2::new(1.0, 1.0)).map(T::of_f64),
+            ))
+            .unwrap();
         }
         match acc.solve() {
             Ok(s) => Ok(s.rcond.f64()),
