@@ -176,10 +176,10 @@ impl SqrtInfo {
             }
             let h = a.hypot(c);
             let (cs, sn) = (a / h, c / h);
-            for j in k..NS {
-                let (rk, xk) = (self.r[(k, j)], row[j]);
+            for (j, x) in row.iter_mut().enumerate().skip(k) {
+                let (rk, xk) = (self.r[(k, j)], *x);
                 self.r[(k, j)] = cs * rk + sn * xk;
-                row[j] = -sn * rk + cs * xk;
+                *x = -sn * rk + cs * xk;
             }
             let zk = self.z[k];
             self.z[k] = cs * zk + sn * yy;

@@ -250,8 +250,8 @@ fn check_solution<T: ToF64>(
         sol.rcond
     );
     assert_eq!(sol.equations, acc.equations());
-    for j in 0..FN {
-        if !active[j] {
+    for (j, a) in active.iter().enumerate() {
+        if !a {
             assert!(sol.x[j] == T::zero(), "inactive parameter {j} not zero");
         }
     }

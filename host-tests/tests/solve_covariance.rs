@@ -60,8 +60,8 @@ fn scalar_example_of_section_4() {
 
     // WLS, W = Σ⁻¹.
     let mut wls = Accumulator::<f64, 1>::new();
-    for i in 0..x.len() {
-        wls.update(&block(i, inverse_sigma(1.0, sigma[i]).unwrap()))
+    for (i, s) in sigma.iter().enumerate() {
+        wls.update(&block(i, inverse_sigma(1.0, *s).unwrap()))
             .unwrap();
     }
     let sol = wls.solve().unwrap();
@@ -82,9 +82,8 @@ fn scalar_example_of_section_4() {
     // variance of the estimate does not depend on the unit of the weights).
     let a = 1e-5;
     let mut wa = Accumulator::<f64, 1>::new();
-    for i in 0..x.len() {
-        wa.update(&block(i, inverse_sigma(a, sigma[i]).unwrap()))
-            .unwrap();
+    for (i, s) in sigma.iter().enumerate() {
+        wa.update(&block(i, inverse_sigma(a, *s).unwrap())).unwrap();
     }
     let sol = wa.solve().unwrap();
     assert!(rel(sol.cov_sandwich(&wa.middle())[(0, 0)], var_wls) <= tol);
