@@ -32,6 +32,7 @@
 //! panic, or fault; each must end QEMU with a non-zero status.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
+mod kr270;
 mod problem;
 
 #[cfg(target_os = "none")]
@@ -105,6 +106,68 @@ fn main() {
         v.sigma_hat_ratio, bad
     );
     let ok = v.pass && bad.is_some();
+    println!("synthetic: {}", if ok { "PASS" } else { "FAIL" });
+    let ok_kr270 = host_kr270(fault);
+    let ok = ok && ok_kr270;
     println!("{}", if ok { "PASS" } else { "FAIL" });
     std::process::exit(if ok { 0 } else { 1 });
+}
+
+/// The KR-270 fit of the firmware, on the host: in f32 (what the device
+/// runs) and in f64, checked against the reference; the f64 streaming fit
+/// also against `GroupedStats` on the same rows.
+#[cfg(not(target_os = "none"))]
+fn host_kr270(fault: SelfTest) -> bool {
+    use kr270::{check, Kr270, G, HISTORY, N};
+    use robcal::irls::{Fit, Reweightable};
+
+    fn run<T: nalgebra::RealField + Copy, R: Reweightable<T, N>>(src: &R) -> Fit<T, N, G> {
+        let mut h = heapless::Vec::<_, HISTORY>::new();
+        src.fit_irls(&kr270::settings().unwrap(), &[true; N], &mut h)
+            .expect("fit")
+    }
+    let expected = kr270_expected(fault);
+    let s32 = Kr270::<f32>::new().expect("model");
+    let s64 = Kr270::<f64>::new().expect("model");
+    let f32fit = run(&s32);
+    let f64fit = run(&s64);
+    let grouped = run(&kr270::grouped(&s64).expect("stats"));
+    let (p32, ok32) = check(&(&f32fit).into(), &expected);
+    let (p64, ok64) = check(&(&f64fit).into(), &expected);
+    let sd = grouped.std();
+    let agree = (0..N)
+        .map(|i| (f64fit.solution.x[i] - grouped.solution.x[i]).abs() / sd[i])
+        .fold(0.0, f64::max);
+    println!(
+        "KR-270: {} deflections, iterative WLS: f32 {} iterations, f64 {}, host reference {}",
+        kr270::KEYS.len(),
+        f32fit.iterations,
+        f64fit.iterations,
+        kr270::HOST_ITERATIONS
+    );
+    println!("param   x (f32) +/- 3 sigma [urad/(N*m)]   |dx|/sigma f32   f64   |dsd|/sd f32");
+    for i in 0..N {
+        println!(
+            "{:>5} {:10.6} +/- {:.6} {:12.2e} {:9.2e} {:12.2e}",
+            robcal::kr270::PAPER_SYMBOLS[i],
+            p32[i].x,
+            3.0 * p32[i].sd,
+            p32[i].x_sigmas,
+            p64[i].x_sigmas,
+            p32[i].sd_rel
+        );
+    }
+    println!("streaming f64 vs GroupedStats f64: max |dx|/sigma = {agree:.2e}");
+    ok32 && ok64 && agree < 1e-9
+}
+
+/// The host's estimate as the KR-270 check sees it: with
+/// [`SelfTest::Mismatch`] k21 is moved by one of its σ, 100 times the
+/// tolerance, so the check must fail.
+fn kr270_expected(fault: SelfTest) -> [f64; kr270::N] {
+    let mut x = kr270::HOST_X;
+    if fault == SelfTest::Mismatch {
+        x[0] += kr270::HOST_SD[0];
+    }
+    x
 }
