@@ -18,7 +18,9 @@ use robcal::irls::{Fit, Reweightable};
 fn job() -> (Job, robcal::io::Measurements) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/kr270");
     let job = Job::load(root.join("setup.toml")).unwrap();
-    let data = job.read_measurements(root.join("measurements.csv")).unwrap();
+    let data = job
+        .read_measurements(root.join("measurements.csv"))
+        .unwrap();
     (job, data)
 }
 
