@@ -8,7 +8,7 @@
 //! ```
 //!
 //! The table (section 5's experiment, 15 configurations × 6 repetitions ×
-//! 3 markers = 270 deflections, 2.3 KB):
+//! 3 markers = 270 deflections, 3.7 KB of flash):
 //!
 //! - `Q_CDEG`: the joint angles of each configuration once, in 0.01° (`i16`):
 //!   Table 2 prints them to 0.01°, so this is exact (checked here);
@@ -20,7 +20,7 @@
 //!   coordinate by at most 0.5 nm (RMS 0.29 nm), 3e-5 of the smallest σ of
 //!   Table 1 (17 µm) and 2e-6 of the largest (153 µm); what it does to the
 //!   estimate is measured below (≈ 1e-5 σ) and written into the table.
-//!   15 bytes per deflection, 4 KB in all. (`i16` in 0.5 µm would fit the
+//!   13 bytes per deflection: 3.5 KB, plus 210 bytes per configuration data. (`i16` in 0.5 µm would fit the
 //!   largest deflection, 11.2 mm, in 2 bytes per coordinate, but moves
 //!   the estimate by 0.009 σ, which would eat most of the f32 tolerance.)
 //!

@@ -246,7 +246,7 @@ fn kr270_iteration(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSetti
         },
     )
     .unwrap_or_else(|e| fail("one iteration", e));
-    info!("first WLS step: k21 = {=f32}", one.solution.x[0]);
+    info!("first WLS step (Fit): {}", one);
 }
 
 /// The whole iterative WLS (a bench phase); logs the convergence of k21
@@ -274,6 +274,7 @@ fn kr270_irls(
             it.change
         );
     }
+    info!("last iteration (Iteration): {}", history.last());
     (&fit).into()
 }
 
