@@ -71,8 +71,9 @@ struct Truth {
     cyclic: Option<(usize, f64)>,
     marker: Option<(usize, Vector3<f64>)>,
     base: Option<[f64; 6]>,
-    /// Outside the library: the loaded tool tilts in proportion to
-    /// `sin(3 q1)` (e.g. a flexible floor plate under the base).
+    /// Outside the library: under load, every marker sinks by
+    /// `amp · sin(3 q1)` [m] (e.g. a floor plate that is stiffer in some
+    /// directions of the first axis than in others).
     outside: Option<f64>,
 }
 
@@ -162,8 +163,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
             job.setup.model.base_frame = true;
         }
     }
-    let nominal: Chain<f64, 16> = job.robot.chain.clone();
-    let mut chain = nominal.clone();
+    let mut chain: Chain<f64, 16> = job.robot.chain.clone();
     if let Some((j, e)) = t.frame {
         let o = chain.joints()[j].origin;
         chain.joints_mut()[j].origin = o * small_transform(&e);
@@ -182,8 +182,8 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
     let mut time = 0.0;
     for c in 0..spec.configs {
         let mut q = [0.0; 6];
-        for j in 0..6 {
-            q[j] = if j == a.binned {
+        for (j, qj) in q.iter_mut().enumerate() {
+            *qj = if j == a.binned {
                 a.bins[c % a.bins.len()]
             } else {
                 let (lo, hi) = a.ranges[j];
@@ -273,9 +273,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
                             p += (perp * cl).cross(&(p - jf.origin_m()));
                         }
                         if let Some(amp) = t.outside {
-                            let tilt = Vector3::new(amp * (3.0 * q_rad[0]).sin(), 0.0, 0.0);
-                            p += tilt.cross(&(p - fr.tip().translation.vector)) * 0.0
-                                + Vector3::new(0.0, 0.0, amp * (3.0 * q_rad[0]).sin());
+                            p.z += amp * (3.0 * q_rad[0]).sin();
                         }
                     }
                     let mut p = base.transform_point(&p.into()).coords;
@@ -307,7 +305,6 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
     }
     let data = parse_measurements(csv.as_bytes(), "synthetic.csv", &job.robot, &job.setup)
         .expect("synthetic data parse");
-    let _ = nominal;
     (job, data)
 }
 

@@ -57,7 +57,7 @@ struct CalibrateArgs {
     #[arg(long, value_enum, default_value = "irls")]
     method: MethodArg,
     /// λ of eq. 14 (default: the setup's `[noise] lambda`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     lambda: Option<f64>,
     /// IRLS iterations at most.
     #[arg(long = "max-iter", default_value_t = 100)]
@@ -77,7 +77,21 @@ struct CalibrateArgs {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            // The contract's one line: clap's first line, without the usage.
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("bad arguments");
+            eprintln!("robcal: {}", first.trim_start_matches("error: ").trim());
+            return ExitCode::from(2);
+        }
+    };
     let result = match cli.command {
         Command::Calibrate(args) => run_calibrate(&args),
     };
