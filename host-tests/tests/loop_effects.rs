@@ -581,6 +581,8 @@ fn outside_the_library_is_unexplained() {
         let what = summary(&r);
         let u = r.unexplained.as_ref().unwrap_or_else(|| panic!("{what}"));
         assert!(u.p_value < 1e-6, "{what}");
+        // ... and it names the variable the structure follows.
+        assert_eq!(u.variable, format!("q_{}", jname(a, 0)), "{what}");
         assert!(r.effects.is_empty(), "{what}");
     }
 }

@@ -518,75 +518,127 @@ fn lack_of_fit(p: &Problem, fitted: &Fitted) -> Option<LackOfFit> {
     })
 }
 
+/// A variable the residuals may follow: its name, its value per row, and
+/// whether it is an angle (then it is expanded in harmonics, else in powers).
+struct Variable {
+    name: String,
+    values: Vec<f64>,
+    angle: bool,
+}
+
 /// Variables the residuals may follow, per row.
-fn variables(p: &Problem) -> Vec<(String, Vec<f64>)> {
+fn variables(p: &Problem) -> Vec<Variable> {
+    let var = |name: String, values: Vec<f64>, angle: bool| Variable {
+        name,
+        values,
+        angle,
+    };
     let mut out = Vec::new();
     for (j, name) in p.ctx.joint_names.iter().enumerate() {
-        out.push((format!("q_{name}"), p.rows.iter().map(|r| r.q[j]).collect()));
+        let angle = p.ctx.joint_kinds[j] == crate::chain::JointKind::Revolute;
+        out.push(var(
+            format!("q_{name}"),
+            p.rows.iter().map(|r| r.q[j]).collect(),
+            angle,
+        ));
     }
     for (j, name) in p.ctx.joint_names.iter().enumerate() {
-        out.push((
+        out.push(var(
             format!("tau_{name}"),
             p.rows.iter().map(|r| r.tau[j]).collect(),
+            false,
         ));
     }
     if p.kinds.deflections {
-        out.push(("load_kg".into(), p.rows.iter().map(|r| r.load_kg).collect()));
+        out.push(var(
+            "load_kg".into(),
+            p.rows.iter().map(|r| r.load_kg).collect(),
+            false,
+        ));
     }
     if p.kinds.time {
-        out.push((
+        out.push(var(
             "t".into(),
             p.rows.iter().map(|r| r.dt.unwrap_or(0.0)).collect(),
+            false,
         ));
     }
     if p.ctx.markers.len() > 1 {
-        out.push((
+        out.push(var(
             "marker".into(),
             p.rows.iter().map(|r| f64::from(r.marker)).collect(),
+            false,
         ));
     }
     out
 }
 
-/// R² of the weighted residual (each axis, pooled) on `[1, v, v²]`.
-fn follow_score(v: &[f64], res: &[Vector3<f64>]) -> f64 {
-    let n = v.len();
-    if n < 4 {
-        return 0.0;
+/// How strongly the weighted residuals follow `v`: the p-value of the F
+/// test of regressing each residual axis on smooth functions of `v`
+/// (harmonics 1–3 for an angle, powers 1–3 otherwise), pooled over the
+/// three axes. Smaller is stronger.
+fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
+    let n = v.values.len();
+    let mean = v.values.iter().sum::<f64>() / n.max(1) as f64;
+    let sd = (v.values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n.max(1) as f64).sqrt();
+    if n < 8 || sd == 0.0 {
+        return 1.0;
     }
-    let mean = v.iter().sum::<f64>() / n as f64;
-    let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-    if sd == 0.0 {
-        return 0.0;
-    }
-    let z: Vec<f64> = v.iter().map(|x| (x - mean) / sd).collect();
-    let x = nalgebra::DMatrix::from_fn(n, 3, |i, c| match c {
-        0 => 1.0,
-        1 => z[i],
-        _ => z[i] * z[i],
-    });
-    let (mut explained, mut total) = (0.0, 0.0);
-    for a in 0..3 {
-        let y = nalgebra::DVector::from_fn(n, |i, _| res[i][a]);
-        let ym = y.mean();
-        let tss: f64 = y.iter().map(|v| (v - ym).powi(2)).sum();
-        if let Some(beta) = (x.transpose() * &x)
-            .cholesky()
-            .map(|c| c.solve(&(x.transpose() * &y)))
-        {
-            let fitted = &x * beta;
-            explained += fitted.iter().map(|v| (v - ym).powi(2)).sum::<f64>();
-        }
-        total += tss;
-    }
-    if total > 0.0 {
-        explained / total
+    let features: Vec<Vec<f64>> = if v.angle {
+        (1..=3)
+            .flat_map(|h| {
+                let h = f64::from(h);
+                [
+                    v.values.iter().map(|x| (h * x).sin()).collect::<Vec<f64>>(),
+                    v.values.iter().map(|x| (h * x).cos()).collect(),
+                ]
+            })
+            .collect()
     } else {
-        0.0
+        (1..=3)
+            .map(|k| v.values.iter().map(|x| ((x - mean) / sd).powi(k)).collect())
+            .collect()
+    };
+    // Orthonormal basis of [1, features] (dependent ones dropped).
+    let mut basis: Vec<Vec<f64>> = vec![vec![1.0 / (n as f64).sqrt(); n]];
+    for mut f in features {
+        let n0 = f.iter().map(|x| x * x).sum::<f64>().sqrt();
+        for _ in 0..2 {
+            for u in &basis {
+                let d: f64 = u.iter().zip(&f).map(|(a, b)| a * b).sum();
+                f.iter_mut().zip(u).for_each(|(x, ui)| *x -= d * ui);
+            }
+        }
+        let nf = f.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if nf > 1e-8 * n0 {
+            f.iter_mut().for_each(|x| *x /= nf);
+            basis.push(f);
+        }
     }
+    let k = basis.len() - 1;
+    if k == 0 || n <= k + 1 {
+        return 1.0;
+    }
+    let (mut explained, mut left) = (0.0, 0.0);
+    for a in 0..3 {
+        let y: Vec<f64> = res.iter().map(|r| r[a]).collect();
+        let ym = y.iter().sum::<f64>() / n as f64;
+        let tss: f64 = y.iter().map(|v| (v - ym).powi(2)).sum();
+        let ess: f64 = basis[1..]
+            .iter()
+            .map(|u| u.iter().zip(&y).map(|(a, b)| a * b).sum::<f64>().powi(2))
+            .sum();
+        explained += ess;
+        left += (tss - ess).max(0.0);
+    }
+    if left <= 0.0 {
+        return 0.0;
+    }
+    let (d1, d2) = (3 * k, 3 * (n - k - 1));
+    stats::f_sf((explained / d1 as f64) / (left / d2 as f64), d1, d2)
 }
 
-/// The variable the residuals follow most, and its score (R²).
+/// The variable the residuals follow most, and its p-value.
 fn most_followed(p: &Problem, fitted: &Fitted) -> (String, f64) {
     let res: Vec<Vector3<f64>> = p
         .rows
@@ -596,12 +648,12 @@ fn most_followed(p: &Problem, fitted: &Fitted) -> (String, f64) {
         .collect();
     variables(p)
         .into_iter()
-        .map(|(name, v)| {
-            let s = follow_score(&v, &res);
-            (name, s)
+        .map(|v| {
+            let s = follow_p_value(&v, &res);
+            (v.name, s)
         })
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .unwrap_or_else(|| ("none".into(), 0.0))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or_else(|| ("none".into(), 1.0))
 }
 
 /// Values of the variable an effect is traced by, per row, for plots.
@@ -638,8 +690,8 @@ fn traced_variable(p: &Problem, c: &Candidate) -> (String, Vec<f64>) {
 fn variable_values(p: &Problem, name: &str) -> Vec<f64> {
     variables(p)
         .into_iter()
-        .find(|(n, _)| n == name)
-        .map(|(_, v)| v)
+        .find(|v| v.name == name)
+        .map(|v| v.values)
         .unwrap_or_else(|| p.rows.iter().map(|r| r.config as f64).collect())
 }
 
