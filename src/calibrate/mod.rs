@@ -874,6 +874,14 @@ fn run(
     let first = e.fit(&declared)?;
     let mut current = e.with_heldout(first)?;
     let declared_rms = (current.rms_um, current.heldout_rms_um);
+    let declared_structure = lack_of_fit(&e.p, &current).map(|l| {
+        let (variable, _) = most_followed(&e.p, &current);
+        Unexplained {
+            variable,
+            statistic: l.f,
+            p_value: l.p_value,
+        }
+    });
     let mut steps: Vec<EffectStep> = Vec::new();
     let mut unexplained = None;
     let mut last_round: Vec<Tested> = Vec::new();
@@ -1042,6 +1050,7 @@ fn run(
         heldout_rms_um: current.heldout_rms_um,
         declared_rms_um: declared_rms.0,
         declared_heldout_rms_um: declared_rms.1,
+        declared_structure,
         effects: steps,
         unexplained,
         lack_of_fit: final_lof,

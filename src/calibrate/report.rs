@@ -106,6 +106,9 @@ pub struct Report {
     pub declared_rms_um: f64,
     /// Held-out RMS of the declared model [µm].
     pub declared_heldout_rms_um: Option<f64>,
+    /// The declared model's lack of fit and the variable its residuals
+    /// follow most (whether or not significant).
+    pub declared_structure: Option<Unexplained>,
     /// Effects added, in order.
     pub effects: Vec<EffectStep>,
     /// Structure left unexplained.
@@ -165,6 +168,19 @@ impl fmt::Display for Report {
             self.declared_rms_um,
             opt(self.declared_heldout_rms_um)
         )?;
+        if let Some(d) = &self.declared_structure {
+            writeln!(
+                f,
+                "  lack of fit F = {:.2} (p = {:.2e}){}",
+                d.statistic,
+                d.p_value,
+                if d.p_value < 0.01 {
+                    ": structure beyond the noise"
+                } else {
+                    ""
+                }
+            )?;
+        }
         if self.effects.is_empty() {
             writeln!(f, "diagnosis: no effect added")?;
         }
