@@ -747,12 +747,11 @@ impl Engine<'_> {
         let d = self.p.design(&fitted.terms);
         let cols: Vec<usize> = (0..fitted.terms.len()).collect();
         let mut res = Vec::with_capacity(d.rows());
+        (self.progress)(&format!(
+            "held-out RMS: {} fits, one without each configuration",
+            self.p.configs.len()
+        ));
         for g in 0..self.p.configs.len() {
-            (self.progress)(&format!(
-                "held out: configuration {} of {}",
-                g + 1,
-                self.p.configs.len()
-            ));
             // Parameters the other configurations cannot identify are held
             // at zero (their error then shows in the prediction).
             let mut use_cols = cols.clone();
