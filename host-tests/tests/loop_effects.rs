@@ -620,3 +620,25 @@ fn geometric_model_on_clean_data_adds_nothing() {
         "a1 offset vs base rz must be dropped"
     );
 }
+
+/// A large declared model (full joint-frame geometry, base, markers,
+/// compliances: 56 columns declared) runs on the 64/128-column capacities
+/// (big fixed-size matrices on the worker's stack), drops what the data
+/// cannot identify, and adds nothing to clean data.
+#[test]
+fn full_geometry_model_uses_the_large_capacities() {
+    let (mut job, data) = simulate(&spec(Arm::UrLike, true, 98, Truth::default()));
+    job.setup.model.geometry = GeometryModel::Full;
+    job.setup.model.markers = MarkerModel::Identify;
+    let settings = Settings {
+        heldout: false,
+        ..Settings::default()
+    };
+    let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).unwrap();
+    assert!(r.parameters.len() > 32, "{}", r.parameters.len());
+    assert!(!r.dropped.is_empty());
+    assert!(r.effects.is_empty(), "{}", summary(&r));
+    // Clean data: the residuals are the noise (σ 10..30 µm per axis, half
+    // in each position: norm RMS ≈ √3 · 20/√2 ≈ 25 µm, less the fitted dof).
+    assert!(r.rms_um < 40.0, "{}", r.rms_um);
+}

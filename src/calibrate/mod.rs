@@ -29,7 +29,21 @@
 //!   (µm, unweighted); held-out RMS is the same over the predictions of
 //!   each configuration from a fit without it (same method);
 //! - nonlinear effects are linearised about the current estimate: `load_com`
-//!   uses the current compliances, re-evaluated after every refit.
+//!   uses the current compliances, re-evaluated after every refit;
+//! - deflection rows carry only the load's torques (as the paper's
+//!   elastostatic experiment): `nonlinear_stiffness` (`τ|τ|`) and
+//!   `backlash` (`sign τ`) act on the load torque, without the robot's own
+//!   weight as a preload; `link_compliance` and `load_com` are seen in the
+//!   deflections only, the geometric effects (`joint_offset`, `geometry`,
+//!   `gear_cyclic`, `marker`, `base_frame`) in the absolute rows only;
+//! - a compensator candidate needs 2–8 distinct angles of its joint, each
+//!   in at least two configurations; with a constant `kⱼ` in the model it is
+//!   tested as the bins minus one (the constant stays), and on acceptance
+//!   `kⱼ` is replaced by one compliance per bin (`k_<joint>@<angle>`);
+//! - candidate and declared columns that the data cannot tell from the
+//!   model's are dropped (greedy Gram–Schmidt) before a test or a fit;
+//! - the work runs on a thread with a 256 MB stack (reserved, not
+//!   committed): a 128-column problem's fixed-size matrices are 131 kB each.
 
 mod effects;
 mod problem;
