@@ -121,7 +121,7 @@ impl core::fmt::Display for CalibrationError {
 
 impl std::error::Error for CalibrationError {}
 
-/// Half-width [rad] of an angle bin (as [`crate::layout::Layout::angle_tolerance_rad`]).
+/// Half-width \[rad\] of an angle bin (as [`crate::layout::Layout::angle_tolerance_rad`]).
 pub const BIN_TOLERANCE_RAD: f64 = 1e-3;
 
 /// The prepared problem: rows, context, the declared model.
@@ -141,13 +141,13 @@ pub struct Problem {
     pub model: Vec<Term>,
     /// Declared terms the data cannot identify (dropped).
     pub dropped: Vec<Term>,
-    /// Gravity [m/s², base frame].
+    /// Gravity \[m/s², base frame\].
     pub gravity: Vector3<f64>,
-    /// Load's centre of mass [m, tip frame].
+    /// Load's centre of mass \[m, tip frame\].
     pub com: Vector3<f64>,
-    /// Mean time of the data [s] (absolute rows' time origin).
+    /// Mean time of the data \[s\] (absolute rows' time origin).
     pub t_mean: f64,
-    /// σ0 [m], λ.
+    /// σ0 \[m\], λ.
     pub weight: RobustWeight<f64>,
 }
 
@@ -752,7 +752,7 @@ impl Engine<'_> {
         }
     }
 
-    /// Leave-one-configuration-out prediction RMS [µm].
+    /// Leave-one-configuration-out prediction RMS \[µm\].
     fn heldout(&mut self, fitted: &Fitted) -> Result<Option<f64>, CalibrationError> {
         if !self.settings.heldout || self.p.configs.len() < 2 {
             return Ok(None);
@@ -1088,7 +1088,7 @@ fn about(ctx: &Context, c: &Candidate) -> Option<String> {
 
 /// Evaluates a calibration's final model on another measurement file of the
 /// same job without re-estimating anything (`--validate`): the norm RMSE
-/// of each marker's position error [mm].
+/// of each marker's position error \[mm\].
 ///
 /// # Errors
 /// [`CalibrationError::Data`] when a row cannot be predicted (an angle

@@ -48,7 +48,7 @@ pub struct Design {
     pub terms: Vec<Term>,
     /// Columns in the reported units.
     pub b: DMatrix<f64>,
-    /// Measured `Δp` [m], `3·rows`.
+    /// Measured `Δp` \[m\], `3·rows`.
     pub y: Vec<f64>,
     /// Group (configuration index) of every row.
     pub group: Vec<usize>,
@@ -89,7 +89,7 @@ impl Design {
         self.terms.iter().position(|u| u == t)
     }
 
-    /// Residual `Δp − B x` [m] of row `i` for `x` on columns `cols`.
+    /// Residual `Δp − B x` \[m\] of row `i` for `x` on columns `cols`.
     pub fn residual(&self, cols: &[usize], x: &[f64], i: usize) -> Vector3<f64> {
         let mut r = Vector3::new(self.y[3 * i], self.y[3 * i + 1], self.y[3 * i + 2]);
         for (&c, &v) in cols.iter().zip(x) {
@@ -112,7 +112,7 @@ pub struct FitOut {
     pub std: Vec<f64>,
     /// Weights per group and axis the fit used.
     pub weights: Vec<Vector3<f64>>,
-    /// Residual σ per group and axis [m].
+    /// Residual σ per group and axis \[m\].
     pub sigma: Vec<Vector3<f64>>,
     /// Reweighting iterations.
     pub iterations: usize,
@@ -217,7 +217,7 @@ impl<const N: usize> Reweightable<f64, N> for View<'_, N> {
 pub struct FitSettings {
     /// OLS, one WLS step or IRLS.
     pub method: Method,
-    /// σ0 [m] and λ of eq. 14.
+    /// σ0 \[m\] and λ of eq. 14.
     pub weight: RobustWeight<f64>,
     /// IRLS iterations at most.
     pub max_iterations: usize,

@@ -37,13 +37,13 @@ pub struct EffectStep {
     pub f: f64,
     /// Candidates tested in that round (the Bonferroni factor).
     pub tried: usize,
-    /// RMS [µm] before.
+    /// RMS \[µm\] before.
     pub rms_um_before: f64,
-    /// RMS [µm] after.
+    /// RMS \[µm\] after.
     pub rms_um_after: f64,
-    /// Held-out RMS [µm] before.
+    /// Held-out RMS \[µm\] before.
     pub heldout_rms_um_before: Option<f64>,
-    /// Held-out RMS [µm] after.
+    /// Held-out RMS \[µm\] after.
     pub heldout_rms_um_after: Option<f64>,
     /// The model's parameters before.
     pub parameters_before: Vec<Parameter>,
@@ -65,7 +65,7 @@ pub struct Unexplained {
 /// `--validate`: the final model on another file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Validation {
-    /// Norm RMSE of the position errors [mm].
+    /// Norm RMSE of the position errors \[mm\].
     pub rms_mm: f64,
     /// Per marker id.
     pub per_marker_rms_mm: BTreeMap<String, f64>,
@@ -81,9 +81,9 @@ pub struct PlotSeries {
     pub variable: String,
     /// Its value per row.
     pub x: Vec<f64>,
-    /// Residual per row before [µm].
+    /// Residual per row before \[µm\].
     pub before_um: Vec<Vector3<f64>>,
-    /// Residual per row after [µm] (empty for unexplained structure).
+    /// Residual per row after \[µm\] (empty for unexplained structure).
     pub after_um: Vec<Vector3<f64>>,
 }
 
@@ -98,13 +98,13 @@ pub struct Report {
     pub converged: bool,
     /// The final model.
     pub parameters: Vec<Parameter>,
-    /// RMS of the final model's position residuals [µm].
+    /// RMS of the final model's position residuals \[µm\].
     pub rms_um: f64,
-    /// Leave-one-configuration-out RMS [µm].
+    /// Leave-one-configuration-out RMS \[µm\].
     pub heldout_rms_um: Option<f64>,
-    /// RMS of the declared model [µm].
+    /// RMS of the declared model \[µm\].
     pub declared_rms_um: f64,
-    /// Held-out RMS of the declared model [µm].
+    /// Held-out RMS of the declared model \[µm\].
     pub declared_heldout_rms_um: Option<f64>,
     /// The declared model's lack of fit and the variable its residuals
     /// follow most (whether or not significant).

@@ -4,7 +4,7 @@
 //! time).
 //!
 //! Columns are in the reported unit, as in [`crate::layout`]: column `i` is
-//! `∂p [m] / ∂xᵢ [unit]`, `x_SI = si_per_unit · x`.
+//! `∂p \[m\] / ∂xᵢ \[unit\]`, `x_SI = si_per_unit · x`.
 
 use nalgebra::Vector3;
 
@@ -37,23 +37,23 @@ pub struct Row {
     pub config: i64,
     /// Marker id.
     pub marker: u32,
-    /// Load [kg] (0 for absolute rows).
+    /// Load \[kg\] (0 for absolute rows).
     pub load_kg: f64,
-    /// Joint values [rad or m].
+    /// Joint values \[rad or m\].
     pub q: Vec<f64>,
     /// Frames at `q` (nominal geometry).
     pub frames: Frames<f64, J>,
-    /// Marker position [m, base frame] at `q`.
+    /// Marker position \[m, base frame\] at `q`.
     pub p: Vector3<f64>,
     /// Joint torques behind the row: the load's (deflection rows) or the
-    /// links' own weight (absolute rows) [N·m or N].
+    /// links' own weight (absolute rows) \[N·m or N\].
     pub tau: Vec<f64>,
-    /// The load's weight `m g` [N] and where it acts [m] (deflection rows).
+    /// The load's weight `m g` \[N\] and where it acts \[m\] (deflection rows).
     pub load_force: Option<(Vector3<f64>, Vector3<f64>)>,
-    /// Time [s] relative to the data's mean time (absolute rows) or between
+    /// Time \[s\] relative to the data's mean time (absolute rows) or between
     /// the unloaded and the loaded measurement (deflection rows).
     pub dt: Option<f64>,
-    /// Measured `Δp` [m].
+    /// Measured `Δp` \[m\].
     pub y: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
@@ -62,7 +62,7 @@ pub struct Row {
 /// One distinct angle of a joint (a compensator bin).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bin {
-    /// Centre [rad].
+    /// Centre \[rad\].
     pub angle: f64,
     /// As written in the CSV (for the parameter's name).
     pub written: String,
@@ -111,15 +111,15 @@ pub struct Context {
     pub joint_names: Vec<String>,
     /// Joint kinds.
     pub joint_kinds: Vec<JointKind>,
-    /// Marker ids and nominal positions [m, tip frame].
+    /// Marker ids and nominal positions \[m, tip frame\].
     pub markers: Vec<(u32, Vector3<f64>)>,
     /// Distinct angles per joint (empty when the joint takes too many).
     pub bins: Vec<Vec<Bin>>,
-    /// Half-width of a bin [rad].
+    /// Half-width of a bin \[rad\].
     pub bin_tolerance: f64,
-    /// Current compliance estimate [rad/(N·m)] per joint (constant part).
+    /// Current compliance estimate \[rad/(N·m)\] per joint (constant part).
     pub k: Vec<f64>,
-    /// Current compliance estimate [rad/(N·m)] per joint and bin.
+    /// Current compliance estimate \[rad/(N·m)\] per joint and bin.
     pub k_bins: Vec<Vec<f64>>,
 }
 
@@ -190,7 +190,7 @@ impl Context {
         }
     }
 
-    /// Column of `t` at `row`, in the reported unit (`∂p [m] / ∂x [unit]`).
+    /// Column of `t` at `row`, in the reported unit (`∂p \[m\] / ∂x \[unit\]`).
     pub fn column(&self, t: &Term, row: &Row) -> Vector3<f64> {
         let (_, si) = self.unit(t);
         self.column_si(t, row) * si
