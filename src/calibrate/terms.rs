@@ -4,7 +4,7 @@
 //! time).
 //!
 //! Columns are in the reported unit, as in [`crate::layout`]: column `i` is
-//! `∂p \[m\] / ∂xᵢ \[unit\]`, `x_SI = si_per_unit · x`.
+//! `∂p [m] / ∂xᵢ [unit]`, `x_SI = si_per_unit · x`.
 
 use nalgebra::Vector3;
 
@@ -190,7 +190,7 @@ impl Context {
         }
     }
 
-    /// Column of `t` at `row`, in the reported unit (`∂p \[m\] / ∂x \[unit\]`).
+    /// Column of `t` at `row`, in the reported unit (`∂p [m] / ∂x [unit]`).
     pub fn column(&self, t: &Term, row: &Row) -> Vector3<f64> {
         let (_, si) = self.unit(t);
         self.column_si(t, row) * si
