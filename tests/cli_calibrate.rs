@@ -288,3 +288,24 @@ fn unknown_method_is_a_usage_error() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("magic"), "{err}");
 }
+
+#[test]
+fn wls_one_step_also_finds_the_compensator() {
+    let mut args = NAIVE.to_vec();
+    args.extend([
+        "--method",
+        "wls",
+        "--lambda",
+        "1",
+        "--max-iter",
+        "3",
+        "--json",
+    ]);
+    let v = json(&robcal(&args));
+    assert_eq!(v["method"], "wls");
+    assert_eq!(v["iterations"], 1);
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1, "{effects:?}");
+    assert_eq!(effects[0]["effect"], "compensator");
+    assert_eq!(effects[0]["joint"], "a2");
+}
