@@ -353,6 +353,10 @@ fn expect_first(spec: &Spec, effect: &str, joint: Option<&str>) {
     );
     assert!(ha < hb, "held-out RMS {hb} -> {ha}: {what}");
     assert!(r.rms_um < r.declared_rms_um, "{what}");
+    eprintln!(
+        "{:?} {effect} {joint:?}: p = {:.1e}, RMS {:.1} -> {:.1} um, held out {hb:.1} -> {ha:.1} um",
+        spec.arm, first.p_value, first.rms_um_before, first.rms_um_after
+    );
 }
 
 fn jname(a: Arm, j: usize) -> &'static str {
@@ -369,7 +373,17 @@ fn jname(a: Arm, j: usize) -> &'static str {
     }
 }
 
+/// `ROBCAL_LOOP_SEED=n` shifts every seed (to check that the tests do not
+/// depend on one lucky draw); default 0.
+fn seed_offset() -> u64 {
+    std::env::var("ROBCAL_LOOP_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0)
+}
+
 fn spec(arm: Arm, geometric: bool, seed: u64, truth: Truth) -> Spec {
+    let seed = seed.wrapping_add(seed_offset().wrapping_mul(0x1000));
     Spec {
         arm,
         geometric,
@@ -410,10 +424,11 @@ fn joint_compliance_is_found() {
 
 #[test]
 fn nonlinear_stiffness_is_found() {
-    // ~15 % softening at the largest torque of joint 2.
+    // Softening at the largest torque of joint 2: ~15 % (KR-270), ~30 %
+    // (UR-like, whose deflections are closer to the noise).
     for (a, k2) in [
         (Arm::Kr270, 0.28e-6 * 0.15 / 6000.0),
-        (Arm::UrLike, 6e-6 * 0.15 / 150.0),
+        (Arm::UrLike, 6e-6 * 0.3 / 150.0),
     ] {
         let t = Truth {
             nonlinear: Some((1, k2)),
@@ -443,7 +458,7 @@ fn link_compliance_is_found() {
     // KR-270: the upper arm (after a2; a2 and a3 are parallel, so the
     // bending of the forearm looks much like the upper arm's there);
     // UR-like: the forearm.
-    for (a, j, c) in [(Arm::Kr270, 1, 0.03e-6), (Arm::UrLike, 2, 1.0e-6)] {
+    for (a, j, c) in [(Arm::Kr270, 1, 0.03e-6), (Arm::UrLike, 2, 2.5e-6)] {
         let t = Truth {
             link: Some((j, c)),
             ..Truth::default()
@@ -478,7 +493,7 @@ fn drift_is_found() {
 fn joint_offset_is_found() {
     for a in ARMS {
         let t = Truth {
-            offset: Some((2, 0.3e-3)),
+            offset: Some((2, 0.15e-3)),
             ..Truth::default()
         };
         expect_first(&spec(a, true, 18, t), "joint_offset", Some(jname(a, 2)));
@@ -539,7 +554,7 @@ fn marker_is_found() {
 fn base_frame_is_found() {
     for a in ARMS {
         let t = Truth {
-            base: Some([0.2e-3, -0.1e-3, 0.15e-3, 0.2e-3, -0.15e-3, 0.1e-3]),
+            base: Some([0.2e-3, -0.1e-3, 0.15e-3, 0.08e-3, -0.06e-3, 0.05e-3]),
             ..Truth::default()
         };
         expect_first(&spec(a, true, 22, t), "base_frame", None);

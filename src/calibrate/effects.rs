@@ -121,7 +121,10 @@ pub fn candidates(
             if !has(&t) && !frame {
                 out.push(cand("joint_offset", Some(j), vec![t], vec![], vec![t]));
             }
-            if !frame {
+            // The first joint's frame error is, to first order, a base pose
+            // error (both are a rigid transform before the first motion):
+            // that is `base_frame`.
+            if !frame && j > 0 {
                 let terms: Vec<Term> = (0..6).map(|a| Term::JointFrame(j, a)).collect();
                 out.push(cand("geometry", Some(j), terms.clone(), vec![], terms));
             }

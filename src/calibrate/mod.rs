@@ -95,7 +95,7 @@ impl Default for Settings {
             diagnose: true,
             heldout: true,
             alpha: 0.01,
-            min_share: 0.3,
+            min_share: 0.1,
             max_effects: 8,
         }
     }
