@@ -652,17 +652,40 @@ fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
     stats::f_sf((explained / d1 as f64) / (left / d2 as f64), d1, d2)
 }
 
-/// The variable the residuals follow most, and its p-value.
+/// The variable the residuals follow most, and its p-value. Rows that
+/// repeat one another (same configuration, marker, kind) are averaged
+/// first: they share their regressors, so counting them as independent
+/// would let a many-harmonic fit look significant.
 fn most_followed(p: &Problem, fitted: &Fitted) -> (String, f64) {
-    let res: Vec<Vector3<f64>> = p
+    let mut cell_of: BTreeMap<(usize, u32, bool), usize> = BTreeMap::new();
+    let cell: Vec<usize> = p
         .rows
         .iter()
-        .zip(&fitted.residuals)
-        .map(|(row, r)| r.component_mul(&fitted.fit.weights[row.group]))
+        .map(|r| {
+            let n = cell_of.len();
+            *cell_of
+                .entry((r.group, r.marker, r.kind == RowKind::Deflection))
+                .or_insert(n)
+        })
         .collect();
+    let cells = cell_of.len();
+    let mut count = vec![0.0; cells];
+    let mut res = vec![Vector3::<f64>::zeros(); cells];
+    for ((row, r), &c) in p.rows.iter().zip(&fitted.residuals).zip(&cell) {
+        res[c] += r.component_mul(&fitted.fit.weights[row.group]);
+        count[c] += 1.0;
+    }
+    for (r, n) in res.iter_mut().zip(&count) {
+        *r /= *n;
+    }
     variables(p)
         .into_iter()
         .map(|v| {
+            let mut values = vec![0.0; cells];
+            for (&x, &c) in v.values.iter().zip(&cell) {
+                values[c] += x / count[c];
+            }
+            let v = Variable { values, ..v };
             let s = follow_p_value(&v, &res);
             (v.name, s)
         })
