@@ -39,7 +39,7 @@ use robcal::elastostatic::PointLoad;
 use robcal::io::Job;
 use robcal::irls::{Fit, IrlsSettings, Iteration, Reweightable};
 use robcal::kr270;
-use robcal::layout::{angle_urad, Layout, Marker, Param};
+use robcal::layout::{Layout, Marker};
 use robcal::weights::RobustWeight;
 use robcal::GroupedStats;
 
@@ -67,20 +67,7 @@ fn main() -> Result<(), Box<dyn StdError>> {
     let noise = job.setup.noise;
     let sigma0_m = noise.sigma0_um * 1e-6;
 
-    let mut layout = Layout::<N>::new();
-    for (bin, q2) in kr270::Q2_GROUPS_DEG.iter().enumerate() {
-        layout.push(
-            chain,
-            Param::ComplianceByAngle {
-                joint: 1,
-                bin: bin as u8,
-                angle_urad: angle_urad(q2.to_radians()),
-            },
-        )?;
-    }
-    for joint in 2..6 {
-        layout.push(chain, Param::Compliance { joint })?;
-    }
+    let layout: Layout<N> = kr270::layout(chain)?;
 
     // Per configuration: angles (0.01°) and load (0.1 kg), exact.
     let mut q_cdeg = [[0i16; 6]; G];

@@ -5,10 +5,19 @@
 //! (`examples/generate_kr270.rs`), the main job (`examples/kr270.rs`), the
 //! host tests and the firmware.
 //!
+//! [`layout`] builds the paper's 9-parameter model for any chain with the
+//! KR-270's six joints.
+//!
 //! Units: angles in degrees as printed in the paper; σ in µm; compliance in
 //! µrad/(N·m). The paper prints compliance in "rad/N×µm", but its values
 //! (0.25–3.5) only make physical sense as µrad/(N·m) = 1e-6 rad/(N·m):
 //! with ~2.6 kN on a 2.7 m arm they give deflections of 2–11 mm.
+
+use nalgebra::RealField;
+
+use crate::chain::Chain;
+use crate::layout::{angle_urad, Layout, Param};
+use crate::Error;
 
 /// Number of configurations (Table 2).
 pub const CONFIGS: usize = 15;
@@ -128,4 +137,30 @@ pub fn q2_group(q2_deg: f64) -> Option<usize> {
     Q2_GROUPS_DEG
         .iter()
         .position(|g| libm::fabs(g - q2_deg) < 1e-6)
+}
+
+/// The paper's parameter layout, in [`PARAM_NAMES`] order: k21…k25 (the
+/// compliance of A2, one per q2 group of Table 2 — the gravity compensator,
+/// section 5), then k3…k6. Columns in µrad/(N·m).
+///
+/// # Errors
+/// From [`Layout::push`]: the chain has fewer than six joints.
+pub fn layout<T: RealField + Copy, const J: usize>(
+    chain: &Chain<T, J>,
+) -> Result<Layout<PARAMS>, Error> {
+    let mut l = Layout::new();
+    for (bin, q2) in Q2_GROUPS_DEG.iter().enumerate() {
+        l.push(
+            chain,
+            Param::ComplianceByAngle {
+                joint: 1,
+                bin: bin as u8,
+                angle_urad: angle_urad(q2.to_radians()),
+            },
+        )?;
+    }
+    for joint in 2..6 {
+        l.push(chain, Param::Compliance { joint })?;
+    }
+    Ok(l)
 }

@@ -59,7 +59,7 @@ use crate::grouped::GroupedStats;
 use crate::io::{Job, Measurements, MAX_JOINTS};
 use crate::irls::{robust_weights, Fit, IrlsSettings, Iteration, Reweightable};
 use crate::kr270;
-use crate::layout::{angle_urad, Layout, Marker, Param};
+use crate::layout::{Layout, Marker};
 use crate::weights::RobustWeight;
 use crate::Error;
 
@@ -79,21 +79,7 @@ pub type Stats = GroupedStats<f64, N, G>;
 /// # Errors
 /// When the chain has fewer than 6 joints.
 pub fn layout<const J: usize>(chain: &Chain<f64, J>) -> Result<Layout<N>, Error> {
-    let mut l = Layout::new();
-    for (bin, q2) in kr270::Q2_GROUPS_DEG.iter().enumerate() {
-        l.push(
-            chain,
-            Param::ComplianceByAngle {
-                joint: 1,
-                bin: bin as u8,
-                angle_urad: angle_urad(q2.to_radians()),
-            },
-        )?;
-    }
-    for joint in 2..6 {
-        l.push(chain, Param::Compliance { joint })?;
-    }
-    Ok(l)
+    kr270::layout(chain)
 }
 
 /// One deflection of the experiment.

@@ -22,7 +22,7 @@
 
 use nalgebra::{Isometry3, RealField, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 use robcal::elastostatic::{joint_torques, PointLoad};
-use robcal::layout::{angle_urad, Layout, Marker, Param};
+use robcal::layout::{Layout, Marker};
 use robcal::weights::RobustWeight;
 use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Joint, JointKind, Reweightable};
 
@@ -92,21 +92,7 @@ pub fn chain<T: RealField + Copy>() -> Result<Chain<T, J>, Error> {
 /// The paper's layout: k21…k25 (A2's compliance by angle, one per q2 group
 /// of Table 2), then k3…k6.
 pub fn layout<T: RealField + Copy>(chain: &Chain<T, J>) -> Result<Layout<N>, Error> {
-    let mut l = Layout::new();
-    for (bin, q2) in robcal::kr270::Q2_GROUPS_DEG.iter().enumerate() {
-        l.push(
-            chain,
-            Param::ComplianceByAngle {
-                joint: 1,
-                bin: bin as u8,
-                angle_urad: angle_urad(q2.to_radians()),
-            },
-        )?;
-    }
-    for joint in 2..6 {
-        l.push(chain, Param::Compliance { joint })?;
-    }
-    Ok(l)
+    robcal::kr270::layout(chain)
 }
 
 fn c<T: RealField + Copy>(x: f64) -> T {
