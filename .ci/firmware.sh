@@ -73,10 +73,10 @@ for target in "${targets[@]}"; do
 done
 
 # The table and the host reference it carries must be those of the data.
-if cargo run --quiet --features std --example firmware_table -- --check; then
+if cargo run --quiet --example firmware_table -- --check; then
     pass "flash table up to date with data/kr270"
 else
-    fail "flash table stale: cargo run --features std --example firmware_table"
+    fail "flash table stale: cargo run --example firmware_table"
 fi
 
 echo "firmware: $passed passed, $failed failed"

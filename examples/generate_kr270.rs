@@ -2,7 +2,7 @@
 //! (section 5) reconstructed from what the paper publishes.
 //!
 //! ```sh
-//! cargo run --release --features std --example generate_kr270
+//! cargo run --release --example generate_kr270
 //! ```
 //!
 //! - configurations: Table 2; loads 250–280 kg per configuration;

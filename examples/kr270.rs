@@ -5,7 +5,7 @@
 //! model (eq. 3) and its Gauss–Newton refinement.
 //!
 //! ```sh
-//! cargo run --release --features std --example kr270 [-- --data DIR --out DIR]
+//! cargo run --release --example kr270 [-- --data DIR --out DIR]
 //! ```
 //!
 //! `--data` (default `data/kr270`) holds `setup.toml` and `measurements.csv`;
