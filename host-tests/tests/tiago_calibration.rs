@@ -20,27 +20,48 @@ fn explore() {
         let markers = [markers[0], markers[1], markers[2], markers[3]];
         for points in [vec![BL], vec![0, 1, 2, 3]] {
             let t = table(&job.robot, markers, &cols, &train, &points);
-            for (name, f, a) in [
-                ("reg", &t.registration, &t.registration_active),
-                ("off", &t.offsets, &t.offsets_active),
-                ("full", &t.full, &t.full_active),
+            let id = identifiable_geometry(&t.registration.model, &cols, &train, &points);
+            let lib = candidates(&cols, &id.kept);
+            for (label, start, act, lib) in [
+                (
+                    "from registration",
+                    &t.registration,
+                    &t.registration_active,
+                    lib.clone(),
+                ),
+                (
+                    "from full",
+                    &t.full,
+                    &t.full_active,
+                    lib.iter()
+                        .filter(|c| {
+                            !c.name.starts_with("joint_offset") && !c.name.starts_with("geometry")
+                        })
+                        .cloned()
+                        .collect(),
+                ),
             ] {
-                println!("{points:?} {name} n={} it={} train {:.3} valid {:.3}  all-train {:.3} all-valid {:.3}", count(a), f.iterations, f.model.rmse_mm(&cols, &train, BL), f.model.rmse_mm(&cols, &valid, BL), f.model.rmse_all_mm(&cols, &train), f.model.rmse_all_mm(&cols, &valid));
+                let now = std::time::Instant::now();
+                let l = closed_loop(start, act, &cols, &train, &valid, &points, &lib);
+                println!("== {points:?} {label}: {:?}", now.elapsed());
+                for s in &l.steps {
+                    println!("  + {:32} p={:.2e} n={} train {:.3}->{:.3} cv {:.3}->{:.3} valid {:.3}->{:.3}", s.effect, s.p_value, s.params, s.train_before_mm, s.train_after_mm, s.cv_before_mm, s.cv_after_mm, s.valid_before_mm, s.valid_after_mm);
+                }
+                for r in &l.rejected {
+                    println!("  rejected {:?}", r);
+                }
+                for i in 0..cols.len() {
+                    if l.active[i] && i >= 18 {
+                        print!(
+                            "{}={:.3}{} ",
+                            cols.name(i),
+                            l.fitted.model.effect[i],
+                            cols.unit(i)
+                        );
+                    }
+                }
+                println!();
             }
-            println!(
-                "markers {:?}",
-                t.registration
-                    .model
-                    .markers
-                    .iter()
-                    .map(|m| (m * 1e3).as_slice().to_vec())
-                    .collect::<Vec<_>>()
-            );
-            let names: Vec<String> = (0..cols.len())
-                .filter(|&i| t.full_active[i])
-                .map(|i| format!("{}={:.2}", cols.name(i), 0.0))
-                .collect();
-            println!("full params: {names:?}");
         }
     });
 }

@@ -355,6 +355,10 @@ pub struct Model {
     pub chain: Chain<f64, MAX_JOINTS>,
     pub markers: [Vector3<f64>; POINTS],
     pub effect: [f64; N],
+    /// Sum of the applied steps of every column (layout units): each
+    /// parameter's estimate relative to the start (geometric ones to first
+    /// order, as their steps compose on the chain).
+    pub total: [f64; N],
 }
 
 fn small_pose(t: [f64; 3], r: [f64; 3]) -> Isometry3<f64> {
@@ -467,6 +471,7 @@ impl Model {
             if v == 0.0 {
                 continue;
             }
+            self.total[i] += v;
             match cols.param(i) {
                 Some(Param::Base { axis }) => {
                     let a = usize::from(axis);
@@ -534,6 +539,7 @@ pub fn initial_model(robot: &Robot, markers: [Vector3<f64>; POINTS], data: &[Pos
         chain: robot.chain.clone(),
         markers,
         effect: [0.0; N],
+        total: [0.0; N],
     };
     let mut a = Vec::new();
     let mut b = Vec::new();
@@ -753,6 +759,50 @@ pub struct Step {
     pub valid_after_mm: f64,
 }
 
+/// Largest admissible gear cyclic error amplitude [mrad] (per harmonic).
+pub const MAX_CYCLIC_MRAD: f64 = 10.0;
+/// Largest admissible drift [mm/h].
+pub const MAX_DRIFT_MM_PER_H: f64 = 5.0;
+
+/// Why the active effects of `model` are not physical, if they are not: a
+/// negative compliance, a backlash against the gravity torque, a cyclic
+/// error above [`MAX_CYCLIC_MRAD`], a drift above [`MAX_DRIFT_MM_PER_H`].
+pub fn inadmissible(model: &Model, cols: &Columns, active: &[bool; N]) -> Option<String> {
+    let x = &model.effect;
+    for i in (0..cols.len()).filter(|&i| active[i]) {
+        let bad = match (cols.param(i), cols.extra(i)) {
+            (Some(Param::Compliance { .. }), _) => x[i] < 0.0,
+            (_, Some(Extra::Backlash { .. })) => x[i] < 0.0,
+            (
+                _,
+                Some(Extra::Cyclic {
+                    joint,
+                    harmonic,
+                    cos: false,
+                }),
+            ) => {
+                let c = cols.extra_index(Extra::Cyclic {
+                    joint,
+                    harmonic,
+                    cos: true,
+                });
+                x[i].hypot(x[c]) > MAX_CYCLIC_MRAD
+            }
+            (_, Some(Extra::Drift { axis: 0 })) => {
+                let v: f64 = (0..3)
+                    .map(|a| x[cols.extra_index(Extra::Drift { axis: a })].powi(2))
+                    .sum();
+                v.sqrt() > MAX_DRIFT_MM_PER_H
+            }
+            _ => false,
+        };
+        if bad {
+            return Some(format!("{} = {:.3} {}", cols.name(i), x[i], cols.unit(i)));
+        }
+    }
+    None
+}
+
 /// The outcome of the closed loop.
 #[derive(Debug, Clone)]
 pub struct Loop {
@@ -816,6 +866,11 @@ pub fn closed_loop(
                 tried_out.push(c.name.clone());
                 continue;
             };
+            if let Some(why) = inadmissible(&f.model, cols, &next) {
+                rejected.push((format!("{} ({why})", c.name), p, f64::NAN));
+                tried_out.push(c.name.clone());
+                continue;
+            }
             let cv_after = lopo_bl_mm(&f.model, cols, train, points, &next);
             if cv_after < cv {
                 steps.push(Step {
@@ -909,4 +964,209 @@ pub fn with_stack<R: Send + 'static>(f: impl FnOnce() -> R + Send + 'static) -> 
         .unwrap()
         .join()
         .unwrap()
+}
+
+/// One row of the FIGAROH table.
+#[derive(Debug, Clone)]
+pub struct Row {
+    pub model: &'static str,
+    /// "BL" or "BL+BR+TR+TL".
+    pub points: &'static str,
+    pub params: usize,
+    pub train_bl_mm: f64,
+    pub valid_bl_mm: f64,
+    pub train_all_mm: f64,
+    pub valid_all_mm: f64,
+}
+
+/// Everything issue 7 reports.
+#[derive(Debug, Clone)]
+pub struct Report {
+    pub train_postures: usize,
+    pub valid_postures: usize,
+    pub rows: Vec<Row>,
+    /// (points, start, loop result, its LOPO CV of BL).
+    pub loops: Vec<(&'static str, &'static str, Loop, f64)>,
+    /// Index in `loops` of the model chosen by training CV.
+    pub chosen: usize,
+    pub cols: Columns,
+}
+
+/// Runs the table and the closed loops. `valid` is evaluated only.
+pub fn report(job: &Job, train: &[Posture], valid: &[Posture]) -> Report {
+    let cols = Columns::new(&job.robot.chain);
+    let m: Vec<Vector3<f64>> = job
+        .setup
+        .markers
+        .iter()
+        .map(|m| Vector3::from(m.xyz))
+        .collect();
+    let markers = [m[0], m[1], m[2], m[3]];
+    let mut rows = Vec::new();
+    let mut loops = Vec::new();
+    for (label, points) in [("BL", vec![BL]), ("BL+BR+TR+TL", vec![0, 1, 2, 3])] {
+        let t = table(&job.robot, markers, &cols, train, &points);
+        for (model, f, a) in [
+            (
+                "registration (base + points)",
+                &t.registration,
+                &t.registration_active,
+            ),
+            ("+ joint offsets", &t.offsets, &t.offsets_active),
+            ("+ joint-frame errors (full)", &t.full, &t.full_active),
+        ] {
+            rows.push(Row {
+                model,
+                points: label,
+                params: count(a),
+                train_bl_mm: f.model.rmse_mm(&cols, train, BL),
+                valid_bl_mm: f.model.rmse_mm(&cols, valid, BL),
+                train_all_mm: f.model.rmse_all_mm(&cols, train),
+                valid_all_mm: f.model.rmse_all_mm(&cols, valid),
+            });
+        }
+        let id = identifiable_geometry(&t.registration.model, &cols, train, &points);
+        let library = candidates(&cols, &id.kept);
+        let effects_only: Vec<Candidate> = library
+            .iter()
+            .filter(|c| !c.name.starts_with("joint_offset") && !c.name.starts_with("geometry"))
+            .cloned()
+            .collect();
+        for (start, fitted, active, lib) in [
+            (
+                "registration",
+                &t.registration,
+                &t.registration_active,
+                &library,
+            ),
+            ("full", &t.full, &t.full_active, &effects_only),
+        ] {
+            let l = closed_loop(fitted, active, &cols, train, valid, &points, lib);
+            let cv = l.steps.last().map_or_else(
+                || lopo_bl_mm(&l.fitted.model, &cols, train, &points, &l.active),
+                |s| s.cv_after_mm,
+            );
+            loops.push((label, start, l, cv));
+        }
+    }
+    let chosen = (0..loops.len())
+        .min_by(|&a, &b| loops[a].3.total_cmp(&loops[b].3))
+        .unwrap();
+    Report {
+        train_postures: train.len(),
+        valid_postures: valid.len(),
+        rows,
+        loops,
+        chosen,
+        cols,
+    }
+}
+
+impl Report {
+    /// The report as Markdown (docs/tiago.md quotes it).
+    pub fn markdown(&self, train: &[Posture], valid: &[Posture]) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "Training {} postures, validation {} postures. Norm RMSE in mm.\n",
+            self.train_postures, self.valid_postures
+        );
+        let _ = writeln!(s, "| model | points fitted | params | BL train | BL valid | all points train | all points valid | FIGAROH (BL train / valid, params) |");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+        let figaroh = ["3.37 / 4.87 (9)", "2.88 / 4.23 (14)", "1.64 / 3.07 (31)"];
+        for (i, r) in self.rows.iter().enumerate() {
+            // Fitted on BL alone, the other points are not identified.
+            let all = |v: f64| {
+                if r.points == "BL" {
+                    "—".to_string()
+                } else {
+                    format!("{v:.2}")
+                }
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.2} | {:.2} | {} | {} | {} |",
+                r.model,
+                r.points,
+                r.params,
+                r.train_bl_mm,
+                r.valid_bl_mm,
+                all(r.train_all_mm),
+                all(r.valid_all_mm),
+                figaroh[i % 3]
+            );
+        }
+        for (i, (points, start, l, cv)) in self.loops.iter().enumerate() {
+            let _ =
+                writeln!(
+                s,
+                "\nClosed loop, points {points}, from {start}{}: final LOPO CV of BL {cv:.2} mm\n",
+                if i == self.chosen { " (**chosen**: lowest training CV)" } else { "" }
+            );
+            let _ = writeln!(
+                s,
+                "| step | effect added | p (F test) | params | BL train | BL LOPO CV | BL valid |"
+            );
+            let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+            if let Some(first) = l.steps.first() {
+                let _ = writeln!(
+                    s,
+                    "| 0 | (start) | | {} | {:.2} | {:.2} | {:.2} |",
+                    first.params - 1,
+                    first.train_before_mm,
+                    first.cv_before_mm,
+                    first.valid_before_mm
+                );
+            }
+            for (k, st) in l.steps.iter().enumerate() {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {:.1e} | {} | {:.2} | {:.2} | {:.2} |",
+                    k + 1,
+                    st.effect,
+                    st.p_value,
+                    st.params,
+                    st.train_after_mm,
+                    st.cv_after_mm,
+                    st.valid_after_mm
+                );
+            }
+            if !l.rejected.is_empty() {
+                let _ = writeln!(s, "\nSignificant on training but not added:");
+                for (name, p, cv) in &l.rejected {
+                    let why = if cv.is_nan() {
+                        "inadmissible estimate".to_string()
+                    } else {
+                        format!("LOPO CV {cv:.2} mm, no better")
+                    };
+                    let _ = writeln!(s, "- {name}: p = {p:.1e}, {why}");
+                }
+            }
+            if i == self.chosen {
+                let _ = writeln!(
+                    s,
+                    "\nParameters of the chosen model beyond base and points (estimate ± 1σ, OLS):\n"
+                );
+                let sd = robcal::solve::std_devs(&l.fitted.solution.cov_iid());
+                for c in (18..self.cols.len()).filter(|&c| l.active[c]) {
+                    let _ = writeln!(
+                        s,
+                        "- {} = {:.2} ± {:.2} {}",
+                        self.cols.name(c),
+                        l.fitted.model.total[c],
+                        sd[c],
+                        self.cols.unit(c)
+                    );
+                }
+                let _ = writeln!(
+                    s,
+                    "\nChosen model: BL train {:.2} mm, BL valid {:.2} mm (FIGAROH's best: 3.07 mm).",
+                    l.fitted.model.rmse_mm(&self.cols, train, BL),
+                    l.fitted.model.rmse_mm(&self.cols, valid, BL)
+                );
+            }
+        }
+        s
+    }
 }
