@@ -14,6 +14,8 @@
 //! effects, and the rows are recomputed, until the step is below 1e-9
 //! units.
 #![allow(dead_code)]
+// Index loops over joints and points mirror the formulas (as in the crate).
+#![allow(clippy::needless_range_loop)]
 
 use std::path::{Path, PathBuf};
 
@@ -153,7 +155,7 @@ pub fn postures(obs: &[Observation], robot: &Robot) -> Vec<Posture> {
         .fold(f64::INFINITY, f64::min);
     for o in obs {
         let k = o.marker as usize - 1;
-        if out.last().map_or(true, |p| p.config != o.config) {
+        if !matches!(out.last(), Some(p) if p.config == o.config) {
             let mut q = [0.0; DOF];
             q.copy_from_slice(&o.q);
             let frames = robot.chain.frames(&o.q).unwrap();
@@ -1160,6 +1162,22 @@ impl Report {
                         sd[c],
                         self.cols.unit(c)
                     );
+                }
+                for c in (18..self.cols.len()).filter(|&c| l.active[c]) {
+                    if let Some(Param::Compliance { joint }) = self.cols.param(c) {
+                        let j = usize::from(joint);
+                        let (lo, hi) = train.iter().fold((f64::MAX, f64::MIN), |(a, b), p| {
+                            (a.min(p.tau[j]), b.max(p.tau[j]))
+                        });
+                        let k = l.fitted.model.effect[c] * 1e-3; // mrad per N·m
+                        let _ = writeln!(
+                            s,
+                            "\n{}: gravity torque {lo:.2} … {hi:.2} N·m on training, so k·τ spans {:.1} … {:.1} mrad.",
+                            JOINT_NAMES[j],
+                            k * lo,
+                            k * hi
+                        );
+                    }
                 }
                 let _ = writeln!(
                     s,
