@@ -4,7 +4,7 @@
 //! recording only and evaluated on 2021-11-26.
 //!
 //! ```text
-//! cargo run --release --features std --example tiago
+//! cargo run --release --example tiago
 //! ```
 //!
 //! Reads `shared/datasets/tiago-mocap` beside the repository (or

@@ -44,11 +44,11 @@ use crate::Error;
 pub struct Block<T: RealField + Copy, const N: usize> {
     /// `B`: one row per equation (x, y, z).
     pub b: SMatrix<T, 3, N>,
-    /// `Δp` [m]: the measured left-hand side.
+    /// `Δp` \[m\]: the measured left-hand side.
     pub dp: Vector3<T>,
     /// `w` per row (eq. 9): finite, ≥ 0. A zero weight drops the row.
     pub w: Vector3<T>,
-    /// σ per row [m], when known: adds `w⁴σ² bbᵀ` to the sandwich middle
+    /// σ per row \[m\], when known: adds `w⁴σ² bbᵀ` to the sandwich middle
     /// term `M` (eq. 11). Finite, > 0.
     pub sigma: Option<Vector3<T>>,
     /// How many of the three rows are used (1..=3); rows past it are ignored.
@@ -74,7 +74,7 @@ impl<T: RealField + Copy, const N: usize> Block<T, N> {
         self
     }
 
-    /// The same block with a known σ per row [m] (for eq. 8 / 11).
+    /// The same block with a known σ per row \[m\] (for eq. 8 / 11).
     #[must_use]
     pub fn with_sigma(mut self, sigma: Vector3<T>) -> Self {
         self.sigma = Some(sigma);
@@ -123,6 +123,7 @@ impl<T: RealField + Copy, const N: usize> Block<T, N> {
 /// Sufficient statistics of a weighted least-squares problem with `N`
 /// parameters. See the [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Accumulator<T: RealField + Copy, const N: usize> {
     /// `Λ = Σ Bᵀ W² B`; only the upper triangle (row ≤ column) is kept.
     info: SMatrix<T, N, N>,
@@ -172,52 +173,86 @@ impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
     ///   element of a sum of positive semi-definite terms).
     ///
     /// The accumulator is unchanged on error.
+    // `!(w >= 0)` is meant: it is true for NaN, which `w < 0` is not.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn update(&mut self, block: &Block<T, N>) -> Result<(), Error> {
-        block.validate()?;
-        // Weighted rows w²b (and w⁴σ²b for the middle term), computed once.
-        let mut wb = [SVector::<T, N>::zeros(); 3];
-        let mut sb = [SVector::<T, N>::zeros(); 3];
-        let mut b = [SVector::<T, N>::zeros(); 3];
-        let mut new_yy = self.yy;
-        let mut eqs = 0;
-        for r in 0..block.rows {
-            let w2 = block.w[r] * block.w[r];
-            if w2 == T::zero() {
-                continue;
-            }
-            b[r] = block.b.row(r).transpose();
-            wb[r] = b[r] * w2;
-            if let Some(s) = block.sigma {
-                sb[r] = wb[r] * (w2 * s[r] * s[r]);
-            }
-            new_yy += w2 * block.dp[r] * block.dp[r];
-            eqs += 1;
+        let rows = block.rows;
+        if rows == 0 || rows > 3 {
+            return block.validate();
         }
-        // Overflow guard: the new diagonal of Λ and M, η and Σ Δpᵀ W² Δp.
-        if !new_yy.is_finite() {
+        // Cheap screening of the values whose problems the sums below cannot
+        // show (negative weight, σ ≤ 0); everything non-finite shows up as a
+        // non-finite new diagonal, η or Σ Δpᵀ W² Δp (every b, Δp and w enters
+        // one of them, also with w = 0: 0·∞ = NaN). Any failure takes the
+        // slow path, `validate`, for the precise error.
+        let zero = T::zero();
+        let mut w2 = [zero; 3];
+        let mut s2 = [zero; 3];
+        let mut eqs = 0;
+        for r in 0..rows {
+            let w = block.w[r];
+            if !(w >= zero) {
+                return block.validate();
+            }
+            w2[r] = w * w;
+            eqs += usize::from(w2[r] > zero);
+            if let Some(s) = block.sigma {
+                if !(s[r] > zero) {
+                    return block.validate();
+                }
+                s2[r] = w2[r] * w2[r] * s[r] * s[r];
+            }
+        }
+        // Rows past `rows` are not read: with fewer than three rows, work on
+        // a copy with them zeroed (their weight is already 0).
+        let masked;
+        let (b, dp) = if rows == 3 {
+            (&block.b, block.dp)
+        } else {
+            masked =
+                SMatrix::<T, 3, N>::from_fn(|r, j| if r < rows { block.b[(r, j)] } else { zero });
+            (
+                &masked,
+                Vector3::from_fn(|r, _| if r < rows { block.dp[r] } else { zero }),
+            )
+        };
+        // The new diagonal of Λ (and M), η and Σ Δpᵀ W² Δp, not yet stored.
+        // `t` collects x·0 over them: NaN iff one is not finite (one
+        // multiply-add per value instead of a compare and a branch).
+        let new_yy =
+            ((self.yy + w2[0] * dp[0] * dp[0]) + w2[1] * dp[1] * dp[1]) + w2[2] * dp[2] * dp[2];
+        let mut t = new_yy * zero;
+        let mut diag = [zero; N];
+        let mut eta = SVector::<T, N>::zeros();
+        let mut mdiag = [zero; N];
+        let sigma = block.sigma.is_some();
+        for j in 0..N {
+            let (b0, b1, b2) = (b[(0, j)], b[(1, j)], b[(2, j)]);
+            diag[j] = fma3(self.info[(j, j)], &w2, b0, b1, b2, b0, b1, b2);
+            eta[j] = fma3(self.eta[j], &w2, b0, b1, b2, dp[0], dp[1], dp[2]);
+            t += diag[j] * zero;
+            t += eta[j] * zero;
+            if sigma {
+                mdiag[j] = fma3(self.middle[(j, j)], &s2, b0, b1, b2, b0, b1, b2);
+                t += mdiag[j] * zero;
+            }
+        }
+        if !t.is_finite() {
+            block.validate()?;
             return Err(Error::NonFinite { what: "overflow" });
         }
-        for i in 0..N {
-            let mut d = self.info[(i, i)];
-            let mut m = self.middle[(i, i)];
-            let mut e = self.eta[i];
-            for r in 0..3 {
-                d += wb[r][i] * b[r][i];
-                m += sb[r][i] * b[r][i];
-                e += wb[r][i] * block.dp[r];
-            }
-            if !(d.is_finite() && m.is_finite() && e.is_finite()) {
-                return Err(Error::NonFinite { what: "overflow" });
-            }
-        }
-        // Commit. Rows left at zero (dropped or unused) add nothing.
-        add_upper3(&mut self.info, &wb, &b);
-        if block.sigma.is_some() {
-            add_upper3(&mut self.middle, &sb, &b);
+        // Commit: the strictly upper triangle, then the checked diagonal and η.
+        add_strict_upper3(&mut self.info, &w2, b);
+        if sigma {
+            add_strict_upper3(&mut self.middle, &s2, b);
             self.sigma_rows += eqs;
         }
-        for r in 0..3 {
-            self.eta += wb[r] * block.dp[r];
+        self.eta = eta;
+        for j in 0..N {
+            self.info[(j, j)] = diag[j];
+            if sigma {
+                self.middle[(j, j)] = mdiag[j];
+            }
         }
         self.yy = new_yy;
         self.equations += eqs;
@@ -365,20 +400,33 @@ impl<T: RealField + Copy, const N: usize> Accumulator<T, N> {
     }
 }
 
-/// `m[i][j] += Σ_r u_r[i] v_r[j]` for `i ≤ j`: the upper triangle of a rank-3
-/// update. The inner loop runs over a contiguous column slice (column-major
-/// storage) so it needs no bounds checks: three multiply-adds per element.
-fn add_upper3<T: RealField + Copy, const N: usize>(
+/// `x + Σ_r (k_r u_r) v_r`, summed left to right (three multiply-adds).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn fma3<T: RealField + Copy>(x: T, k: &[T; 3], u0: T, u1: T, u2: T, v0: T, v1: T, v2: T) -> T {
+    ((x + (k[0] * u0) * v0) + (k[1] * u1) * v1) + (k[2] * u2) * v2
+}
+
+/// `m[i][j] += Σ_r b[r][i] k[r] b[r][j]` for `i < j`: the strictly upper
+/// triangle of the rank-3 update `Bᵀ K B`, `K = diag(k)`. `B` is 3 × N,
+/// column-major, so column `i` of `B` is three contiguous values and the
+/// inner loop runs over contiguous slices without bounds checks: three
+/// multiply-adds per element, the column's `k b[·][j]` in registers.
+fn add_strict_upper3<T: RealField + Copy, const N: usize>(
     m: &mut SMatrix<T, N, N>,
-    u: &[SVector<T, N>; 3],
-    v: &[SVector<T, N>; 3],
+    k: &[T; 3],
+    b: &SMatrix<T, 3, N>,
 ) {
-    let (u0, u1, u2) = (u[0].as_slice(), u[1].as_slice(), u[2].as_slice());
-    for (j, col) in m.as_mut_slice().chunks_exact_mut(N).enumerate() {
-        let (a, b, c) = (v[0][j], v[1][j], v[2][j]);
-        let upper = &mut col[..=j];
-        for (((x, &p), &q), &r) in upper.iter_mut().zip(u0).zip(u1).zip(u2) {
-            *x += p * a + q * b + r * c;
+    let bcols = b.as_slice().chunks_exact(3);
+    for ((j, col), bj) in m
+        .as_mut_slice()
+        .chunks_exact_mut(N)
+        .enumerate()
+        .zip(bcols.clone())
+    {
+        let (a0, a1, a2) = (k[0] * bj[0], k[1] * bj[1], k[2] * bj[2]);
+        for (x, bi) in col[..j].iter_mut().zip(bcols.clone()) {
+            *x = ((*x + bi[0] * a0) + bi[1] * a1) + bi[2] * a2;
         }
     }
 }

@@ -8,7 +8,7 @@
 //!
 //! Frames: joint `j`'s frame at joint value `q_j` is
 //! `T_j = T_{j-1} · origin_j · motion_j(q_j)`, with `motion_j` a rotation of
-//! `q_j` [rad] about `axis_j` (revolute) or a translation of `q_j` [m] along
+//! `q_j` \[rad\] about `axis_j` (revolute) or a translation of `q_j` \[m\] along
 //! it (prismatic). `T_tip = T_last · tip`. All lengths in metres.
 
 use nalgebra::{Isometry3, RealField, Unit, Vector3};
@@ -28,9 +28,9 @@ pub enum JointKind {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LinkInertia<T: RealField + Copy> {
-    /// Mass [kg].
+    /// Mass \[kg\].
     pub mass_kg: T,
-    /// Centre of mass [m], in the joint's (child) frame.
+    /// Centre of mass \[m\], in the joint's (child) frame.
     pub com_m: Vector3<T>,
 }
 
@@ -51,7 +51,7 @@ pub struct Joint<T: RealField + Copy> {
 }
 
 impl<T: RealField + Copy> Joint<T> {
-    /// A joint from URDF-style data: origin `xyz` [m] and `rpy` [rad] (fixed
+    /// A joint from URDF-style data: origin `xyz` \[m\] and `rpy` \[rad\] (fixed
     /// X-Y-Z angles, `R = Rz(y)·Ry(p)·Rx(r)`), an axis (normalised here).
     /// Returns `None` when the axis is zero or not finite.
     pub fn from_urdf(
@@ -74,6 +74,7 @@ impl<T: RealField + Copy> Joint<T> {
 /// A serial chain of at most `J` movable joints from the base frame to the
 /// tip frame (`tip_link`).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Chain<T: RealField + Copy, const J: usize> {
     joints: heapless::Vec<Joint<T>, J>,
     tip: Isometry3<T>,
@@ -91,8 +92,8 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// Appends a movable joint.
     ///
     /// # Errors
-    /// [`Error::CapacityExceeded`] when the chain already holds `J` joints;
-    /// [`Error::NonFinite`] when the joint holds a non-finite number. The
+    /// [`crate::Error::CapacityExceeded`] when the chain already holds `J` joints;
+    /// [`crate::Error::NonFinite`] when the joint holds a non-finite number. The
     /// chain is unchanged on error.
     pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::Error> {
         let finite = joint

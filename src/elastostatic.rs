@@ -1,11 +1,11 @@
 //! Elastostatic identification columns (eq. 3, `Δpᵉ = A⁽ᵖ⁾ k`), virtual-joint
 //! model: rigid links, one linear spring per joint.
 //!
-//! A wrench (force `F` [N] acting at point `c` [m], plus a moment `M`
-//! [N·m], all in the base frame) loads joint `j` with
+//! A wrench (force `F` \[N\] acting at point `c` \[m\], plus a moment `M`
+//! \[N·m\], all in the base frame) loads joint `j` with
 //!
-//! - `τⱼ = zⱼᵀ((c − oⱼ) × F + M)` [N·m] (revolute),
-//! - `τⱼ = zⱼᵀ F` [N] (prismatic),
+//! - `τⱼ = zⱼᵀ((c − oⱼ) × F + M)` \[N·m\] (revolute),
+//! - `τⱼ = zⱼᵀ F` \[N\] (prismatic),
 //!
 //! and the joint yields by `δqⱼ = kⱼ τⱼ` (`kⱼ` in rad/(N·m), or m/N for a
 //! prismatic joint). To first order a marker at `p` moves by
@@ -46,16 +46,16 @@ use crate::Error;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Wrench<T: RealField + Copy> {
-    /// Force `F` [N].
+    /// Force `F` \[N\].
     pub force_n: Vector3<T>,
-    /// Point of application `c` [m].
+    /// Point of application `c` \[m\].
     pub point_m: Vector3<T>,
-    /// Pure moment `M` [N·m].
+    /// Pure moment `M` \[N·m\].
     pub moment_nm: Vector3<T>,
 }
 
 impl<T: RealField + Copy> Wrench<T> {
-    /// A force `F` [N] at point `c` [m], no moment.
+    /// A force `F` \[N\] at point `c` \[m\], no moment.
     pub fn force(force_n: Vector3<T>, point_m: Vector3<T>) -> Self {
         Self {
             force_n,
@@ -80,11 +80,11 @@ impl<T: RealField + Copy> Wrench<T> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PointLoad<T: RealField + Copy> {
-    /// Mass [kg].
+    /// Mass \[kg\].
     pub mass_kg: T,
-    /// Centre of mass [m] in the tip frame.
+    /// Centre of mass \[m\] in the tip frame.
     pub com_m: Vector3<T>,
-    /// Gravity `g` [m/s²] in the base frame (e.g. `(0, 0, −9.80665)`).
+    /// Gravity `g` \[m/s²\] in the base frame (e.g. `(0, 0, −9.80665)`).
     pub gravity_mps2: Vector3<T>,
 }
 
@@ -117,7 +117,7 @@ pub fn joint_torques<T: RealField + Copy, const J: usize>(
 }
 
 /// Joint torques `τⱼ` from the chain's own link masses under gravity `g`
-/// [m/s², base frame], written to `tau[..dof]`: the weight `m_l g` of link
+/// \[m/s², base frame\], written to `tau[..dof]`: the weight `m_l g` of link
 /// `l` acts at its centre of mass `T_l · com_l` and loads joints `0..=l`.
 /// Links without [`crate::LinkInertia`] weigh nothing.
 ///
@@ -152,10 +152,10 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
     Ok(())
 }
 
-/// Compliance columns at a marker `p_m` [m, base frame] for joint torques
+/// Compliance columns at a marker `p_m` \[m, base frame\] for joint torques
 /// `tau` (from [`joint_torques`], [`gravity_torques`] or their sum), written
 /// to `out[..dof]`: `τⱼ (zⱼ × (p − oⱼ))` [m per rad/(N·m)] (revolute) or
-/// `τⱼ zⱼ` [m per m/N] (prismatic).
+/// `τⱼ zⱼ` \[m per m/N\] (prismatic).
 ///
 /// # Errors
 /// [`Error::Mismatch`] when `tau` or `out` is shorter than the number of
@@ -174,8 +174,8 @@ pub fn compliance_columns<T: RealField + Copy, const J: usize>(
     Ok(())
 }
 
-/// First-order deflection `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` [m] of a marker at
-/// `p_m` under joint torques `tau`, with compliances `k` [rad/(N·m) or m/N].
+/// First-order deflection `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` \[m\] of a marker at
+/// `p_m` under joint torques `tau`, with compliances `k` \[rad/(N·m) or m/N\].
 ///
 /// # Errors
 /// [`Error::Mismatch`] when `tau` or `k` is shorter than the number of

@@ -73,6 +73,7 @@ pub struct GroupMoments<T: RealField + Copy, const N: usize> {
 /// Grouped sufficient statistics for at most `G` groups. See the
 /// [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GroupedStats<T: RealField + Copy, const N: usize, const G: usize> {
     groups: heapless::Vec<GroupMoments<T, N>, G>,
 }
@@ -104,7 +105,7 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
             .sum()
     }
 
-    /// Adds one measurement of group `id`: rows `b` (x, y, z) and `Δp` [m].
+    /// Adds one measurement of group `id`: rows `b` (x, y, z) and `Δp` \[m\].
     /// Weights are not given here: they are chosen later, per group and axis.
     ///
     /// # Errors

@@ -66,6 +66,7 @@ pub struct Iteration<T: RealField + Copy, const N: usize> {
 
 /// A fit and its noise model.
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Fit<T: RealField + Copy, const N: usize, const G: usize> {
     /// The estimate and `Λ⁻¹`.
     pub solution: Solution<T, N>,

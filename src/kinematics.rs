@@ -34,7 +34,7 @@ pub struct JointFrame<T: RealField + Copy> {
     /// (translation in m). Joint-frame errors act on this frame.
     pub zero: Isometry3<T>,
     /// `T_j = Z_j · motion_j(q_j)`: the moved joint frame. Its origin is
-    /// `oⱼ` [m] (for a revolute joint the same point as `Z_j`'s origin).
+    /// `oⱼ` \[m\] (for a revolute joint the same point as `Z_j`'s origin).
     pub frame: Isometry3<T>,
     /// `zⱼ`: the unit joint axis in the base frame.
     pub axis: Unit<Vector3<T>>,
@@ -43,12 +43,12 @@ pub struct JointFrame<T: RealField + Copy> {
 }
 
 impl<T: RealField + Copy> JointFrame<T> {
-    /// `oⱼ` [m]: origin of the moved joint frame, in the base frame.
+    /// `oⱼ` \[m\]: origin of the moved joint frame, in the base frame.
     pub fn origin_m(&self) -> Vector3<T> {
         self.frame.translation.vector
     }
 
-    /// `∂p/∂qⱼ` [m/rad or m/m] of a point `p_m` [m, base frame] carried by
+    /// `∂p/∂qⱼ` \[m/rad or m/m\] of a point `p_m` \[m, base frame\] carried by
     /// the joint: `zⱼ × (p − oⱼ)` for a revolute joint, `zⱼ` for a prismatic
     /// one. This is the joint-offset column of eq. 2 and, times `τⱼ`, the
     /// compliance column of eq. 3.
@@ -97,7 +97,7 @@ impl<T: RealField + Copy, const J: usize> Frames<T, J> {
         &self.tip
     }
 
-    /// Position [m, base frame] of a marker given at `marker_m` [m] in the
+    /// Position \[m, base frame\] of a marker given at `marker_m` \[m\] in the
     /// tip frame: `p = T_tip · m`.
     pub fn point_m(&self, marker_m: &Vector3<T>) -> Vector3<T> {
         self.tip.transform_point(&Point3::from(*marker_m)).coords
@@ -175,7 +175,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         Ok(*self.frames(q)?.tip())
     }
 
-    /// Position [m, base frame] of a marker at `marker_m` [m] in the tip
+    /// Position \[m, base frame\] of a marker at `marker_m` \[m\] in the tip
     /// frame, at joint values `q`.
     ///
     /// # Errors

@@ -19,7 +19,7 @@ pub const MARKERS: usize = 3;
 /// Parameters identified: k21…k25, k3, k4, k5, k6.
 pub const PARAMS: usize = 9;
 
-/// Table 2: joint angles q1…q6 [deg] of the 15 measurement configurations.
+/// Table 2: joint angles q1…q6 \[deg\] of the 15 measurement configurations.
 /// The paper prints q2 once per group of three; it is repeated here.
 pub const CONFIGURATIONS_DEG: [[f64; 6]; CONFIGS] = [
     [79.20, -0.01, -5.57, 51.00, -97.52, -91.67],
@@ -39,12 +39,12 @@ pub const CONFIGURATIONS_DEG: [[f64; 6]; CONFIGS] = [
     [-60.00, -140.0, -52.00, -124.89, -41.62, 27.78],
 ];
 
-/// The five angles of joint 2 [deg] that carry their own compliance
+/// The five angles of joint 2 \[deg\] that carry their own compliance
 /// k21…k25 (the gravity compensator, section 5).
 pub const Q2_GROUPS_DEG: [f64; 5] = [-0.01, -25.24, -56.9, -99.85, -140.0];
 
 /// Table 1: σ of the deflection measurement errors per configuration and
-/// base-frame axis (x, y, z), "mean" column [µm].
+/// base-frame axis (x, y, z), "mean" column \[µm\].
 pub const SIGMA_UM: [[f64; 3]; CONFIGS] = [
     [150.0, 64.0, 33.0],
     [57.0, 86.0, 118.0],
@@ -81,20 +81,20 @@ pub const PARAM_NAMES: [&str; PARAMS] = [
 pub const PAPER_SYMBOLS: [&str; PARAMS] =
     ["k21", "k22", "k23", "k24", "k25", "k3", "k4", "k5", "k6"];
 
-/// Table 3, WLS column (identical for λ = 0.5, 1, 2) [µrad/(N·m)]: the truth
+/// Table 3, WLS column (identical for λ = 0.5, 1, 2) \[µrad/(N·m)\]: the truth
 /// of the reconstructed data set.
 pub const WLS_VALUE: [f64; PARAMS] = [
     0.287, 0.277, 0.302, 0.293, 0.246, 0.416, 2.786, 3.483, 2.074,
 ];
-/// Table 3, WLS ± 3σ [µrad/(N·m)].
+/// Table 3, WLS ± 3σ \[µrad/(N·m)\].
 pub const WLS_CI3: [f64; PARAMS] = [
     0.0003, 0.0004, 0.0005, 0.0010, 0.0007, 0.0011, 0.0071, 0.0120, 0.0267,
 ];
-/// Table 3, OLS value [µrad/(N·m)].
+/// Table 3, OLS value \[µrad/(N·m)\].
 pub const OLS_VALUE: [f64; PARAMS] = [
     0.297, 0.287, 0.315, 0.302, 0.251, 0.396, 3.017, 3.294, 2.248,
 ];
-/// Table 3, OLS ± 3σ [µrad/(N·m)].
+/// Table 3, OLS ± 3σ \[µrad/(N·m)\].
 pub const OLS_CI3: [f64; PARAMS] = [
     0.010, 0.012, 0.018, 0.032, 0.020, 0.031, 0.248, 0.506, 0.725,
 ];
@@ -106,23 +106,23 @@ pub const CI_WLS_PERCENT: [f64; PARAMS] = [0.09, 0.13, 0.18, 0.33, 0.27, 0.26, 0
 pub const SIGMA_RATIO: [f64; PARAMS] = [40.5, 33.2, 33.9, 33.1, 30.1, 28.8, 35.1, 42.0, 27.2];
 
 /// Our choice (the paper does not publish its tool): load centre of mass in
-/// `tool0` [m]. It must be off the A6 axis, or k6 is unidentifiable.
+/// `tool0` \[m\]. It must be off the A6 axis, or k6 is unidentifiable.
 pub const LOAD_COM_M: [f64; 3] = [0.25, 0.0, 0.30];
 /// Our choice: three markers on a 0.30 m circle at z = 0.20 m in `tool0`,
-/// at 90°, 210° and 330° [m].
+/// at 90°, 210° and 330° \[m\].
 pub const MARKERS_M: [[f64; 3]; MARKERS] = [
     [0.0, 0.30, 0.20],
     [-0.259_807_621_135_331_5, -0.15, 0.20],
     [0.259_807_621_135_331_5, -0.15, 0.20],
 ];
-/// Range of the load per configuration [kg] (section 5: 250–280 kg).
+/// Range of the load per configuration \[kg\] (section 5: 250–280 kg).
 pub const LOAD_KG_RANGE: (f64, f64) = (250.0, 280.0);
-/// The tracker's claimed precision σ0 [µm] (section 4).
+/// The tracker's claimed precision σ0 \[µm\] (section 4).
 pub const SIGMA0_UM: f64 = 10.0;
 /// The λ values of Table 3.
 pub const LAMBDAS: [f64; 3] = [0.5, 1.0, 2.0];
 
-/// Index of the q2 group (0…4) of a joint-2 angle [deg], matching
+/// Index of the q2 group (0…4) of a joint-2 angle \[deg\], matching
 /// [`Q2_GROUPS_DEG`] within 1e-6 deg.
 pub fn q2_group(q2_deg: f64) -> Option<usize> {
     Q2_GROUPS_DEG

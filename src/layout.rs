@@ -4,7 +4,7 @@
 //! A [`Layout`] is a fixed-capacity list of [`Column`]s, one per parameter
 //! of `X = [ΔΠ, k]`, each with its [`Param`] kind, its unit and the SI value
 //! of one unit. Columns are built **in the reported unit**: column `i` of
-//! `B` is `∂p [m] / ∂xᵢ [unit]`, so the estimate `X̂` of the accumulator is
+//! `B` is `∂p \[m\] / ∂xᵢ \[unit\]`, so the estimate `X̂` of the accumulator is
 //! directly in `mm`, `mrad`, `urad/(N*m)`, ... and its scale is moderate
 //! (a compliance of 0.3 µrad/(N·m) is 0.3, not 3e-7). `si_per_unit`
 //! converts: `x_SI = si_per_unit · x`.
@@ -78,7 +78,7 @@ pub enum Param {
         joint: u8,
         /// Bin number (0 for `k21`, 1 for `k22`, …), for naming.
         bin: u8,
-        /// The bin's joint angle [µrad].
+        /// The bin's joint angle \[µrad\].
         angle_urad: i32,
     },
 }
@@ -128,7 +128,7 @@ pub struct Column {
 pub struct Marker<T: RealField + Copy> {
     /// Id (matches [`Param::Marker`]).
     pub id: u8,
-    /// Position [m] in the tip frame.
+    /// Position \[m\] in the tip frame.
     pub xyz_m: Vector3<T>,
 }
 
@@ -138,7 +138,7 @@ pub struct Marker<T: RealField + Copy> {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Layout<const N: usize> {
     columns: heapless::Vec<Column, N>,
-    /// Half-width [rad] of a [`Param::ComplianceByAngle`] bin (default
+    /// Half-width \[rad\] of a [`Param::ComplianceByAngle`] bin (default
     /// 1e-3 rad ≈ 0.06°).
     pub angle_tolerance_rad: f64,
 }
@@ -401,7 +401,7 @@ fn compliance<T: RealField + Copy, const J: usize>(
     Ok(jf.twist_column(p) * t)
 }
 
-/// Angle [rad] → the `angle_urad` of a [`Param::ComplianceByAngle`]
+/// Angle \[rad\] → the `angle_urad` of a [`Param::ComplianceByAngle`]
 /// (rounded to the nearest µrad; saturates outside ±2147 rad).
 pub fn angle_urad(angle_rad: f64) -> i32 {
     let v = libm::round(angle_rad * 1e6);

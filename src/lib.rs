@@ -26,6 +26,8 @@
 //   stats          nested F tests from the accumulated cross-products
 //
 //   kr270          the paper's published numbers (section 5)
+//   paper (std)    the paper's experiment end to end: rows, fits, and the
+//                  Gauss–Newton refinement on the exact deflection model
 //
 // Everything above is no_std and allocation-free. With the `std` feature,
 // `io` reads the data contract's files (URDF, setup TOML, measurement CSV).
@@ -43,6 +45,8 @@ pub mod irls;
 pub mod kinematics;
 pub mod kr270;
 pub mod layout;
+#[cfg(feature = "std")]
+pub mod paper;
 pub mod solve;
 pub mod stats;
 pub mod weights;

@@ -26,6 +26,7 @@ pub type Active<const N: usize> = [bool; N];
 
 /// A weighted least-squares estimate and what is needed for its covariances.
 #[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Solution<T: RealField + Copy, const N: usize> {
     /// `X̂ = Λ⁻¹ η` (eq. 6 / 10); zero for inactive parameters.
     pub x: SVector<T, N>,

@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Bare-metal CI for robcal: builds the firmware example for the Cortex-M4F
+# (thumbv7em-none-eabihf, QEMU mps2-an386) and the Cortex-M3
+# (thumbv7m-none-eabi, QEMU lm3s6965evb), runs it in QEMU, and fails when
+#   - the firmware fails (its semihosting exit status is non-zero),
+#   - a failure self-test (wrong reference, panic, HardFault) does NOT fail,
+#   - it exceeds the budget: 64 KiB flash, 16 KiB RAM including stack.
+# Installs what it needs on a fresh Debian machine with rustup: the two
+# targets, llvm-tools (llvm-size), qemu-system-arm, defmt-print.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export PATH="${CARGO_HOME:-$HOME/.cargo}/bin:$PATH"
+
+targets=(thumbv7em-none-eabihf thumbv7m-none-eabi)
+rustup target add "${targets[@]}"
+rustup component add llvm-tools
+if ! command -v qemu-system-arm >/dev/null; then
+    sudo=
+    if [ "$(id -u)" -ne 0 ]; then sudo=sudo; fi
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends qemu-system-arm
+fi
+if ! command -v defmt-print >/dev/null; then
+    cargo install defmt-print --locked
+fi
+llvm_bin="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin"
+
+flash_budget=$((64 * 1024))
+ram_budget=$((16 * 1024))
+passed=0
+failed=0
+pass() { echo "firmware: ok: $*"; passed=$((passed + 1)); }
+fail() { echo "firmware: FAILED: $*" >&2; failed=$((failed + 1)); }
+
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+for target in "${targets[@]}"; do
+    # The aliases `cargo firmware` / `cargo firmware-m3` (.cargo/config.toml).
+    run=(cargo run --quiet --profile firmware --target "$target" --example firmware --)
+    cargo build --quiet --profile firmware --target "$target" --example firmware
+
+    if "${run[@]}" 2>&1 | tee "$log"; then
+        pass "$target: firmware checks"
+    else
+        fail "$target: firmware checks"
+    fi
+
+    elf=${CARGO_TARGET_DIR:-target}/$target/firmware/examples/firmware
+    read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
+        { s[$1] = $2 }
+        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
+                    s[".data"] + s[".bss"] + s[".uninit"] }')
+    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    echo "firmware: $target: flash $flash B, RAM $ram B + stack ${stack:-?} B"
+    if [ "$flash" -le "$flash_budget" ] && [ -n "$stack" ] &&
+        [ $((ram + stack)) -le "$ram_budget" ]; then
+        pass "$target: within 64 KiB flash, 16 KiB RAM"
+    else
+        fail "$target: over budget (64 KiB flash, 16 KiB RAM incl. stack)"
+    fi
+
+    # Each failure path must end QEMU with a non-zero status.
+    for selftest in mismatch panic hardfault; do
+        if "${run[@]}" "$selftest" >"$log" 2>&1; then
+            cat "$log"
+            fail "$target: self-test '$selftest' exited 0"
+        else
+            pass "$target: self-test '$selftest' fails as it must (exit $?)"
+        fi
+    done
+done
+
+echo "firmware: $passed passed, $failed failed"
+[ "$failed" -eq 0 ]
