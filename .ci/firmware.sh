@@ -4,7 +4,9 @@
 # (thumbv7m-none-eabi, QEMU lm3s6965evb), runs it in QEMU, and fails when
 #   - the firmware fails (its semihosting exit status is non-zero),
 #   - a failure self-test (wrong reference, panic, HardFault) does NOT fail,
-#   - it exceeds the budget: 64 KiB flash, 16 KiB RAM including stack.
+#   - it exceeds the budget: 64 KiB flash, 16 KiB RAM including stack,
+#   - the firmware's flash table (examples/firmware/kr270_table.rs) is stale
+#     against data/kr270 (host build: `--example firmware_table -- --check`).
 # Installs what it needs on a fresh Debian machine with rustup: the two
 # targets, llvm-tools (llvm-size), qemu-system-arm, defmt-print.
 set -euo pipefail
@@ -69,6 +71,13 @@ for target in "${targets[@]}"; do
         fi
     done
 done
+
+# The table and the host reference it carries must be those of the data.
+if cargo run --quiet --features std --example firmware_table -- --check; then
+    pass "flash table up to date with data/kr270"
+else
+    fail "flash table stale: cargo run --features std --example firmware_table"
+fi
 
 echo "firmware: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -114,6 +114,8 @@ fn main() -> Res<()> {
     residual_sigma(&fits);
     nonlinearity(&exp, &stats, &fits, &exact)?;
 
+    closed_loop(&args.data)?;
+
     std::fs::create_dir_all(&args.out)?;
     let f3 = args.out.join("figure3.svg");
     plot_figure3(&fits, &f3)?;
@@ -483,7 +485,11 @@ fn plot_figure3(f: &Fits, path: &std::path::Path) -> Res<()> {
     ))?
     .label("truth (Table 3 WLS)")
     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-    c.configure_series_labels().border_style(BLACK).draw()?;
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()?;
 
     let ci: Vec<(f64, f64)> = xs.iter().map(|&(k, v, e)| (k, 100.0 * e / v)).collect();
     let top = ci.iter().map(|v| v.1).fold(0.0, f64::max) * 1.1;
@@ -575,5 +581,24 @@ fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &std::path::Path) -> Res<()> {
         .border_style(BLACK)
         .draw()?;
     root.present()?;
+    Ok(())
+}
+
+/// The closed loop on the same data: declare the naive model (one constant
+/// compliance for A2) and let the diagnosis find what the residuals follow.
+/// This is `robcal calibrate --setup data/kr270/setup-naive.toml --data
+/// data/kr270/measurements.csv`.
+fn closed_loop(data_dir: &std::path::Path) -> Res<()> {
+    println!("\n== Closed loop: the naive model (constant k2) and the diagnosis");
+    println!("   (robcal calibrate --setup data/kr270/setup-naive.toml --data data/kr270/measurements.csv)\n");
+    let job = Job::load(data_dir.join("setup-naive.toml"))?;
+    let data = job.read_measurements(data_dir.join("measurements.csv"))?;
+    let report = robcal::calibrate::calibrate(
+        &job,
+        &data,
+        &robcal::calibrate::Settings::default(),
+        &mut |_| {},
+    )?;
+    println!("{report}");
     Ok(())
 }

@@ -33,6 +33,8 @@
 // `io` reads the data contract's files (URDF, setup TOML, measurement CSV).
 
 pub mod accumulator;
+#[cfg(feature = "std")]
+pub mod calibrate;
 pub mod chain;
 pub mod diagnose;
 pub mod elastostatic;

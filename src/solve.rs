@@ -158,13 +158,19 @@ pub fn solve<T: RealField + Copy, const N: usize>(
         linv.set_column(k, &solve_lower(&l, &e));
     }
     let mut inv = linv.transpose() * linv;
+    // Scale the upper triangle and mirror it: `(v·sᵢ)·sⱼ` and `(v·sⱼ)·sᵢ`
+    // round differently, and Λ⁻¹ (the eq. 13 covariance) must be exactly
+    // symmetric. (Not `v·(sᵢ·sⱼ)`: that product can overflow where the
+    // result does not.)
     for j in 0..N {
-        for i in 0..N {
-            inv[(i, j)] = if active[i] && active[j] {
+        for i in 0..=j {
+            let v = if active[i] && active[j] {
                 inv[(i, j)] * s[i] * s[j]
             } else {
                 T::zero()
             };
+            inv[(i, j)] = v;
+            inv[(j, i)] = v;
         }
     }
     let x: SVector<T, N> = SVector::from_fn(|i, _| if active[i] { x[i] } else { T::zero() });

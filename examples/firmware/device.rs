@@ -7,10 +7,12 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt::{error, info};
 use defmt_semihosting as _; // the global defmt logger (semihosting stdout)
 use nalgebra::Vector3;
+use robcal::irls::Reweightable;
 use robcal::weights::RobustWeight;
 use robcal::{Accumulator, Block, Error, JointKind, LinkInertia};
 use semihosting::process::exit;
 
+use crate::kr270::{self, Kr270, G, HISTORY};
 use crate::problem::{self, check, rejects_bad_block, stream, Lcg, N};
 use crate::SelfTest;
 
@@ -40,11 +42,13 @@ fn main() -> ! {
 
     // Separate, non-inlined phases: their stack frames do not add up.
     log_types();
-    benchmarks();
+    let mut k = 0;
+    benchmarks(&mut k);
     let pass = fit(fault);
+    let pass_kr270 = kr270_fit(&mut k, fault);
     // Measured last, after the deepest call.
     info!("stack high-water mark: {=usize} bytes", stack_high_water());
-    if pass {
+    if pass && pass_kr270 {
         info!("PASS");
         exit(0)
     } else {
@@ -109,6 +113,169 @@ fn fit(fault: SelfTest) -> bool {
         problem::TOL_SIGMA_HAT
     );
     v.pass && bad.is_some()
+}
+
+/// The paper's experiment on the device, in f32: the 270 deflections
+/// streamed from flash on every pass, rows computed from the joint angles,
+/// the iterative WLS to convergence, the estimates ± 3σ logged and checked
+/// against the host's f64 result. The costs of its parts are bench phases:
+/// the rows of one configuration, one pass of each kind, the OLS start,
+/// one iteration, and the whole iterative WLS (whose result is checked).
+#[inline(never)]
+fn kr270_fit(k: &mut usize, fault: SelfTest) -> bool {
+    let src = Kr270::<f32>::new().unwrap_or_else(|e| fail("KR-270 model", e));
+    let settings = kr270::settings::<f32>().unwrap_or_else(|e| fail("settings", e));
+    info!(
+        "KR-270 (section 5): {=usize} deflections in flash, {=usize} configurations, layout {}",
+        kr270::KEYS.len(),
+        G,
+        src.layout().columns()[0]
+    );
+    info!(
+        "settings: {}; table quantisation moves the host estimate by {=f64} sigma",
+        settings,
+        kr270::QUANTISATION_SIGMAS
+    );
+    kr270_parts(k, &src, &settings);
+    let fit = kr270_irls(k, &src, &settings);
+    kr270_report(&fit, fault)
+}
+
+/// Checks the estimate against the host's and logs it.
+#[inline(never)]
+fn kr270_report(fit: &kr270::Estimate<f32>, fault: SelfTest) -> bool {
+    let expected = crate::kr270_expected(fault);
+    let (params, pass) = kr270::check(fit, &expected);
+    info!(
+        "KR-270 iterative WLS (f32): {=usize} iterations (host f64: {=usize}), converged: {=bool}",
+        fit.iterations,
+        kr270::HOST_ITERATIONS,
+        fit.converged
+    );
+    info!("param  x +/- 3 sigma [urad/(N*m)]  host x  |x-host|/sigma  |sd/host-1|");
+    for (i, p) in params.iter().enumerate() {
+        info!(
+            "{=str}  {=f64} +/- {=f64}  {=f64}  {=f64}  {=f64}",
+            robcal::kr270::PAPER_SYMBOLS[i],
+            p.x,
+            3.0 * p.sd,
+            expected[i],
+            p.x_sigmas,
+            p.sd_rel
+        );
+    }
+    info!(
+        "tolerances: {=f64} sigma on x, {=f64} relative on sigma; {=str}",
+        kr270::TOL_X_SIGMAS,
+        kr270::TOL_SD_REL,
+        if pass {
+            "KR-270 check passed"
+        } else {
+            "KR-270 check FAILED"
+        }
+    );
+    pass
+}
+
+/// The parts of the KR-270 fit as bench phases, each in its own frame (not
+/// inlined), so that none of them adds to the stack of another or of the
+/// whole fit.
+#[inline(never)]
+fn kr270_parts(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSettings<f32>) {
+    kr270_rows(k, src);
+    kr270_passes(k, src);
+    kr270_iteration(k, src, settings);
+}
+
+#[inline(never)]
+fn kr270_rows(k: &mut usize, src: &Kr270<f32>) {
+    let first = phase(
+        k,
+        "kr270 rows of one configuration f32 (FK, load torques, 3 markers)",
+        || src.config_blocks(0),
+    )
+    .unwrap_or_else(|e| fail("rows", e));
+    info!(
+        "B of configuration 1, marker 1 [m per urad/(N*m)]: {}",
+        first[0]
+    );
+}
+
+#[inline(never)]
+fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
+    let ones = [nalgebra::Vector3::repeat(1.0f32); G];
+    let acc = phase(
+        k,
+        "kr270 pass: weighted statistics f32 (270 rows streamed)",
+        || src.weighted(&ones, None),
+    )
+    .unwrap_or_else(|e| fail("weighted pass", e));
+    info!(
+        "one pass: {=usize} equations, eta = {}",
+        acc.equations(),
+        acc.eta()
+    );
+    let x = solution_x(&acc);
+    let mut sigma = [nalgebra::Vector3::zeros(); G];
+    phase(
+        k,
+        "kr270 pass: residual sigma f32 (270 rows streamed)",
+        || src.residual_sigma_into(&x, kr270::N, &mut sigma),
+    )
+    .unwrap_or_else(|e| fail("residual pass", e));
+}
+
+#[inline(never)]
+fn solution_x(acc: &Accumulator<f32, { kr270::N }>) -> nalgebra::SVector<f32, { kr270::N }> {
+    acc.solve().unwrap_or_else(|e| fail("solve", e)).x
+}
+
+#[inline(never)]
+fn kr270_iteration(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSettings<f32>) {
+    let active = [true; kr270::N];
+    let ols = phase(k, "kr270 OLS start f32 (3 passes, 2 solves)", || {
+        src.fit_ols::<G>(&active)
+    })
+    .unwrap_or_else(|e| fail("OLS", e));
+    let one = phase(
+        k,
+        "kr270 one IRLS iteration f32 (weights, 3 passes, solve, sandwich)",
+        || {
+            robcal::irls::robust_weights::<f32, G>(&ols.sigma, &settings.weight)
+                .and_then(|w| src.fit_weighted::<G>(&w, &active))
+        },
+    )
+    .unwrap_or_else(|e| fail("one iteration", e));
+    info!("first WLS step (Fit): {}", one);
+}
+
+/// The whole iterative WLS (a bench phase); logs the convergence of k21
+/// (the paper's Figure 3) and returns the estimate.
+#[inline(never)]
+fn kr270_irls(
+    k: &mut usize,
+    src: &Kr270<f32>,
+    settings: &robcal::IrlsSettings<f32>,
+) -> kr270::Estimate<f32> {
+    let mut history = heapless::Vec::<_, HISTORY>::new();
+    let fit = phase(
+        k,
+        "kr270 whole iterative WLS f32 (OLS start + iterations)",
+        || src.fit_irls::<G, HISTORY>(settings, &[true; kr270::N], &mut history),
+    )
+    .unwrap_or_else(|e| fail("iterative WLS", e));
+    info!("convergence of k21 (Figure 3): iteration, k21, 3 sigma, change [sigma]");
+    for (i, it) in history.iter().enumerate() {
+        info!(
+            "  {=usize}  {=f32}  {=f32}  {=f32}",
+            i,
+            it.x[0],
+            3.0 * it.std[0],
+            it.change
+        );
+    }
+    info!("last iteration (Iteration): {}", history.last());
+    (&fit).into()
 }
 
 /// The failure self-test named by the first semihosting command-line
@@ -177,11 +344,10 @@ fn phase<R>(k: &mut usize, name: &str, f: impl FnOnce() -> R) -> R {
 /// in f32 then in f64, each between two marks (phase 0 is empty: the
 /// bracket overhead).
 #[inline(never)]
-fn benchmarks() {
-    let mut k = 0;
-    phase(&mut k, "empty (bracket overhead)", || ());
-    let ok32 = bench_precision::<f32>(&mut k, "f32", problem::to_f32);
-    let ok64 = bench_precision::<f64>(&mut k, "f64", |b| *b);
+fn benchmarks(k: &mut usize) {
+    phase(k, "empty (bracket overhead)", || ());
+    let ok32 = bench_precision::<f32>(k, "f32", problem::to_f32);
+    let ok64 = bench_precision::<f64>(k, "f64", |b| *b);
     if !(ok32 && ok64) {
         error!("a benchmark call failed");
         exit(EXIT_FAIL)

@@ -1,1 +1,333 @@
-fn main() {}
+//! `robcal`: calibration jobs from the command line (data contract §4).
+//!
+//! ```text
+//! robcal calibrate --setup S.toml --data D.csv
+//!                  [--method irls|wls|ols] [--lambda L] [--max-iter N]
+//!                  [--no-diagnose] [--validate V.csv] [--plots DIR] [--json]
+//! robcal import figaroh-mocap IN.csv OUT.csv
+//! ```
+//!
+//! Exit status 0 on success; otherwise one line on stderr saying why, and
+//! nothing written (files are written to a temporary name and renamed).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use serde_json::{json, Value};
+
+use robcal::calibrate::{self, Method, PlotSeries, Report, Settings};
+use robcal::io::Job;
+
+#[derive(Parser)]
+#[command(
+    name = "robcal",
+    version,
+    about = "Calibrate robot manipulators from tracker measurements"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// One variant per subcommand (`import ...` goes here too).
+#[derive(Subcommand)]
+enum Command {
+    /// Fit the declared model, trace what the residuals follow to the
+    /// effects it lacks, add them, report the errors before and after.
+    Calibrate(CalibrateArgs),
+    /// Convert another tool's recording into the data contract's CSV.
+    #[command(subcommand)]
+    Import(ImportCommand),
+}
+
+/// `robcal import <format> IN OUT`.
+#[derive(Subcommand)]
+enum ImportCommand {
+    /// FIGAROH's motion-capture layout (`x1..z4` in m, joint columns by URDF
+    /// name, optional `t_start_robot`/`t_end_robot`): one `config` per
+    /// posture, markers 1..4 = the four points, SI units (rad, m).
+    #[command(name = "figaroh-mocap")]
+    FigarohMocap {
+        /// FIGAROH CSV.
+        input: PathBuf,
+        /// Contract CSV to write (left untouched on error).
+        output: PathBuf,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    Irls,
+    Wls,
+    Ols,
+}
+
+#[derive(clap::Args)]
+struct CalibrateArgs {
+    /// Setup file (TOML).
+    #[arg(long)]
+    setup: PathBuf,
+    /// Measurements (CSV).
+    #[arg(long)]
+    data: PathBuf,
+    /// Estimation method.
+    #[arg(long, value_enum, default_value = "irls")]
+    method: MethodArg,
+    /// λ of eq. 14 (default: the setup's `[noise] lambda`).
+    #[arg(long, allow_negative_numbers = true)]
+    lambda: Option<f64>,
+    /// IRLS iterations at most.
+    #[arg(long = "max-iter", default_value_t = 100)]
+    max_iter: usize,
+    /// Fit the declared model only.
+    #[arg(long = "no-diagnose")]
+    no_diagnose: bool,
+    /// Evaluate the fitted model on this file without re-estimating.
+    #[arg(long)]
+    validate: Option<PathBuf>,
+    /// Write SVG plots of the residuals against the traced variable here.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+    /// Print the contract's JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            // The contract's one line: clap's first line, without the usage.
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("bad arguments");
+            eprintln!("robcal: {}", first.trim_start_matches("error: ").trim());
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        Command::Calibrate(args) => run_calibrate(&args),
+        Command::Import(ImportCommand::FigarohMocap { input, output }) => {
+            robcal::io::figaroh::import_mocap(&input, &output, None)
+                .map(|n| {
+                    eprintln!(
+                        "robcal: {} postures, {} rows written to {}",
+                        n.postures,
+                        n.rows,
+                        output.display()
+                    );
+                })
+                .map_err(|e| e.to_string())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let line = e.replace('\n', " ");
+            eprintln!("robcal: error: {line}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
+    if let Some(l) = a.lambda {
+        if !(l.is_finite() && l >= 0.0) {
+            return Err(format!("--lambda {l}: must be a finite number >= 0"));
+        }
+    }
+    if a.max_iter == 0 {
+        return Err("--max-iter must be at least 1".into());
+    }
+    let job = Job::load(&a.setup).map_err(|e| e.to_string())?;
+    let data = job.read_measurements(&a.data).map_err(|e| e.to_string())?;
+    for w in &data.warnings {
+        eprintln!("robcal: warning: {w}");
+    }
+    let validation_data = match &a.validate {
+        Some(v) => Some(job.read_measurements(v).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    let settings = Settings {
+        method: match a.method {
+            MethodArg::Irls => Method::Irls,
+            MethodArg::Wls => Method::Wls,
+            MethodArg::Ols => Method::Ols,
+        },
+        lambda: a.lambda,
+        max_iterations: a.max_iter,
+        diagnose: !a.no_diagnose,
+        ..Settings::default()
+    };
+    let mut progress = |m: &str| eprintln!("robcal: {m}");
+    let mut report =
+        calibrate::calibrate(&job, &data, &settings, &mut progress).map_err(|e| e.to_string())?;
+    if let Some(v) = &validation_data {
+        report.validation = Some(calibrate::validate(&report, &job, v).map_err(|e| e.to_string())?);
+    }
+    if let Some(dir) = &a.plots {
+        write_plots(dir, &report)?;
+    }
+    let out = if a.json {
+        serde_json::to_string_pretty(&to_json(&report)).map_err(|e| e.to_string())? + "\n"
+    } else {
+        report.to_string()
+    };
+    std::io::stdout()
+        .write_all(out.as_bytes())
+        .map_err(|e| format!("cannot write the report: {e}"))
+}
+
+/// Finite numbers as numbers; NaN/∞ (not JSON) as null.
+fn num(v: f64) -> Value {
+    serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)
+}
+
+fn opt_num(v: Option<f64>) -> Value {
+    v.map_or(Value::Null, num)
+}
+
+/// The contract's JSON (§5).
+fn to_json(r: &Report) -> Value {
+    json!({
+        "method": r.method,
+        "iterations": r.iterations,
+        "parameters": r.parameters.iter().map(|p| json!({
+            "name": p.name, "value": num(p.value), "std": num(p.std), "unit": p.unit,
+        })).collect::<Vec<_>>(),
+        "rms_um": num(r.rms_um),
+        "heldout_rms_um": opt_num(r.heldout_rms_um),
+        "effects": r.effects.iter().map(|s| {
+            let mut e = json!({
+                "effect": s.effect,
+                "joint": s.joint,
+                "p_value": num(s.p_value),
+                "rms_um_before": num(s.rms_um_before),
+                "rms_um_after": num(s.rms_um_after),
+                "heldout_rms_um_before": opt_num(s.heldout_rms_um_before),
+                "heldout_rms_um_after": opt_num(s.heldout_rms_um_after),
+            });
+            if let Some(m) = s.marker {
+                e["marker"] = json!(m);
+            }
+            e
+        }).collect::<Vec<_>>(),
+        "unexplained": r.unexplained.as_ref().map(|u| json!({
+            "variable": u.variable, "statistic": num(u.statistic), "p_value": num(u.p_value),
+        })),
+        "validation": r.validation.as_ref().map(|v| json!({
+            "rms_mm": num(v.rms_mm),
+            "per_marker_rms_mm": v.per_marker_rms_mm.iter()
+                .map(|(k, x)| (k.clone(), num(*x))).collect::<serde_json::Map<_, _>>(),
+        })),
+    })
+}
+
+/// Writes `path` atomically: a temporary file in the same directory, then
+/// a rename.
+fn write_atomic(path: &Path, content: &str) -> Result<(), String> {
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(content.as_bytes())?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("{}: cannot write: {e}", path.display())
+    })
+}
+
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect::<String>()
+        .trim_matches('_')
+        .to_string()
+}
+
+/// One SVG per plot series: the three residual components against the
+/// traced variable, before (top) and after (bottom).
+fn write_plots(dir: &Path, r: &Report) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut svgs = Vec::new();
+    for (i, s) in r.plots.iter().enumerate() {
+        let svg = plot_svg(s).map_err(|e| format!("plot '{}': {e}", s.title))?;
+        svgs.push((
+            dir.join(format!("{:02}_{}.svg", i + 1, slug(&s.title))),
+            svg,
+        ));
+    }
+    for (path, svg) in svgs {
+        write_atomic(&path, &svg)?;
+    }
+    Ok(())
+}
+
+fn plot_svg(s: &PlotSeries) -> Result<String, Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    let mut buf = String::new();
+    {
+        let panels = if s.after_um.is_empty() { 1 } else { 2 };
+        let root = SVGBackend::with_string(&mut buf, (900, 380 * panels)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let areas = root.split_evenly((panels as usize, 1));
+        let (xmin, xmax) = bounds(s.x.iter().copied());
+        let all = s
+            .before_um
+            .iter()
+            .chain(&s.after_um)
+            .flat_map(|v| v.iter().copied());
+        let (ymin, ymax) = bounds(all);
+        let series = [("before", &s.before_um), ("after", &s.after_um)];
+        for (area, (label, res)) in areas.iter().zip(series) {
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!("{} — residuals {label}", s.title),
+                    ("sans-serif", 18),
+                )
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(xmin..xmax, ymin..ymax)?;
+            chart
+                .configure_mesh()
+                .x_desc(s.variable.as_str())
+                .y_desc("residual [um]")
+                .draw()?;
+            for (a, color) in [(0usize, RED), (1, GREEN), (2, BLUE)] {
+                chart
+                    .draw_series(
+                        s.x.iter()
+                            .zip(res.iter())
+                            .map(|(&x, r)| Circle::new((x, r[a]), 2, color.filled())),
+                    )?
+                    .label(["x", "y", "z"][a])
+                    .legend(move |(x, y)| Circle::new((x, y), 3, color.filled()));
+            }
+            chart.configure_series_labels().border_style(BLACK).draw()?;
+        }
+        root.present()?;
+    }
+    Ok(buf)
+}
+
+fn bounds(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in v.filter(|x| x.is_finite()) {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-9);
+    (lo - pad, hi + pad)
+}

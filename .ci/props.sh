@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Bounded property run (issue 8): the stable equivalents of the fuzz targets
+# and the batch-equality properties, with more cases than the default
+# `cargo test`. Bounded by PROPTEST_CASES and by `timeout` (≤ 2 minutes
+# after the build). Usage: bash .ci/props.sh [cases]  (default 20000)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cases="${1:-20000}"
+cargo test -p host-tests --no-run --quiet
+PROPTEST_CASES="$cases" timeout 60 cargo test -p host-tests --quiet --test fuzz_props --test fuzz_regressions
+# The batch-equality properties: a tenth of the cases (each solves an SVD).
+PROPTEST_CASES="$((cases / 10))" timeout 60 cargo test -p host-tests --quiet --test accumulator_props

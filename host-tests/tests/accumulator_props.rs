@@ -1,0 +1,316 @@
+//! Property tests of the accumulator against the independent batch
+//! reference (`host_tests::Batch`: stacked dense system, SVD, covariances
+//! from explicit diagonal `W` and `Σ`).
+//!
+//! Problems are drawn from a `u64` seed (`host_tests::random_blocks`), so a
+//! failing case is reproducible from the seed proptest prints. `N` is a
+//! const generic, so a few sizes are instantiated: 1, 3, 6 and 12.
+//!
+//! "Well-posed" means: at least as many weighted rows as parameters and a
+//! column-equilibrated `W B` with 2-norm condition ≤ [`MAX_COND`]; cases
+//! beyond are discarded with `prop_assume!` (they are the subject of
+//! `docs/numerics.md`, not of an equality test).
+//!
+//! Tolerances (all relative, see `host_tests::{scaled_rel_err,
+//! cov_rel_err}` for the metrics):
+//! - f64 estimate and `Λ⁻¹` against batch: 1e-10 (the figure). The
+//!   normal equations square the condition, and forming `Λ` from `m` rows
+//!   adds up to `m·ε` per entry: the error is up to about
+//!   `m·ε·cond(Λs) ≤ 144 · 1.1e-16 · MAX_COND²` = 1.6e-10 at the bound,
+//!   typically 10–100 times less. Measured: with `MAX_COND` = 1000 a
+//!   1000-case run found 1.1e-10, with 300 a 20 000-case run found 4e-10
+//!   (the permuted order), with 100 none above 1e-10.
+//! - f32 with columns scaled 1e-6 and 1: 1e-4 (the figure). The
+//!   solve equilibrates the columns, so only `cond` of the equilibrated
+//!   matrix counts: `6e-8 · m · cond(Λs)`.
+//! - `σ̂²` (eq. 7) comes from `Σ Δpᵀ W² Δp − X̂ᵀη`, a difference that
+//!   cancels: its error is `≈ ε · Σ Δpᵀ W² Δp / RSS`, so eq. 7 is compared
+//!   with that bound added (see `docs/numerics.md`).
+
+use host_tests::{
+    accumulate, convert_block, cov_rel_err, random_blocks, scaled_rel_err, Batch, Rng, Spec, ToF64,
+};
+use nalgebra::{DMatrix, SMatrix};
+use proptest::prelude::*;
+use robcal::{Accumulator, Block};
+
+/// Largest condition number of the column-equilibrated `W B` accepted as
+/// well-posed.
+const MAX_COND: f64 = 100.0;
+
+fn equilibrated_cond(batch: &Batch) -> f64 {
+    let wb = batch.w_mat() * &batch.b;
+    let mut e = wb.clone();
+    for (j, mut c) in e.column_iter_mut().enumerate() {
+        let n = wb.column(j).norm();
+        if n > 0.0 {
+            c /= n;
+        }
+    }
+    let sv = e.singular_values();
+    sv.max() / sv.min()
+}
+
+fn spec(blocks: usize, weight_decades: f64) -> Spec {
+    Spec {
+        blocks,
+        weight_decades,
+        ..Spec::default()
+    }
+}
+
+/// Draws a well-posed problem or discards the case.
+fn problem<const N: usize>(
+    seed: u64,
+    spec: &Spec,
+    col_scale: &[f64; N],
+) -> Result<Vec<Block<f64, N>>, TestCaseError> {
+    let mut rng = Rng::new(seed);
+    let (blocks, _) = random_blocks::<N>(&mut rng, spec, col_scale);
+    let batch = Batch::from_blocks(&blocks);
+    prop_assume!(batch.rows() >= N);
+    prop_assume!(equilibrated_cond(&batch) <= MAX_COND);
+    Ok(blocks)
+}
+
+fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), TestCaseError> {
+    let blocks = problem::<N>(seed, &spec(blocks, wdec), &[1.0; N])?;
+    let batch = Batch::from_blocks(&blocks);
+    let reference = batch.solve();
+    let acc = accumulate(&blocks);
+    let sol = acc
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let ex = scaled_rel_err(&sol.x, &batch, &reference);
+    prop_assert!(ex <= 1e-10, "estimate: {ex:e}");
+    let el = cov_rel_err(&sol.lambda_inv, &reference.lambda_inv);
+    prop_assert!(el <= 1e-10, "Λ⁻¹: {el:e}");
+    // Sandwich (eq. 11) against P W Σ² W Pᵀ.
+    let es = cov_rel_err(
+        &sol.cov_sandwich(&acc.middle()),
+        &batch.cov_sandwich(&reference),
+    );
+    // Loosened to 1e-9: the sandwich has Λ⁻¹ twice, and M weights rows by
+    // w⁴σ² (6 decades here) where Λ weights them by w² — its diagonal can
+    // be far smaller than Λ⁻¹'s, and the element errors are judged
+    // against it. Worst measured in 20 000 cases: 2.9e-10 (m = n = 3).
+    prop_assert!(es <= 1e-9, "sandwich: {es:e}");
+    // Eq. 7, with the cancellation bound of σ̂² (module docs).
+    let yy = acc.weighted_yy();
+    let cancel = 64.0 * f64::EPSILON * yy / reference.wrss.max(f64::MIN_POSITIVE);
+    let ei = cov_rel_err(&sol.cov_iid(), &batch.cov_iid(&reference));
+    prop_assert!(
+        ei <= 1e-10 + cancel,
+        "eq. 7: {ei:e} (cancellation {cancel:e})"
+    );
+    prop_assert_eq!(sol.equations, reference.equations);
+
+    // Eq. 13: with W = Σ⁻¹ the covariance is Λ⁻¹ = (Bᵀ Σ⁻² B)⁻¹, against
+    // the batch computed from Σ alone; and the sandwich agrees with it.
+    let inv: Vec<Block<f64, N>> = blocks
+        .iter()
+        .map(|b| b.with_weights(b.sigma.unwrap().map(|s| 1.0 / s)))
+        .collect();
+    let b13 = Batch::from_blocks(&inv);
+    let acc13 = accumulate(&inv);
+    let sol13 = acc13
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let e13 = cov_rel_err(&sol13.cov_information(), &b13.cov_eq13());
+    prop_assert!(e13 <= 1e-10, "eq. 13: {e13:e}");
+    let e11 = cov_rel_err(&sol13.cov_sandwich(&acc13.middle()), &b13.cov_eq13());
+    prop_assert!(e11 <= 1e-10, "eq. 11 with WΣ = I: {e11:e}");
+    Ok(())
+}
+
+fn check_f32_scaled<const N: usize>(seed: u64, blocks: usize) -> Result<(), TestCaseError> {
+    // Compliances ~1e-6 next to lengths ~1: every other column scaled 1e-6
+    // (the true parameter is then ~1e6 times larger, as with rad/(N·m)
+    // against N·m loads). Unit weights: the scaling is what is tested here.
+    let scale: [f64; N] = core::array::from_fn(|j| if j % 2 == 0 { 1.0 } else { 1e-6 });
+    let s = Spec {
+        weight_decades: 0.3,
+        ..spec(blocks, 0.0)
+    };
+    let blocks64 = problem::<N>(seed, &s, &scale)?;
+    let blocks: Vec<Block<f32, N>> = blocks64.iter().map(convert_block).collect();
+    // The reference solves the f32-rounded data exactly widened to f64, so
+    // only the accumulator's arithmetic is measured, not the input rounding.
+    let batch = Batch::from_blocks(&blocks);
+    prop_assume!(equilibrated_cond(&batch) <= 100.0);
+    let reference = batch.solve();
+    let acc = accumulate(&blocks);
+    let sol = acc
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let ex = scaled_rel_err(&sol.x, &batch, &reference);
+    prop_assert!(ex <= 1e-4, "f32 estimate: {ex:e}");
+    // (Not componentwise: a parameter whose effect on the rows is 1 % of
+    // the largest one carries 100× the relative error of the norm-wise
+    // figure, as the conditioning of the problem dictates, not the solver.)
+    let el = cov_rel_err(&sol.lambda_inv, &reference.lambda_inv);
+    prop_assert!(el <= 1e-4, "f32 Λ⁻¹: {el:e}");
+    let es = cov_rel_err(
+        &sol.cov_sandwich(&acc.middle()),
+        &batch.cov_sandwich(&reference),
+    );
+    prop_assert!(es <= 1e-4, "f32 sandwich: {es:e}");
+    Ok(())
+}
+
+fn shuffled<T: Clone>(v: &[T], seed: u64) -> Vec<T> {
+    let mut rng = Rng::new(seed ^ 0x5eed);
+    let mut out = v.to_vec();
+    for i in (1..out.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        out.swap(i, j);
+    }
+    out
+}
+
+/// Same statistics up to rounding: counts exact, matrices within
+/// `m·ε` of their diagonal scale (sums of the same terms in another order).
+fn same_up_to_rounding<T: ToF64, const N: usize>(
+    a: &Accumulator<T, N>,
+    b: &Accumulator<T, N>,
+) -> Result<(), TestCaseError> {
+    prop_assert_eq!(a.equations(), b.equations());
+    prop_assert_eq!(a.sigma_rows(), b.sigma_rows());
+    let tol = 4.0 * (a.equations() as f64 + 1.0) * T::default_epsilon().f64();
+    let la = a.information();
+    let lb = DMatrix::from_fn(N, N, |i, j| b.information()[(i, j)].f64());
+    prop_assert!(cov_rel_err(&la, &lb) <= tol, "Λ differs beyond rounding");
+    let ma = a.middle();
+    let mb = DMatrix::from_fn(N, N, |i, j| b.middle()[(i, j)].f64());
+    prop_assert!(cov_rel_err(&ma, &mb) <= tol, "M differs beyond rounding");
+    Ok(())
+}
+
+fn check_order<const N: usize>(seed: u64, blocks: usize, split: f64) -> Result<(), TestCaseError> {
+    let blocks = problem::<N>(seed, &spec(blocks, 1.0), &[1.0; N])?;
+    let batch = Batch::from_blocks(&blocks);
+    let reference = batch.solve();
+    let seq = accumulate(&blocks);
+    let sol = seq
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+
+    // Permutation invariance.
+    let perm = accumulate(&shuffled(&blocks, seed));
+    same_up_to_rounding(&seq, &perm)?;
+    let sp = perm
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let d =
+        scaled_rel_err(&sp.x, &batch, &reference).max(scaled_rel_err(&sol.x, &batch, &reference));
+    prop_assert!(d <= 1e-10, "permuted estimate: {d:e}");
+
+    // Merge == sequential, split at a random point, merged both ways.
+    let k = ((blocks.len() as f64) * split) as usize;
+    let (left, right) = blocks.split_at(k);
+    let mut a = accumulate(left);
+    let b = accumulate(right);
+    a.merge(&b)
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    same_up_to_rounding(&seq, &a)?;
+    let mut b2 = b.clone();
+    b2.merge(&accumulate(left))
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    same_up_to_rounding(&seq, &b2)?;
+    let sm = a.solve().map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let d = scaled_rel_err(&sm.x, &batch, &reference);
+    prop_assert!(d <= 1e-10, "merged estimate: {d:e}");
+
+    // Merging an empty accumulator changes nothing, bit for bit.
+    let mut c = seq.clone();
+    c.merge(&Accumulator::new()).unwrap();
+    let (tc, ts) = (format!("{c:?}"), format!("{seq:?}"));
+    prop_assert_eq!(tc, ts);
+
+    // Exact symmetry of Λ and M, after updates and after merges.
+    for acc in [&seq, &perm, &a, &b2] {
+        let l = acc.information();
+        prop_assert!(l == l.transpose(), "Λ not exactly symmetric");
+        let m = acc.middle();
+        prop_assert!(m == m.transpose(), "M not exactly symmetric");
+    }
+    Ok(())
+}
+
+/// Λ⁻¹ as returned by the solve (and so eq. 13) is exactly symmetric.
+fn check_inverse_symmetric<const N: usize>(seed: u64, blocks: usize) -> Result<(), TestCaseError> {
+    let scale: [f64; N] = core::array::from_fn(|j| 10f64.powi(j as i32 % 7 - 3));
+    let blocks = problem::<N>(seed, &spec(blocks, 1.0), &scale)?;
+    let sol = accumulate(&blocks)
+        .solve()
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let l: SMatrix<f64, N, N> = sol.lambda_inv;
+    prop_assert!(l == l.transpose(), "Λ⁻¹ not exactly symmetric: {l}");
+    Ok(())
+}
+
+proptest! {
+    // 64 cases per property by default (fast `cargo test`); `PROPTEST_CASES`
+    // overrides (`.ci/props.sh`).
+    #![proptest_config(ProptestConfig {
+        cases: std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(64),
+        max_global_rejects: 1 << 16,
+        ..ProptestConfig::default()
+    })]
+
+    #[test]
+    fn f64_equals_batch_n1(seed: u64, blocks in 1usize..8, wdec in 0.0..1.0f64) {
+        check_f64::<1>(seed, blocks, wdec)?;
+    }
+    #[test]
+    fn f64_equals_batch_n3(seed: u64, blocks in 3usize..16, wdec in 0.0..1.0f64) {
+        check_f64::<3>(seed, blocks, wdec)?;
+    }
+    #[test]
+    fn f64_equals_batch_n6(seed: u64, blocks in 6usize..30, wdec in 0.0..1.0f64) {
+        check_f64::<6>(seed, blocks, wdec)?;
+    }
+    #[test]
+    fn f64_equals_batch_n12(seed: u64, blocks in 14usize..48, wdec in 0.0..1.0f64) {
+        check_f64::<12>(seed, blocks, wdec)?;
+    }
+
+    #[test]
+    fn f32_scaled_equals_batch_n1(seed: u64, blocks in 2usize..8) {
+        check_f32_scaled::<1>(seed, blocks)?;
+    }
+    #[test]
+    fn f32_scaled_equals_batch_n3(seed: u64, blocks in 8usize..20) {
+        check_f32_scaled::<3>(seed, blocks)?;
+    }
+    #[test]
+    fn f32_scaled_equals_batch_n6(seed: u64, blocks in 16usize..40) {
+        check_f32_scaled::<6>(seed, blocks)?;
+    }
+    #[test]
+    fn f32_scaled_equals_batch_n12(seed: u64, blocks in 32usize..64) {
+        check_f32_scaled::<12>(seed, blocks)?;
+    }
+
+    #[test]
+    fn order_merge_symmetry_n3(seed: u64, blocks in 3usize..16, split in 0.0..1.0f64) {
+        check_order::<3>(seed, blocks, split)?;
+    }
+    #[test]
+    fn order_merge_symmetry_n6(seed: u64, blocks in 6usize..30, split in 0.0..1.0f64) {
+        check_order::<6>(seed, blocks, split)?;
+    }
+    #[test]
+    fn order_merge_symmetry_n12(seed: u64, blocks in 14usize..48, split in 0.0..1.0f64) {
+        check_order::<12>(seed, blocks, split)?;
+    }
+
+    // Finding F1 (host-tests/PROPOSED-FIXES.md): `solve` scales Λs⁻¹ back
+    // with `(inv·sᵢ)·sⱼ`, which rounds differently from `(inv·sⱼ)·sᵢ`, so the
+    // returned Λ⁻¹ (the eq. 13 covariance) is asymmetric in the last bit.
+    // Remove the `ignore` when the fix is applied.
+    #[test]
+    fn lambda_inv_exactly_symmetric_n6(seed: u64, blocks in 8usize..30) {
+        check_inverse_symmetric::<6>(seed, blocks)?;
+    }
+}

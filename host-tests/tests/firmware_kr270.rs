@@ -1,0 +1,131 @@
+//! The firmware's KR-270 experiment (`examples/firmware/kr270.rs`) on the
+//! host: its hand-written chain against the URDF, its flash table against
+//! the CSV, its streaming `Reweightable` source against `GroupedStats` on
+//! the same rows, and its f32 and f64 fits against the host reference the
+//! table carries.
+
+#[allow(dead_code)]
+#[path = "../../examples/firmware/kr270.rs"]
+mod kr270;
+
+use std::path::Path;
+
+use kr270::{Kr270, G, HISTORY, N};
+use nalgebra::RealField;
+use robcal::io::Job;
+use robcal::irls::{Fit, Reweightable};
+
+fn job() -> (Job, robcal::io::Measurements) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/kr270");
+    let job = Job::load(root.join("setup.toml")).unwrap();
+    let data = job
+        .read_measurements(root.join("measurements.csv"))
+        .unwrap();
+    (job, data)
+}
+
+fn irls<T: RealField + Copy, R: Reweightable<T, N>>(src: &R) -> Fit<T, N, G> {
+    let mut h = heapless::Vec::<_, HISTORY>::new();
+    src.fit_irls(&kr270::settings().unwrap(), &[true; N], &mut h)
+        .unwrap()
+}
+
+#[test]
+fn chain_constant_matches_the_urdf() {
+    let (job, _) = job();
+    let urdf = &job.robot.chain;
+    let ours = kr270::chain::<f64>().unwrap();
+    assert_eq!(urdf.dof(), 6);
+    for g in 0..G {
+        let q = kr270::q_rad::<f64>(g);
+        let a = urdf.frames(&q).unwrap();
+        let b = ours.frames(&q).unwrap();
+        for (ja, jb) in a.joints().iter().zip(b.joints()) {
+            assert!((ja.origin_m() - jb.origin_m()).norm() < 1e-12);
+            assert!((ja.axis.into_inner() - jb.axis.into_inner()).norm() < 1e-12);
+        }
+        // Marker positions through the tip transform.
+        for m in robcal::kr270::MARKERS_M {
+            let m = nalgebra::Vector3::from(m);
+            assert!((a.point_m(&m) - b.point_m(&m)).norm() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn flash_table_holds_the_csv() {
+    let (job, data) = job();
+    // The table is sorted by configuration, file order within one.
+    let mut csv: Vec<_> = data.deflections.iter().collect();
+    csv.sort_by_key(|d| d.config);
+    let table: Vec<_> = kr270::deflections().collect();
+    assert_eq!(table.len(), csv.len());
+    assert_eq!(table.len(), 270);
+    for (t, d) in table.iter().zip(&csv) {
+        assert_eq!(i64::from(t.config) + 1, d.config);
+        let marker = &job.setup.markers[usize::from(t.marker)];
+        assert_eq!(marker.id, d.marker);
+        let q = kr270::q_rad::<f64>(usize::from(t.config));
+        for (a, b) in q.iter().zip(&d.q) {
+            // 0.01° steps, exact up to the CSV's degree→radian rounding.
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+        let load = f64::from(kr270::LOAD_DKG[usize::from(t.config)]) * 0.1;
+        assert!((load - d.load_kg).abs() < 1e-9);
+        let dp = kr270::dp_m::<f64>(t);
+        for a in 0..3 {
+            // Quantisation: at most half a nanometre.
+            assert!((dp[a] - d.dp_m[a]).abs() <= 0.5e-9 + 1e-15);
+        }
+    }
+}
+
+/// The streaming source and `GroupedStats` fed with the same rows give the
+/// same iterative WLS to rounding (f64): same iterations, estimates within
+/// 1e-9 σ, standard deviations within 1e-9 relative.
+#[test]
+fn streaming_source_equals_grouped_stats() {
+    let src = Kr270::<f64>::new().unwrap();
+    let grouped = kr270::grouped(&src).unwrap();
+    assert_eq!(grouped.equations(), 810);
+    let a = irls(&src);
+    let b = irls(&grouped);
+    assert!(a.converged && b.converged);
+    assert_eq!(a.iterations, b.iterations);
+    let (sa, sb) = (a.std(), b.std());
+    for i in 0..N {
+        assert!((a.solution.x[i] - b.solution.x[i]).abs() <= 1e-9 * sb[i]);
+        assert!((sa[i] / sb[i] - 1.0).abs() <= 1e-9);
+    }
+    for (x, y) in a.sigma.iter().zip(&b.sigma) {
+        assert!((x - y).norm() <= 1e-9 * y.norm());
+    }
+}
+
+/// Against the reference in the table (f64 from the CSV): the f64 stream
+/// differs only by the table's quantisation (measured 1.8e-5 σ), the f32
+/// stream — what the firmware computes — within the firmware's tolerance.
+#[test]
+fn fits_match_the_host_reference() {
+    let f64fit = irls(&Kr270::<f64>::new().unwrap());
+    let e64 = kr270::Estimate::from(&f64fit);
+    let (p64, ok64) = kr270::check(&e64, &kr270::HOST_X);
+    assert!(ok64);
+    assert_eq!(f64fit.iterations, kr270::HOST_ITERATIONS);
+    for p in &p64 {
+        assert!(p.x_sigmas < 1e-4, "{p:?}");
+        assert!(p.sd_rel < 1e-4, "{p:?}");
+    }
+    let f32fit = irls(&Kr270::<f32>::new().unwrap());
+    let (p32, ok32) = kr270::check(&(&f32fit).into(), &kr270::HOST_X);
+    assert!(ok32, "{p32:?}");
+}
+
+/// The mismatch self-test's shift (one σ of k21) fails the check.
+#[test]
+fn check_rejects_a_one_sigma_shift() {
+    let fit = irls(&Kr270::<f64>::new().unwrap());
+    let mut x = kr270::HOST_X;
+    x[0] += kr270::HOST_SD[0];
+    assert!(!kr270::check(&(&fit).into(), &x).1);
+}

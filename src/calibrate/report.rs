@@ -1,0 +1,286 @@
+//! What a calibration reports: the final model, the errors, the effects the
+//! diagnosis added with the errors before and after each, and what is left.
+//! The CLI prints it (`Display`) or writes the contract's JSON.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use nalgebra::Vector3;
+
+use super::{LackOfFit, Problem, Term, Tested};
+
+/// One estimated parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Parameter {
+    /// Contract name (`k_a2`, `k_a2@-0.01`, `a3.offset`, `backlash_a4`, …).
+    pub name: String,
+    /// Estimate, in `unit`.
+    pub value: f64,
+    /// One standard deviation (sandwich covariance).
+    pub std: f64,
+    /// Unit (`urad/(N*m)`, `mm`, `mrad`, …).
+    pub unit: String,
+}
+
+/// One effect the diagnosis added.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectStep {
+    /// Effect name (contract §6).
+    pub effect: String,
+    /// Joint, for per-joint effects.
+    pub joint: Option<String>,
+    /// Marker id, for `marker`.
+    pub marker: Option<u32>,
+    /// p-value of its nested F test (before the Bonferroni factor).
+    pub p_value: f64,
+    /// F statistic.
+    pub f: f64,
+    /// Candidates tested in that round (the Bonferroni factor).
+    pub tried: usize,
+    /// RMS \[µm\] before.
+    pub rms_um_before: f64,
+    /// RMS \[µm\] after.
+    pub rms_um_after: f64,
+    /// Held-out RMS \[µm\] before.
+    pub heldout_rms_um_before: Option<f64>,
+    /// Held-out RMS \[µm\] after.
+    pub heldout_rms_um_after: Option<f64>,
+    /// The model's parameters before.
+    pub parameters_before: Vec<Parameter>,
+    /// The model's parameters after.
+    pub parameters_after: Vec<Parameter>,
+}
+
+/// Structure left that no effect of the library explains.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unexplained {
+    /// The variable the residuals follow most (`q_a3`, `tau_a2`, `load_kg`, `t`, `marker`).
+    pub variable: String,
+    /// Lack-of-fit F statistic.
+    pub statistic: f64,
+    /// Its p-value.
+    pub p_value: f64,
+}
+
+/// `--validate`: the final model on another file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Validation {
+    /// Norm RMSE of the position errors \[mm\].
+    pub rms_mm: f64,
+    /// Per marker id.
+    pub per_marker_rms_mm: BTreeMap<String, f64>,
+}
+
+/// Residuals against the variable an effect was traced by, before and after
+/// it was added (for `--plots`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlotSeries {
+    /// Effect and joint.
+    pub title: String,
+    /// Variable name and unit.
+    pub variable: String,
+    /// Its value per row.
+    pub x: Vec<f64>,
+    /// Residual per row before \[µm\].
+    pub before_um: Vec<Vector3<f64>>,
+    /// Residual per row after \[µm\] (empty for unexplained structure).
+    pub after_um: Vec<Vector3<f64>>,
+}
+
+/// The outcome of [`super::calibrate`].
+#[derive(Debug, Clone)]
+pub struct Report {
+    /// `irls` | `wls` | `ols`.
+    pub method: &'static str,
+    /// Reweighting iterations of the final fit.
+    pub iterations: usize,
+    /// Whether IRLS converged.
+    pub converged: bool,
+    /// The final model.
+    pub parameters: Vec<Parameter>,
+    /// RMS of the final model's position residuals \[µm\].
+    pub rms_um: f64,
+    /// Leave-one-configuration-out RMS \[µm\].
+    pub heldout_rms_um: Option<f64>,
+    /// RMS of the declared model \[µm\].
+    pub declared_rms_um: f64,
+    /// Held-out RMS of the declared model \[µm\].
+    pub declared_heldout_rms_um: Option<f64>,
+    /// The declared model's lack of fit and the variable its residuals
+    /// follow most (whether or not significant).
+    pub declared_structure: Option<Unexplained>,
+    /// Effects added, in order.
+    pub effects: Vec<EffectStep>,
+    /// Structure left unexplained.
+    pub unexplained: Option<Unexplained>,
+    /// Lack-of-fit test of the final model (needs repetitions).
+    pub lack_of_fit: Option<LackOfFit>,
+    /// `--validate` result.
+    pub validation: Option<Validation>,
+    /// The tests of the last diagnosis round, most significant first.
+    pub last_round: Vec<Tested>,
+    /// Declared parameters the data cannot identify (left out).
+    pub dropped: Vec<String>,
+    /// Rows (3 equations each).
+    pub rows: usize,
+    /// Configurations.
+    pub configurations: usize,
+    /// Plot data.
+    pub plots: Vec<PlotSeries>,
+    /// Final model terms.
+    pub model: Vec<Term>,
+    /// Final estimate.
+    pub x: Vec<f64>,
+    /// The problem (for validation).
+    pub problem: Problem,
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or_else(|| "n/a".into(), |v| format!("{v:.1}"))
+}
+
+fn about(s: &EffectStep) -> String {
+    match (&s.joint, s.marker) {
+        (Some(j), _) => format!(" on {j}"),
+        (None, Some(m)) => format!(" on marker {m}"),
+        _ => String::new(),
+    }
+}
+
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "robcal calibrate: {} rows (3 equations each), {} configurations, method {}",
+            self.rows, self.configurations, self.method
+        )?;
+        if !self.dropped.is_empty() {
+            writeln!(
+                f,
+                "not identifiable from these data (left out): {}",
+                self.dropped.join(", ")
+            )?;
+        }
+        writeln!(f)?;
+        writeln!(
+            f,
+            "declared model: RMS {:.1} um, held-out RMS {} um",
+            self.declared_rms_um,
+            opt(self.declared_heldout_rms_um)
+        )?;
+        if let Some(d) = &self.declared_structure {
+            writeln!(
+                f,
+                "  lack of fit F = {:.2} (p = {:.2e}){}",
+                d.statistic,
+                d.p_value,
+                if d.p_value < 0.01 {
+                    ": structure beyond the noise"
+                } else {
+                    ""
+                }
+            )?;
+        }
+        if self.effects.is_empty() {
+            writeln!(f, "diagnosis: no effect added")?;
+        }
+        for (i, s) in self.effects.iter().enumerate() {
+            writeln!(
+                f,
+                "step {}: added {}{}  (F = {:.1}, p = {:.2e}, {} candidates tried)",
+                i + 1,
+                s.effect,
+                about(s),
+                s.f,
+                s.p_value,
+                s.tried
+            )?;
+            writeln!(
+                f,
+                "        RMS {:.1} -> {:.1} um, held-out RMS {} -> {} um",
+                s.rms_um_before,
+                s.rms_um_after,
+                opt(s.heldout_rms_um_before),
+                opt(s.heldout_rms_um_after)
+            )?;
+            for a in &s.parameters_after {
+                let before = s.parameters_before.iter().find(|b| b.name == a.name);
+                match before {
+                    Some(b) => writeln!(
+                        f,
+                        "          {:<24} {:>12.4} -> {:>12.4} {}",
+                        a.name, b.value, a.value, a.unit
+                    )?,
+                    None => writeln!(
+                        f,
+                        "          {:<24} {:>12} -> {:>12.4} {}  (new)",
+                        a.name, "", a.value, a.unit
+                    )?,
+                }
+            }
+            for b in &s.parameters_before {
+                if !s.parameters_after.iter().any(|a| a.name == b.name) {
+                    writeln!(f, "          {:<24} {:>12.4} -> removed", b.name, b.value)?;
+                }
+            }
+        }
+        match &self.unexplained {
+            Some(u) => writeln!(
+                f,
+                "unexplained structure left: residuals follow {} most (lack-of-fit F = {:.2}, p = {:.2e}); no effect of the library explains it",
+                u.variable, u.statistic, u.p_value
+            )?,
+            None => match &self.lack_of_fit {
+                Some(l) => writeln!(
+                    f,
+                    "lack of fit (repetitions as pure error): F = {:.2}, p = {:.2e}{}",
+                    l.f,
+                    l.p_value,
+                    if l.p_value < 0.01 { "" } else { ": no structure left beyond the noise" }
+                )?,
+                None => writeln!(f, "lack of fit: not testable (no repetitions)")?,
+            },
+        }
+        if let Some(t) = self.last_round.first() {
+            writeln!(
+                f,
+                "most significant remaining candidate: {}{} (p = {:.2e}, {} tried)",
+                t.effect,
+                t.about
+                    .as_deref()
+                    .map(|a| format!(" on {a}"))
+                    .unwrap_or_default(),
+                t.p_value,
+                self.last_round.len()
+            )?;
+        }
+        writeln!(f)?;
+        writeln!(
+            f,
+            "final model ({} iterations{}):",
+            self.iterations,
+            if self.converged { ", converged" } else { "" }
+        )?;
+        for p in &self.parameters {
+            writeln!(
+                f,
+                "  {:<24} {:>12.4} ± {:<10.4} {}",
+                p.name, p.value, p.std, p.unit
+            )?;
+        }
+        writeln!(
+            f,
+            "RMS {:.1} um, held-out RMS {} um",
+            self.rms_um,
+            opt(self.heldout_rms_um)
+        )?;
+        if let Some(v) = &self.validation {
+            write!(f, "validation: RMS {:.4} mm", v.rms_mm)?;
+            for (m, r) in &v.per_marker_rms_mm {
+                write!(f, ", marker {m} {r:.4} mm")?;
+            }
+            writeln!(f)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,311 @@
+//! `robcal calibrate` end to end, through the data contract (§4, §5): the
+//! KR-270 naive-model demonstration, the JSON schema, `--validate`,
+//! `--plots`, and bad input (file, line, column; non-zero exit; nothing
+//! written).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn robcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .expect("run robcal")
+}
+
+const NAIVE: [&str; 5] = [
+    "calibrate",
+    "--setup",
+    "data/kr270/setup-naive.toml",
+    "--data",
+    "data/kr270/measurements.csv",
+];
+
+fn json(out: &Output) -> Value {
+    assert!(
+        out.status.success(),
+        "robcal failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
+}
+
+fn keys(v: &Value) -> Vec<&str> {
+    let mut k: Vec<&str> = v.as_object().unwrap().keys().map(|s| s.as_str()).collect();
+    k.sort_unstable();
+    k
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("robcal-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn kr270_naive_model_traces_the_compensator() {
+    let mut args = NAIVE.to_vec();
+    args.push("--json");
+    let v = json(&robcal(&args));
+    assert_eq!(
+        keys(&v),
+        [
+            "effects",
+            "heldout_rms_um",
+            "iterations",
+            "method",
+            "parameters",
+            "rms_um",
+            "unexplained",
+            "validation"
+        ]
+    );
+    assert_eq!(v["method"], "irls");
+    assert!(v["iterations"].as_u64().unwrap() >= 1);
+    assert!(v["validation"].is_null());
+    assert!(v["unexplained"].is_null(), "{}", v["unexplained"]);
+
+    // The diagnosis adds exactly the compensator on a2 (the paper's k21…k25).
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1, "{effects:?}");
+    let e = &effects[0];
+    assert_eq!(
+        keys(e),
+        [
+            "effect",
+            "heldout_rms_um_after",
+            "heldout_rms_um_before",
+            "joint",
+            "p_value",
+            "rms_um_after",
+            "rms_um_before"
+        ]
+    );
+    assert_eq!(e["effect"], "compensator");
+    assert_eq!(e["joint"], "a2");
+    assert!(e["p_value"].as_f64().unwrap() < 1e-20);
+    let (before, after) = (
+        e["rms_um_before"].as_f64().unwrap(),
+        e["rms_um_after"].as_f64().unwrap(),
+    );
+    let (hb, ha) = (
+        e["heldout_rms_um_before"].as_f64().unwrap(),
+        e["heldout_rms_um_after"].as_f64().unwrap(),
+    );
+    // Reference run: 262.1 -> 123.2 µm, held out 265.7 -> 124.3 µm.
+    assert!(before > 1.8 * after, "{before} -> {after}");
+    assert!(hb > 1.8 * ha, "{hb} -> {ha}");
+    assert_eq!(v["rms_um"].as_f64().unwrap(), after);
+    assert_eq!(v["heldout_rms_um"].as_f64().unwrap(), ha);
+
+    // Parameters: k_a2@<angle as written in the CSV> and k_a3..k_a6.
+    let params = v["parameters"].as_array().unwrap();
+    let names: Vec<&str> = params.iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        [
+            "k_a2@-0.01",
+            "k_a2@-25.24",
+            "k_a2@-56.9",
+            "k_a2@-99.85",
+            "k_a2@-140",
+            "k_a3",
+            "k_a4",
+            "k_a5",
+            "k_a6"
+        ]
+    );
+    // Table 3 (WLS) of the paper, which generated the data: the estimates
+    // lie within 4σ of it.
+    let truth = [
+        0.287, 0.277, 0.302, 0.293, 0.246, 0.416, 2.786, 3.483, 2.074,
+    ];
+    for (p, t) in params.iter().zip(truth) {
+        assert_eq!(p["unit"], "urad/(N*m)");
+        assert_eq!(keys(p), ["name", "std", "unit", "value"]);
+        let (x, s) = (p["value"].as_f64().unwrap(), p["std"].as_f64().unwrap());
+        assert!(
+            s > 0.0 && (x - t).abs() < 4.0 * s + 0.01 * t,
+            "{p}: truth {t}"
+        );
+    }
+}
+
+#[test]
+fn paper_model_needs_no_effect() {
+    let v = json(&robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup.toml",
+        "--data",
+        "data/kr270/measurements.csv",
+        "--json",
+    ]));
+    assert_eq!(v["effects"].as_array().unwrap().len(), 0);
+    assert!(v["unexplained"].is_null());
+}
+
+#[test]
+fn no_diagnose_ols_fits_the_declared_model_only() {
+    let mut args = NAIVE.to_vec();
+    args.extend(["--no-diagnose", "--method", "ols", "--json"]);
+    let v = json(&robcal(&args));
+    assert_eq!(v["method"], "ols");
+    assert_eq!(v["iterations"], 0);
+    assert_eq!(v["effects"].as_array().unwrap().len(), 0);
+    let names: Vec<&str> = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["k_a2", "k_a3", "k_a4", "k_a5", "k_a6"]);
+}
+
+#[test]
+fn validate_reports_per_marker_rmse() {
+    let mut args = NAIVE.to_vec();
+    args.extend(["--validate", "data/kr270/measurements.csv", "--json"]);
+    let v = json(&robcal(&args));
+    let val = &v["validation"];
+    assert_eq!(keys(val), ["per_marker_rms_mm", "rms_mm"]);
+    assert_eq!(keys(&val["per_marker_rms_mm"]), ["1", "2", "3"]);
+    // The calibration file itself: the validation RMS is the fit's RMS.
+    let rms_mm = val["rms_mm"].as_f64().unwrap();
+    assert!((rms_mm * 1e3 - v["rms_um"].as_f64().unwrap()).abs() < 1e-6);
+}
+
+#[test]
+fn human_report_shows_the_errors_before_and_after() {
+    let out = robcal(&NAIVE);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("added compensator on a2"), "{text}");
+    assert!(text.contains("RMS 262.1 -> 123.2 um"), "{text}");
+    assert!(text.contains("held-out RMS"), "{text}");
+}
+
+#[test]
+fn plots_are_svg_and_complete() {
+    let dir = temp_dir("plots");
+    let mut args = NAIVE.to_vec();
+    let d = dir.to_str().unwrap().to_string();
+    args.extend(["--plots", &d, "--json"]);
+    json(&robcal(&args));
+    let files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let svg = std::fs::read_to_string(&files[0]).unwrap();
+    assert!(files[0]
+        .to_str()
+        .unwrap()
+        .ends_with("01_compensator_a2.svg"));
+    assert!(svg.trim_start().starts_with("<svg"), "{}", &svg[..80]);
+    assert!(svg.trim_end().ends_with("</svg>"));
+    assert!(svg.contains("q_a2"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn assert_rejected(out: &Output, expect: &str, plots: &Path) {
+    assert!(!out.status.success());
+    assert!(
+        out.stdout.is_empty(),
+        "stdout: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let err = String::from_utf8(out.stderr.clone()).unwrap();
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains(expect), "{err}");
+    assert!(!plots.exists(), "nothing may be written on error");
+}
+
+#[test]
+fn bad_input_names_file_line_column_and_writes_nothing() {
+    let dir = temp_dir("bad");
+    let d = dir.to_str().unwrap().to_string();
+    let bad = "host-tests/tests/fixtures/loop/kr270_bad.csv";
+    let out = robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup-naive.toml",
+        "--data",
+        bad,
+        "--plots",
+        &d,
+        "--json",
+    ]);
+    assert_rejected(
+        &out,
+        "kr270_bad.csv:5: column 'a2': 'abc' is not a number",
+        &dir,
+    );
+
+    // A bad validation file is rejected before anything runs or is written.
+    let out = robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup-naive.toml",
+        "--data",
+        "data/kr270/measurements.csv",
+        "--validate",
+        bad,
+        "--plots",
+        &d,
+    ]);
+    assert_rejected(&out, "kr270_bad.csv:5: column 'a2'", &dir);
+
+    let out = robcal(&[
+        "calibrate",
+        "--setup",
+        "no/such/setup.toml",
+        "--data",
+        "data/kr270/measurements.csv",
+    ]);
+    assert_rejected(&out, "no/such/setup.toml", &dir);
+
+    let mut args = NAIVE.to_vec();
+    args.extend(["--lambda", "-1"]);
+    assert_rejected(&robcal(&args), "--lambda", &dir);
+}
+
+#[test]
+fn unknown_method_is_a_usage_error() {
+    let mut args = NAIVE.to_vec();
+    args.extend(["--method", "magic"]);
+    let out = robcal(&args);
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty());
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("magic"), "{err}");
+}
+
+#[test]
+fn wls_one_step_also_finds_the_compensator() {
+    let mut args = NAIVE.to_vec();
+    args.extend([
+        "--method",
+        "wls",
+        "--lambda",
+        "1",
+        "--max-iter",
+        "3",
+        "--json",
+    ]);
+    let v = json(&robcal(&args));
+    assert_eq!(v["method"], "wls");
+    assert_eq!(v["iterations"], 1);
+    let effects = v["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), 1, "{effects:?}");
+    assert_eq!(effects[0]["effect"], "compensator");
+    assert_eq!(effects[0]["joint"], "a2");
+}
