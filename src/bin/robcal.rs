@@ -4,6 +4,7 @@
 //! robcal calibrate --setup S.toml --data D.csv
 //!                  [--method irls|wls|ols] [--lambda L] [--max-iter N]
 //!                  [--no-diagnose] [--validate V.csv] [--plots DIR] [--json]
+//! robcal import figaroh-mocap IN.csv OUT.csv
 //! ```
 //!
 //! Exit status 0 on success; otherwise one line on stderr saying why, and
@@ -36,6 +37,24 @@ enum Command {
     /// Fit the declared model, trace what the residuals follow to the
     /// effects it lacks, add them, report the errors before and after.
     Calibrate(CalibrateArgs),
+    /// Convert another tool's recording into the data contract's CSV.
+    #[command(subcommand)]
+    Import(ImportCommand),
+}
+
+/// `robcal import <format> IN OUT`.
+#[derive(Subcommand)]
+enum ImportCommand {
+    /// FIGAROH's motion-capture layout (`x1..z4` in m, joint columns by URDF
+    /// name, optional `t_start_robot`/`t_end_robot`): one `config` per
+    /// posture, markers 1..4 = the four points, SI units (rad, m).
+    #[command(name = "figaroh-mocap")]
+    FigarohMocap {
+        /// FIGAROH CSV.
+        input: PathBuf,
+        /// Contract CSV to write (left untouched on error).
+        output: PathBuf,
+    },
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -94,6 +113,18 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Calibrate(args) => run_calibrate(&args),
+        Command::Import(ImportCommand::FigarohMocap { input, output }) => {
+            robcal::io::figaroh::import_mocap(&input, &output, None)
+                .map(|n| {
+                    eprintln!(
+                        "robcal: {} postures, {} rows written to {}",
+                        n.postures,
+                        n.rows,
+                        output.display()
+                    );
+                })
+                .map_err(|e| e.to_string())
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -54,6 +54,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod figaroh;
 pub mod measurements;
 pub mod setup;
 pub mod urdf;

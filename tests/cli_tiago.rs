@@ -1,0 +1,118 @@
+//! `robcal import figaroh-mocap` and `robcal calibrate --validate` on the
+//! TIAGo motion-capture recordings of `shared/datasets/tiago-mocap` (issue 7,
+//! docs/tiago.md): the command of the issue runs and reports
+//! `validation.per_marker_rms_mm` with marker 1 = point BL.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `shared/datasets/tiago-mocap` beside the repository (CI), else in the
+/// nearest ancestor that has it (a nested git worktree).
+fn data_dir() -> PathBuf {
+    root()
+        .ancestors()
+        .skip(1)
+        .map(|a| a.join("shared/datasets/tiago-mocap"))
+        .find(|d| d.join("tiago_48_schunk.urdf").exists())
+        .expect("shared/datasets/tiago-mocap beside the repository")
+}
+
+fn robcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .expect("run robcal")
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "robcal failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `data/tiago/setup.toml` itself when `shared/` is beside the repository;
+/// else a copy naming the URDF found by [`data_dir`].
+fn setup(dir: &Path) -> PathBuf {
+    let shipped = root().join("data/tiago/setup.toml");
+    if root().join("../shared/datasets/tiago-mocap").exists() {
+        return shipped;
+    }
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    let urdf = data_dir().join("tiago_48_schunk.urdf");
+    let text = text.replace(
+        "../../../shared/datasets/tiago-mocap/tiago_48_schunk.urdf",
+        &urdf.to_string_lossy(),
+    );
+    let copy = dir.join("setup.toml");
+    std::fs::write(&copy, text).unwrap();
+    copy
+}
+
+#[test]
+fn import_then_calibrate_with_validation() {
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (train, held) = (dir.join("train.csv"), dir.join("held.csv"));
+    for (name, out, postures) in [
+        ("qualisys_2021-11-30_static_postures.csv", &train, 37),
+        ("qualisys_2021-11-26_static_postures.csv", &held, 62),
+    ] {
+        let input = data_dir().join(name);
+        let o = robcal(&[
+            "import",
+            "figaroh-mocap",
+            input.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ]);
+        ok(&o);
+        let text = std::fs::read_to_string(out).unwrap();
+        assert_eq!(text.lines().count(), 1 + 4 * postures);
+    }
+    // A missing input: one line on stderr, non-zero exit, nothing written.
+    let missing = dir.join("missing.csv");
+    let o = robcal(&[
+        "import",
+        "figaroh-mocap",
+        missing.to_str().unwrap(),
+        dir.join("never.csv").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert_eq!(String::from_utf8_lossy(&o.stderr).lines().count(), 1);
+    assert!(!dir.join("never.csv").exists());
+
+    let setup = setup(&dir);
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        train.to_str().unwrap(),
+        "--validate",
+        held.to_str().unwrap(),
+        "--json",
+    ]);
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let per = &v["validation"]["per_marker_rms_mm"];
+    let bl = per["1"]
+        .as_f64()
+        .expect("marker 1 (BL) in per_marker_rms_mm");
+    for k in ["2", "3", "4"] {
+        assert!(per[k].as_f64().is_some(), "marker {k}");
+    }
+    // The CLI's declared model (full geometry, four points, IRLS) plus what
+    // its diagnosis adds: 3.38 mm on BL when written (docs/tiago.md); a
+    // threshold with room for changes to the loop's defaults, well below
+    // the registration-only 4.9 mm.
+    assert!(bl < 4.0, "BL validation {bl} mm");
+    let _ = std::fs::remove_dir_all(&dir);
+}
