@@ -6,7 +6,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cases="${1:-20000}"
-cargo test -p host-tests --no-run --quiet
-PROPTEST_CASES="$cases" timeout 60 cargo test -p host-tests --quiet --test fuzz_props --test fuzz_regressions
+# Same features as the README test command, so the build is reused.
+features=(--features robcal/cli)
+cargo test -p host-tests "${features[@]}" --no-run --quiet
+PROPTEST_CASES="$cases" timeout 60 cargo test -p host-tests "${features[@]}" --quiet --test fuzz_props --test fuzz_regressions
 # The batch-equality properties: a tenth of the cases (each solves an SVD).
-PROPTEST_CASES="$((cases / 10))" timeout 60 cargo test -p host-tests --quiet --test accumulator_props
+PROPTEST_CASES="$((cases / 10))" timeout 60 cargo test -p host-tests "${features[@]}" --quiet --test accumulator_props
