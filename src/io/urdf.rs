@@ -188,6 +188,12 @@ impl Ctx<'_> {
 
 /// Line of the first `<tag ... name="name"` in `text`.
 fn element_line(text: &str, tag: &str, name: &str) -> Option<usize> {
+    nth_element_line(text, tag, name, 0)
+}
+
+/// Line of the `n`-th (0-based) `<tag ... name="name"` in `text`.
+fn nth_element_line(text: &str, tag: &str, name: &str, n: usize) -> Option<usize> {
+    let mut seen = 0;
     for quote in ['"', '\''] {
         let pattern = format!("name={quote}{name}{quote}");
         for (at, _) in text.match_indices(&pattern) {
@@ -199,7 +205,10 @@ fn element_line(text: &str, tag: &str, name: &str) -> Option<usize> {
                 && element[tag.len()..].starts_with(char::is_whitespace)
                 && !element.contains('>')
             {
-                return Some(super::line_of_offset(text, lt));
+                if seen == n {
+                    return Some(super::line_of_offset(text, lt));
+                }
+                seen += 1;
             }
         }
     }
@@ -239,7 +248,19 @@ impl<'u> Tree<'u> {
         }
         let mut parent_joint = HashMap::new();
         let mut child_joints: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
-        for joint in &urdf.joints {
+        for (i, joint) in urdf.joints.iter().enumerate() {
+            // The CSV has one column per joint name: a second joint of the
+            // same name could never be given a value.
+            if urdf.joints[..i].iter().any(|j| j.name == joint.name) {
+                let e = ctx.err(
+                    ErrorKind::Robot,
+                    format!("joint '{}': defined twice", joint.name),
+                );
+                return Err(match nth_element_line(ctx.text, "joint", &joint.name, 1) {
+                    Some(line) => e.at_line(line),
+                    None => e,
+                });
+            }
             for (role, link) in [("parent", &joint.parent.link), ("child", &joint.child.link)] {
                 if !links.contains_key(link.as_str()) {
                     return Err(ctx.err_at(
