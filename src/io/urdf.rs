@@ -287,6 +287,29 @@ impl<'u> Tree<'u> {
                 .or_default()
                 .push(joint);
         }
+        // Every link has at most one parent joint, so a loop is a link that
+        // is its own ancestor: walking up from it never reaches a root.
+        // (Left in, the walks down the tree would never end.)
+        for link in &urdf.links {
+            let mut at = link.name.as_str();
+            for _ in 0..=urdf.joints.len() {
+                match parent_joint.get(at) {
+                    Some(j) => at = j.parent.link.as_str(),
+                    None => break,
+                }
+            }
+            if let Some(joint) = parent_joint.get(at) {
+                return Err(ctx.err_at(
+                    "joint",
+                    &joint.name,
+                    ErrorKind::Robot,
+                    format!(
+                        "closes a loop of links through '{}': a URDF is a tree",
+                        joint.child.link
+                    ),
+                ));
+            }
+        }
         Ok(Self {
             links,
             parent_joint,
