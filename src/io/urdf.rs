@@ -495,6 +495,12 @@ impl<'u> Tree<'u> {
             if !finite(&a) {
                 return Err(ctx.err_at("joint", name, ErrorKind::NonFinite, format!("axis {a:?}")));
             }
+            // Normalizing `1e300 1e300 0` overflows its norm (the unit axis
+            // came out 0): divide by the largest component first (exact in
+            // direction; only ever by a factor > 1, so a tiny axis is still
+            // a zero axis).
+            let big = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            let a = if big > 1.0 { a.map(|v| v / big) } else { a };
             let mut j = Joint::from_urdf(
                 Vector3::from(o.xyz.0),
                 Vector3::from(o.rpy.0),
