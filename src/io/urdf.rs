@@ -510,6 +510,19 @@ impl<'u> Tree<'u> {
             .ok_or_else(|| ctx.err_at("joint", name, ErrorKind::Robot, "zero axis".into()))?;
             j.origin = pending * j.origin;
             pending = Isometry3::identity();
+            // Each origin is finite, their composition need not be (two
+            // fixed joints of 1e308 m).
+            if !finite(j.origin.translation.vector.as_slice()) {
+                return Err(ctx.err_at(
+                    "joint",
+                    name,
+                    ErrorKind::NonFinite,
+                    format!(
+                        "origin {:?} m with the fixed joints before it overflows",
+                        j.origin.translation.vector.as_slice()
+                    ),
+                ));
+            }
             let limit = match kind {
                 UrdfJointKind::Continuous => None,
                 _ => {
@@ -538,6 +551,12 @@ impl<'u> Tree<'u> {
             return Err(ctx.err(
                 ErrorKind::Robot,
                 format!("no movable joint from base_link '{base}' to tip_link '{tip}'"),
+            ));
+        }
+        if !finite(pending.translation.vector.as_slice()) {
+            return Err(ctx.err(
+                ErrorKind::NonFinite,
+                format!("the fixed joints from the last movable joint to tip_link '{tip}' overflow"),
             ));
         }
         chain.set_tip(pending);
@@ -574,7 +593,16 @@ impl<'u> Tree<'u> {
                                 format!("origin xyz {:?} rpy {:?}", o.xyz.0, o.rpy.0),
                             ));
                         }
-                        stack.push((child_link, frame * pose(o)));
+                        let next = frame * pose(o);
+                        if !finite(next.translation.vector.as_slice()) {
+                            return Err(ctx.err_at(
+                                "joint",
+                                &joint.name,
+                                ErrorKind::NonFinite,
+                                "origin with the fixed joints before it overflows".into(),
+                            ));
+                        }
+                        stack.push((child_link, next));
                     } else if !on_chain.contains(&joint.name.as_str()) {
                         off_chain.push(OffChainBranch {
                             joint: joint.name.clone(),
@@ -584,6 +612,20 @@ impl<'u> Tree<'u> {
                         });
                     }
                 }
+            }
+            // Finite masses and centres of mass can still overflow the sum
+            // or the mass moment (1e300 kg at 1e10 m).
+            if !mass.is_finite() || !finite(moment.as_slice()) {
+                return Err(ctx.err_at(
+                    "link",
+                    child,
+                    ErrorKind::NonFinite,
+                    format!(
+                        "the mass ({mass} kg) or mass moment of the body moved by joint '{}' \
+                         overflows",
+                        joint_names[index]
+                    ),
+                ));
             }
             if mass > 0.0 {
                 chain.joints_mut()[index].link = Some(LinkInertia {
