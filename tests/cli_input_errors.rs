@@ -207,6 +207,21 @@ fn non_finite_value_names_line_and_column() {
 }
 
 #[test]
+fn too_few_configurations_for_the_declared_model() {
+    // One configuration seen by one marker: 3 equations per repetition, so
+    // at most 3 of the 5 declared compliances can be identified. This used
+    // to succeed with k_a5 and k_a6 silently missing from the JSON.
+    let (dir, setup) = job("few-configs", None, None);
+    let data = csv(&dir, |_, c| (c[0] == "1" && c[2] == "1").then_some(c));
+    let err = rejected(&run(&setup, &data, &["--json"]));
+    assert!(
+        err.contains("data.csv: too few configurations for the declared model: k_a5, k_a6 cannot be identified from 1 configuration(s)"),
+        "{err}"
+    );
+    assert!(err.contains("measure more configurations"), "{err}");
+}
+
+#[test]
 fn two_configurations_are_enough_for_the_paper_model() {
     // The brief's "2 configurations": with three markers the six declared
     // compliances (a2 split over its two angles) are identifiable, and the
