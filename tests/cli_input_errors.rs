@@ -150,7 +150,9 @@ fn metres_read_as_millimetres_warns_on_stderr() {
 fn unknown_joint_column_lists_the_chain_joints() {
     let (dir, setup) = job("unknown-joint", None, None);
     let data = csv(&dir, |_, c| Some(c));
-    let text = std::fs::read_to_string(&data).unwrap().replacen("a3", "A3", 1);
+    let text = std::fs::read_to_string(&data)
+        .unwrap()
+        .replacen("a3", "A3", 1);
     std::fs::write(&data, text).unwrap();
     let err = rejected(&run(&setup, &data, &[]));
     assert!(
@@ -227,7 +229,13 @@ fn two_configurations_are_enough_for_the_paper_model() {
     // compliances (a2 split over its two angles) are identifiable, and the
     // fit runs (leave-one-configuration-out is honest about the rest).
     let (dir, setup) = job("two-configs", None, None);
-    let data = csv(&dir, |_, c| (c[0].parse::<i64>().unwrap() <= 2).then_some(c));
+    let data = csv(&dir, |_, c| {
+        (c[0].parse::<i64>().unwrap() <= 2).then_some(c)
+    });
     let out = run(&setup, &data, &["--json", "--no-diagnose"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

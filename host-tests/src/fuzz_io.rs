@@ -40,7 +40,11 @@ pub fn csv_robot() -> Robot {
 pub fn csv_setup(selector: u8) -> Setup {
     let angle = if selector & 1 == 0 { "deg" } else { "rad" };
     let length = if selector & 2 == 0 { "mm" } else { "m" };
-    let load = if selector & 4 == 0 { "[load]\ncom = [0.1, 0, 0]\n" } else { "" };
+    let load = if selector & 4 == 0 {
+        "[load]\ncom = [0.1, 0, 0]\n"
+    } else {
+        ""
+    };
     let text = format!(
         "robot = \"fz.urdf\"\n[units]\nangle = \"{angle}\"\nlength = \"{length}\"\n\
          [[marker]]\nid = 1\n[[marker]]\nid = 2\nxyz = [0.1, 0, 0]\n{load}"
@@ -62,11 +66,17 @@ pub fn line_count(text: &[u8]) -> usize {
 fn check_err(e: &InputError, file: &str, text: Option<&[u8]>) {
     assert_eq!(e.file, Path::new(file), "error does not name the file: {e}");
     let shown = e.to_string();
-    assert!(shown.starts_with(file), "Display does not start with the file: {shown}");
+    assert!(
+        shown.starts_with(file),
+        "Display does not start with the file: {shown}"
+    );
     assert!(!e.message.is_empty(), "empty message: {e:?}");
     if let (Some(line), Some(text)) = (e.line, text) {
         let lines = line_count(text);
-        assert!(line >= 1 && line <= lines + 1, "line {line} of {lines}: {e}");
+        assert!(
+            line >= 1 && line <= lines + 1,
+            "line {line} of {lines}: {e}"
+        );
     }
 }
 
@@ -82,14 +92,21 @@ pub fn check_robot(r: &Robot) {
     assert_eq!(r.joint_kinds.len(), dof);
     assert_eq!(r.limits.len(), dof);
     for (i, n) in r.joint_names.iter().enumerate() {
-        assert!(!r.joint_names[..i].contains(n), "joint name '{n}' twice in the chain");
+        assert!(
+            !r.joint_names[..i].contains(n),
+            "joint name '{n}' twice in the chain"
+        );
     }
     for j in r.chain.joints() {
         let o = &j.origin;
         assert!(all_finite(o.translation.vector.iter()), "origin {o:?}");
         assert!(all_finite(o.rotation.coords.iter()), "rotation {o:?}");
         assert!(all_finite(j.axis.iter()), "axis {:?}", j.axis);
-        assert!((j.axis.norm() - 1.0).abs() < 1e-9, "axis not unit: {:?}", j.axis);
+        assert!(
+            (j.axis.norm() - 1.0).abs() < 1e-9,
+            "axis not unit: {:?}",
+            j.axis
+        );
         if let Some(l) = &j.link {
             assert!(l.mass_kg.is_finite() && l.mass_kg > 0.0, "mass {l:?}");
             assert!(all_finite(l.com_m.iter()), "com {l:?}");
@@ -109,11 +126,17 @@ pub fn check_robot(r: &Robot) {
 /// The `urdf` target: `data` = base name, tip name, URDF text (split at the
 /// first two NUL bytes; a missing name means `None`).
 pub fn run_urdf(data: &[u8]) {
-    let Ok(s) = std::str::from_utf8(data) else { return };
+    let Ok(s) = std::str::from_utf8(data) else {
+        return;
+    };
     let mut parts = s.splitn(3, '\0');
     let (a, b, text) = (parts.next(), parts.next(), parts.next());
     let (base, tip, text) = match (a, b, text) {
-        (Some(a), Some(b), Some(t)) => ((!a.is_empty()).then_some(a), (!b.is_empty()).then_some(b), t),
+        (Some(a), Some(b), Some(t)) => (
+            (!a.is_empty()).then_some(a),
+            (!b.is_empty()).then_some(b),
+            t,
+        ),
         _ => (None, None, s),
     };
     match Robot::parse(text, URDF_FILE, base, tip) {
@@ -124,7 +147,9 @@ pub fn run_urdf(data: &[u8]) {
 
 /// The `setup_toml` target: `data` is the TOML text.
 pub fn run_setup(data: &[u8]) {
-    let Ok(text) = std::str::from_utf8(data) else { return };
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
     match Setup::parse(text, TOML_FILE) {
         Ok(s) => {
             assert!(!s.markers.is_empty());
@@ -147,7 +172,9 @@ pub fn run_setup(data: &[u8]) {
 /// The `csv_measurements` target: first byte selects the setup
 /// ([`csv_setup`]), the rest is the CSV file.
 pub fn run_csv(robot: &Robot, data: &[u8]) {
-    let Some((&sel, csv)) = data.split_first() else { return };
+    let Some((&sel, csv)) = data.split_first() else {
+        return;
+    };
     let setup = csv_setup(sel);
     match parse_measurements(csv, CSV_FILE, robot, &setup) {
         Ok(m) => {

@@ -68,7 +68,10 @@ fn urdf_huge_axis_is_normalized() {
     let r = Robot::parse(text, URDF_FILE, None, None).unwrap();
     let a = r.chain.joints()[0].axis;
     let h = std::f64::consts::FRAC_1_SQRT_2;
-    assert!((a.x - h).abs() < 1e-15 && (a.y - h).abs() < 1e-15 && a.z == 0.0, "{a:?}");
+    assert!(
+        (a.x - h).abs() < 1e-15 && (a.y - h).abs() < 1e-15 && a.z == 0.0,
+        "{a:?}"
+    );
 }
 
 /// A link of 1e300 kg with its centre of mass at 1e10 m: the mass moment

@@ -436,7 +436,11 @@ impl Problem {
             .map(|t| p.ctx.name(t))
             .collect();
         if !missing.is_empty() {
-            let deflections = p.rows.iter().filter(|r| r.kind == RowKind::Deflection).count();
+            let deflections = p
+                .rows
+                .iter()
+                .filter(|r| r.kind == RowKind::Deflection)
+                .count();
             return Err(CalibrationError::Data(format!(
                 "{}: too few configurations for the declared model: {} cannot be identified \
                  from {} configuration(s) and {} deflection(s) ({} equations for {} declared \

@@ -556,7 +556,9 @@ impl<'u> Tree<'u> {
         if !finite(pending.translation.vector.as_slice()) {
             return Err(ctx.err(
                 ErrorKind::NonFinite,
-                format!("the fixed joints from the last movable joint to tip_link '{tip}' overflow"),
+                format!(
+                    "the fixed joints from the last movable joint to tip_link '{tip}' overflow"
+                ),
             ));
         }
         chain.set_tip(pending);
