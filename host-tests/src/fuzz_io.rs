@@ -87,7 +87,7 @@ fn all_finite<'a>(v: impl IntoIterator<Item = &'a f64>) -> bool {
 /// Checks a parsed robot's invariants.
 pub fn check_robot(r: &Robot) {
     let dof = r.dof();
-    assert!(dof >= 1 && dof <= robcal::io::MAX_JOINTS);
+    assert!((1..=robcal::io::MAX_JOINTS).contains(&dof));
     assert_eq!(r.chain.dof(), dof);
     assert_eq!(r.joint_kinds.len(), dof);
     assert_eq!(r.limits.len(), dof);
