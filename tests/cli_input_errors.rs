@@ -225,9 +225,10 @@ fn too_few_configurations_for_the_declared_model() {
 
 #[test]
 fn two_configurations_are_enough_for_the_paper_model() {
-    // The brief's "2 configurations": with three markers the six declared
-    // compliances (a2 split over its two angles) are identifiable, and the
-    // fit runs (leave-one-configuration-out is honest about the rest).
+    // Two configurations seen by three markers identify the paper's model
+    // (five compliances here: both configurations have a2 at -0.01 deg, so
+    // a2's split has one bin); the fit runs, and the held-out RMS shows how
+    // badly two configurations predict.
     let (dir, setup) = job("two-configs", None, None);
     let data = csv(&dir, |_, c| {
         (c[0].parse::<i64>().unwrap() <= 2).then_some(c)
