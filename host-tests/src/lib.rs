@@ -21,6 +21,7 @@
 use nalgebra::{DMatrix, DVector, RealField, SMatrix, SVector, Vector3};
 use robcal::{Accumulator, Block};
 
+pub mod fuzz_io;
 pub mod fuzz_ops;
 
 /// Lossless widening of the scalar types under test to `f64`.

@@ -325,3 +325,11 @@ proptest! {
 fn eq7_bound_regression_kappa() {
     check_f64::<3>(648_116_794_374_954_785, 3, 0.963_385_983_483_048_8).unwrap();
 }
+
+/// A second case over the κ-free bound (2.53e-5 against 2.30e-5), found by
+/// `.ci/props.sh` on the parser-fuzzing branch (wdec as reported, rounded
+/// to four digits, so this is the neighbourhood of that case).
+#[test]
+fn eq7_bound_regression_kappa_2() {
+    check_f64::<3>(4_652_127_773_476_234_132, 3, 0.9597).unwrap();
+}

@@ -168,6 +168,13 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
     let mut progress = |m: &str| eprintln!("robcal: {m}");
     let mut report =
         calibrate::calibrate(&job, &data, &settings, &mut progress).map_err(|e| e.to_string())?;
+    if !report.dropped.is_empty() {
+        // The JSON has no place for them: say it on stderr too.
+        eprintln!(
+            "robcal: warning: not identifiable from these data (left out): {}",
+            report.dropped.join(", ")
+        );
+    }
     if let Some(v) = &validation_data {
         report.validation = Some(calibrate::validate(&report, &job, v).map_err(|e| e.to_string())?);
     }

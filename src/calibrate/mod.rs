@@ -422,6 +422,38 @@ impl Problem {
             .map(|i| model[i])
             .collect();
         p.model = kept.iter().map(|&i| model[i]).collect();
+        // A declared compliance the data cannot identify is too few
+        // configurations (or markers, or a load that does not load the
+        // joint) for the declared model: an error naming the parameters,
+        // not a fit that silently leaves them out. (Geometric parameters
+        // that another declared one absorbs, e.g. a1's offset and the base
+        // yaw, are a property of the model, not of the data: left out and
+        // reported in `Report::dropped`.)
+        let missing: Vec<String> = p
+            .dropped
+            .iter()
+            .filter(|t| matches!(t, Term::Compliance(_) | Term::ComplianceAt(..)))
+            .map(|t| p.ctx.name(t))
+            .collect();
+        if !missing.is_empty() {
+            let deflections = p
+                .rows
+                .iter()
+                .filter(|r| r.kind == RowKind::Deflection)
+                .count();
+            return Err(CalibrationError::Data(format!(
+                "{}: too few configurations for the declared model: {} cannot be identified \
+                 from {} configuration(s) and {} deflection(s) ({} equations for {} declared \
+                 parameters); measure more configurations (or markers), or remove them from \
+                 [model]",
+                data.file.display(),
+                missing.join(", "),
+                p.configs.len(),
+                deflections,
+                3 * deflections,
+                model.len()
+            )));
+        }
         if p.model.is_empty() {
             return Err(CalibrationError::Data(
                 "the declared model has no parameter these data can identify".into(),

@@ -177,11 +177,16 @@ pub fn parse_measurements<R: std::io::Read>(
         )
     })?;
     // Line numbers from byte offsets: the csv crate's own line count is off
-    // after CRLF line ends and does not count blank lines.
+    // after CRLF line ends and does not count blank lines. A line ends at
+    // `\n`, `\r\n` or a lone `\r` (old Mac files), as the csv crate's
+    // records do.
     let newlines: Vec<usize> = bytes
         .iter()
         .enumerate()
-        .filter_map(|(i, &b)| (b == b'\n').then_some(i))
+        .filter_map(|(i, &b)| {
+            let end = b == b'\n' || (b == b'\r' && bytes.get(i + 1) != Some(&b'\n'));
+            end.then_some(i)
+        })
         .collect();
     let line_at = |pos: Option<&csv::Position>| {
         let Some(pos) = pos else { return 1 };

@@ -188,6 +188,12 @@ impl Ctx<'_> {
 
 /// Line of the first `<tag ... name="name"` in `text`.
 fn element_line(text: &str, tag: &str, name: &str) -> Option<usize> {
+    nth_element_line(text, tag, name, 0)
+}
+
+/// Line of the `n`-th (0-based) `<tag ... name="name"` in `text`.
+fn nth_element_line(text: &str, tag: &str, name: &str, n: usize) -> Option<usize> {
+    let mut seen = 0;
     for quote in ['"', '\''] {
         let pattern = format!("name={quote}{name}{quote}");
         for (at, _) in text.match_indices(&pattern) {
@@ -199,7 +205,10 @@ fn element_line(text: &str, tag: &str, name: &str) -> Option<usize> {
                 && element[tag.len()..].starts_with(char::is_whitespace)
                 && !element.contains('>')
             {
-                return Some(super::line_of_offset(text, lt));
+                if seen == n {
+                    return Some(super::line_of_offset(text, lt));
+                }
+                seen += 1;
             }
         }
     }
@@ -239,7 +248,19 @@ impl<'u> Tree<'u> {
         }
         let mut parent_joint = HashMap::new();
         let mut child_joints: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
-        for joint in &urdf.joints {
+        for (i, joint) in urdf.joints.iter().enumerate() {
+            // The CSV has one column per joint name: a second joint of the
+            // same name could never be given a value.
+            if urdf.joints[..i].iter().any(|j| j.name == joint.name) {
+                let e = ctx.err(
+                    ErrorKind::Robot,
+                    format!("joint '{}': defined twice", joint.name),
+                );
+                return Err(match nth_element_line(ctx.text, "joint", &joint.name, 1) {
+                    Some(line) => e.at_line(line),
+                    None => e,
+                });
+            }
             for (role, link) in [("parent", &joint.parent.link), ("child", &joint.child.link)] {
                 if !links.contains_key(link.as_str()) {
                     return Err(ctx.err_at(
@@ -265,6 +286,29 @@ impl<'u> Tree<'u> {
                 .entry(joint.parent.link.as_str())
                 .or_default()
                 .push(joint);
+        }
+        // Every link has at most one parent joint, so a loop is a link that
+        // is its own ancestor: walking up from it never reaches a root.
+        // (Left in, the walks down the tree would never end.)
+        for link in &urdf.links {
+            let mut at = link.name.as_str();
+            for _ in 0..=urdf.joints.len() {
+                match parent_joint.get(at) {
+                    Some(j) => at = j.parent.link.as_str(),
+                    None => break,
+                }
+            }
+            if let Some(joint) = parent_joint.get(at) {
+                return Err(ctx.err_at(
+                    "joint",
+                    &joint.name,
+                    ErrorKind::Robot,
+                    format!(
+                        "closes a loop of links through '{}': a URDF is a tree",
+                        joint.child.link
+                    ),
+                ));
+            }
         }
         Ok(Self {
             links,
@@ -451,6 +495,12 @@ impl<'u> Tree<'u> {
             if !finite(&a) {
                 return Err(ctx.err_at("joint", name, ErrorKind::NonFinite, format!("axis {a:?}")));
             }
+            // Normalizing `1e300 1e300 0` overflows its norm (the unit axis
+            // came out 0): divide by the largest component first (exact in
+            // direction; only ever by a factor > 1, so a tiny axis is still
+            // a zero axis).
+            let big = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            let a = if big > 1.0 { a.map(|v| v / big) } else { a };
             let mut j = Joint::from_urdf(
                 Vector3::from(o.xyz.0),
                 Vector3::from(o.rpy.0),
@@ -460,6 +510,19 @@ impl<'u> Tree<'u> {
             .ok_or_else(|| ctx.err_at("joint", name, ErrorKind::Robot, "zero axis".into()))?;
             j.origin = pending * j.origin;
             pending = Isometry3::identity();
+            // Each origin is finite, their composition need not be (two
+            // fixed joints of 1e308 m).
+            if !finite(j.origin.translation.vector.as_slice()) {
+                return Err(ctx.err_at(
+                    "joint",
+                    name,
+                    ErrorKind::NonFinite,
+                    format!(
+                        "origin {:?} m with the fixed joints before it overflows",
+                        j.origin.translation.vector.as_slice()
+                    ),
+                ));
+            }
             let limit = match kind {
                 UrdfJointKind::Continuous => None,
                 _ => {
@@ -488,6 +551,14 @@ impl<'u> Tree<'u> {
             return Err(ctx.err(
                 ErrorKind::Robot,
                 format!("no movable joint from base_link '{base}' to tip_link '{tip}'"),
+            ));
+        }
+        if !finite(pending.translation.vector.as_slice()) {
+            return Err(ctx.err(
+                ErrorKind::NonFinite,
+                format!(
+                    "the fixed joints from the last movable joint to tip_link '{tip}' overflow"
+                ),
             ));
         }
         chain.set_tip(pending);
@@ -524,7 +595,16 @@ impl<'u> Tree<'u> {
                                 format!("origin xyz {:?} rpy {:?}", o.xyz.0, o.rpy.0),
                             ));
                         }
-                        stack.push((child_link, frame * pose(o)));
+                        let next = frame * pose(o);
+                        if !finite(next.translation.vector.as_slice()) {
+                            return Err(ctx.err_at(
+                                "joint",
+                                &joint.name,
+                                ErrorKind::NonFinite,
+                                "origin with the fixed joints before it overflows".into(),
+                            ));
+                        }
+                        stack.push((child_link, next));
                     } else if !on_chain.contains(&joint.name.as_str()) {
                         off_chain.push(OffChainBranch {
                             joint: joint.name.clone(),
@@ -534,6 +614,20 @@ impl<'u> Tree<'u> {
                         });
                     }
                 }
+            }
+            // Finite masses and centres of mass can still overflow the sum
+            // or the mass moment (1e300 kg at 1e10 m).
+            if !mass.is_finite() || !finite(moment.as_slice()) {
+                return Err(ctx.err_at(
+                    "link",
+                    child,
+                    ErrorKind::NonFinite,
+                    format!(
+                        "the mass ({mass} kg) or mass moment of the body moved by joint '{}' \
+                         overflows",
+                        joint_names[index]
+                    ),
+                ));
             }
             if mass > 0.0 {
                 chain.joints_mut()[index].link = Some(LinkInertia {

@@ -1,0 +1,148 @@
+//! Regression tests of the parser fuzz findings (issue 8), and a replay of
+//! the kept parser corpora (`fuzz/corpus/{csv_measurements,setup_toml,urdf}`)
+//! on stable. The invariants are `host_tests::fuzz_io`'s: no panic, an
+//! error names the file (and a line inside it), a success is finite and
+//! its shapes agree.
+//!
+//! `tests/fuzz_regressions/<target>-<name>.bin` is a fuzz input of that
+//! target (`urdf-…`: `base\0tip\0text`; `csv-…`: setup selector byte, then
+//! the CSV). What each one found is written next to its test.
+
+use std::time::{Duration, Instant};
+
+use host_tests::fuzz_io::{csv_robot, run_csv, run_setup, run_urdf, URDF_FILE};
+use robcal::io::{parse_measurements, ErrorKind, Robot};
+
+/// Runs `f` on a thread and fails if it takes longer than `limit` (the
+/// cycle findings were infinite loops).
+fn within(limit: Duration, f: impl FnOnce() + Send + 'static) {
+    let start = Instant::now();
+    let handle = std::thread::spawn(f);
+    while !handle.is_finished() {
+        assert!(start.elapsed() < limit, "still running after {limit:?}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    handle.join().unwrap();
+}
+
+fn urdf_err(bytes: &'static [u8]) -> robcal::io::InputError {
+    let s = std::str::from_utf8(bytes).unwrap();
+    let mut p = s.splitn(3, '\0');
+    let (b, t, text) = (p.next().unwrap(), p.next().unwrap(), p.next().unwrap());
+    let opt = |x: &'static str| (!x.is_empty()).then_some(x);
+    let e = Robot::parse(text, URDF_FILE, opt(b), opt(t)).expect_err("must be rejected");
+    run_urdf(bytes);
+    e
+}
+
+/// A link that is (through a fixed joint) its own ancestor: `default_tip`,
+/// the subtree-mass walk and the moving-body walk looped forever (out of
+/// memory). Now a `Robot` error naming the joint that closes the loop.
+#[test]
+fn urdf_cycle_is_an_error_not_a_hang() {
+    within(Duration::from_secs(10), || {
+        let e = urdf_err(include_bytes!("fuzz_regressions/urdf-cycle.bin"));
+        assert_eq!(e.kind, ErrorKind::Robot);
+        assert!(e.to_string().contains("loop"), "{e}");
+    });
+}
+
+/// Two fixed origins of 1e308 m compose to +∞: the chain held a non-finite
+/// joint origin and the parse succeeded.
+#[test]
+fn urdf_origin_overflow_is_rejected() {
+    let e = urdf_err(include_bytes!("fuzz_regressions/urdf-origin-overflow.bin"));
+    assert_eq!(e.kind, ErrorKind::NonFinite);
+    assert_eq!(e.line, Some(3), "{e}");
+    assert!(e.to_string().contains("joint 'j'"), "{e}");
+}
+
+/// An axis of `1e300 1e300 0` is a valid direction, but its norm overflows
+/// and the "unit" axis came out as `(0, 0, 0)`. Now normalized after scaling
+/// by its largest component.
+#[test]
+fn urdf_huge_axis_is_normalized() {
+    let bytes: &[u8] = include_bytes!("fuzz_regressions/urdf-huge-axis.bin");
+    run_urdf(bytes);
+    let text = std::str::from_utf8(&bytes[2..]).unwrap();
+    let r = Robot::parse(text, URDF_FILE, None, None).unwrap();
+    let a = r.chain.joints()[0].axis;
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    assert!(
+        (a.x - h).abs() < 1e-15 && (a.y - h).abs() < 1e-15 && a.z == 0.0,
+        "{a:?}"
+    );
+}
+
+/// A link of 1e300 kg with its centre of mass at 1e10 m: the mass moment
+/// overflowed and the link inertia's centre of mass was ∞.
+#[test]
+fn urdf_mass_moment_overflow_is_rejected() {
+    let e = urdf_err(include_bytes!("fuzz_regressions/urdf-mass-overflow.bin"));
+    assert_eq!(e.kind, ErrorKind::NonFinite);
+    assert!(e.to_string().contains("link 'b'"), "{e}");
+}
+
+/// Two joints named `j`: the CSV needs one column per joint name, so the
+/// second joint's values could never be read (silently 0). Now an error.
+#[test]
+fn urdf_duplicate_joint_name_is_rejected() {
+    let e = urdf_err(include_bytes!("fuzz_regressions/urdf-duplicate-joint.bin"));
+    assert_eq!(e.kind, ErrorKind::Robot);
+    assert_eq!(e.line, Some(3), "the second one: {e}");
+    assert!(e.to_string().contains("defined twice"), "{e}");
+}
+
+/// A CSV with old-Mac `\r` line ends: the csv crate splits records at `\r`,
+/// but lines were counted at `\n` only, so every row and every error said
+/// line 1.
+#[test]
+fn csv_cr_line_ends_count_lines() {
+    let bytes: &[u8] = include_bytes!("fuzz_regressions/csv-cr-line-ends.bin");
+    let robot = csv_robot();
+    run_csv(&robot, bytes);
+    let setup = host_tests::fuzz_io::csv_setup(bytes[0]);
+    let m = parse_measurements(&bytes[1..], "cr.csv", &robot, &setup).unwrap();
+    let lines: Vec<usize> = m.observations.iter().map(|o| o.line).collect();
+    assert_eq!(lines, [2, 3]);
+    let bad = b"config,rep,marker,load_kg,a1,a2,d3,x,y,z\r1,0,1,0,1,0,0.1,0.5,0,0\r1,0,9,0,1,0,0.1,0.5,0,0\r";
+    let e = parse_measurements(&bad[..], "cr.csv", &robot, &setup).unwrap_err();
+    assert_eq!(e.line, Some(3), "{e}");
+}
+
+/// Every kept parser corpus entry and every `urdf-`/`csv-`/`toml-`
+/// regression input.
+#[test]
+fn replay_parser_corpora() {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let robot = csv_robot();
+    let mut n = 0;
+    let mut replay = |target: &str, bytes: &[u8]| {
+        match target {
+            "csv_measurements" | "csv" => run_csv(&robot, bytes),
+            "setup_toml" | "toml" => run_setup(bytes),
+            "urdf" => run_urdf(bytes),
+            _ => return,
+        }
+        n += 1;
+    };
+    for target in ["csv_measurements", "setup_toml", "urdf"] {
+        let Ok(dir) = std::fs::read_dir(format!("{root}/fuzz/corpus/{target}")) else {
+            continue;
+        };
+        for entry in dir.flatten() {
+            replay(target, &std::fs::read(entry.path()).unwrap());
+        }
+    }
+    for entry in std::fs::read_dir(format!("{root}/host-tests/tests/fuzz_regressions"))
+        .unwrap()
+        .flatten()
+    {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if let Some((target, _)) = name.split_once('-') {
+            replay(target, &std::fs::read(entry.path()).unwrap());
+        }
+    }
+    println!("replayed {n} parser inputs");
+    assert!(n > 0);
+}

@@ -1,0 +1,242 @@
+//! The input errors a calibration engineer makes, through `robcal calibrate`
+//! (issue 8): each one is either rejected with a one-line message naming the
+//! file, line and column, or accepted with a `robcal: warning:` on stderr
+//! when the numbers only look suspicious (wrong units). Built from the
+//! KR-270 job (`data/kr270`), each case changing one thing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn robcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .expect("run robcal")
+}
+
+/// A fresh directory with a copy of the KR-270 setup (its `[units]` and
+/// `[model]` replaced by `units`/`model` when given, robot path absolute).
+fn job(name: &str, units: Option<&str>, model: Option<&str>) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("robcal-input-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(root().join("data/kr270/setup.toml")).unwrap();
+    let urdf = root().join("data/kr270/kr270.urdf");
+    let mut text = text.replace(
+        "robot = \"kr270.urdf\"",
+        &format!("robot = {:?}", urdf.to_str().unwrap()),
+    );
+    if let Some(u) = units {
+        text = text.replace("angle = \"deg\"\nlength = \"mm\"", u);
+    }
+    if let Some(m) = model {
+        let at = text.find("[model]").unwrap();
+        text = format!("{}{m}", &text[..at]);
+    }
+    let setup = dir.join("setup.toml");
+    std::fs::write(&setup, text).unwrap();
+    (dir, setup)
+}
+
+/// The KR-270 measurements, each data row passed through `edit(line, cells)`
+/// (line 1-based as in the file; returning `None` drops the row).
+fn csv(dir: &Path, edit: impl Fn(usize, Vec<String>) -> Option<Vec<String>>) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("data/kr270/measurements.csv")).unwrap();
+    let mut lines = text.lines();
+    let mut out = String::from(lines.next().unwrap());
+    out.push('\n');
+    for (i, l) in lines.enumerate() {
+        let cells: Vec<String> = l.split(',').map(str::to_owned).collect();
+        if let Some(c) = edit(i + 2, cells) {
+            out.push_str(&c.join(","));
+            out.push('\n');
+        }
+    }
+    let path = dir.join("data.csv");
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+fn run(setup: &Path, data: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    robcal(&args)
+}
+
+fn rejected(out: &Output) -> String {
+    let err = String::from_utf8(out.stderr.clone()).unwrap();
+    assert!(!out.status.success(), "accepted: {err}");
+    assert!(out.stdout.is_empty());
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("robcal: error: "), "{err}");
+    err
+}
+
+const COL_X: usize = 10;
+
+#[test]
+fn degrees_read_as_radians_is_an_error_naming_the_cell() {
+    let (dir, setup) = job("deg-as-rad", Some("angle = \"rad\"\nlength = \"mm\""), None);
+    let data = csv(&dir, |_, c| Some(c));
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:2: column 'a1': 79.2 rad is beyond ±2π")
+            && err.contains("is the column in degrees?"),
+        "{err}"
+    );
+}
+
+#[test]
+fn radians_read_as_degrees_warns_on_stderr() {
+    let (dir, setup) = job("rad-as-deg", None, None);
+    let data = csv(&dir, |_, mut c| {
+        for v in &mut c[4..10] {
+            *v = format!("{}", v.parse::<f64>().unwrap().to_radians());
+        }
+        Some(c)
+    });
+    let out = run(&setup, &data, &["--no-diagnose", "--json"]);
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        err.lines().any(|l| l.starts_with("robcal: warning: ")
+            && l.contains("data.csv: every revolute joint value is within ±π")
+            && l.contains("are the joint columns in radians?")),
+        "{err}"
+    );
+}
+
+#[test]
+fn millimetres_read_as_metres_is_an_error_naming_the_cell() {
+    let (dir, setup) = job("mm-as-m", Some("angle = \"deg\"\nlength = \"m\""), None);
+    let data = csv(&dir, |_, c| Some(c));
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:2: column 'x': ") && err.contains("is the column in millimetres?"),
+        "{err}"
+    );
+}
+
+#[test]
+fn metres_read_as_millimetres_warns_on_stderr() {
+    let (dir, setup) = job("m-as-mm", None, None);
+    let data = csv(&dir, |_, mut c| {
+        for v in &mut c[COL_X..COL_X + 3] {
+            *v = format!("{}", v.parse::<f64>().unwrap() / 1000.0);
+        }
+        Some(c)
+    });
+    let out = run(&setup, &data, &["--no-diagnose", "--json"]);
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        err.lines().any(|l| l.starts_with("robcal: warning: ")
+            && l.contains("every x, y, z is within ±10")
+            && l.contains("are the positions in metres?")),
+        "{err}"
+    );
+}
+
+#[test]
+fn unknown_joint_column_lists_the_chain_joints() {
+    let (dir, setup) = job("unknown-joint", None, None);
+    let data = csv(&dir, |_, c| Some(c));
+    let text = std::fs::read_to_string(&data)
+        .unwrap()
+        .replacen("a3", "A3", 1);
+    std::fs::write(&data, text).unwrap();
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:1: column 'A3': neither a fixed column nor a movable joint")
+            && err.contains("(joints: a1, a2, a3, a4, a5, a6)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn unknown_marker_names_line_and_column() {
+    let (dir, setup) = job("unknown-marker", None, None);
+    let data = csv(&dir, |line, mut c| {
+        if line == 7 {
+            c[2] = "4".into();
+        }
+        Some(c)
+    });
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:7: column 'marker': marker 4 is not declared in the setup"),
+        "{err}"
+    );
+}
+
+#[test]
+fn unpaired_loaded_row_names_its_line() {
+    let (dir, setup) = job("unpaired", None, None);
+    // Line 2 is the unloaded row of line 3.
+    let data = csv(&dir, |line, c| (line != 2).then_some(c));
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:2: column 'load_kg': loaded row (config 1, rep 1, marker 1) has no unloaded row"),
+        "{err}"
+    );
+}
+
+#[test]
+fn non_finite_value_names_line_and_column() {
+    for bad in ["nan", "inf", "-Infinity", "1e999"] {
+        let (dir, setup) = job("non-finite", None, None);
+        let data = csv(&dir, |line, mut c| {
+            if line == 5 {
+                c[COL_X + 1] = bad.into();
+            }
+            Some(c)
+        });
+        let err = rejected(&run(&setup, &data, &[]));
+        assert!(
+            err.contains(&format!("data.csv:5: column 'y': non-finite value '{bad}'")),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn too_few_configurations_for_the_declared_model() {
+    // One configuration seen by one marker: 3 equations per repetition, so
+    // at most 3 of the 5 declared compliances can be identified. This used
+    // to succeed with k_a5 and k_a6 silently missing from the JSON.
+    let (dir, setup) = job("few-configs", None, None);
+    let data = csv(&dir, |_, c| (c[0] == "1" && c[2] == "1").then_some(c));
+    let err = rejected(&run(&setup, &data, &["--json"]));
+    assert!(
+        err.contains("data.csv: too few configurations for the declared model: k_a5, k_a6 cannot be identified from 1 configuration(s)"),
+        "{err}"
+    );
+    assert!(err.contains("measure more configurations"), "{err}");
+}
+
+#[test]
+fn two_configurations_are_enough_for_the_paper_model() {
+    // Two configurations seen by three markers identify the paper's model
+    // (five compliances here: both configurations have a2 at -0.01 deg, so
+    // a2's split has one bin); the fit runs, and the held-out RMS shows how
+    // badly two configurations predict.
+    let (dir, setup) = job("two-configs", None, None);
+    let data = csv(&dir, |_, c| {
+        (c[0].parse::<i64>().unwrap() <= 2).then_some(c)
+    });
+    let out = run(&setup, &data, &["--json", "--no-diagnose"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
