@@ -116,3 +116,46 @@ fn import_then_calibrate_with_validation() {
     assert!(bl < 4.0, "BL validation {bl} mm");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// One point per posture (marker 1 only): no configuration has two rows to
+/// estimate its σ from, so IRLS falls back to OLS and the report says so.
+#[test]
+fn one_marker_per_configuration_falls_back_to_ols() {
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-ols-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let all = dir.join("all.csv");
+    let input = data_dir().join("qualisys_2021-11-30_static_postures.csv");
+    ok(&robcal(&[
+        "import",
+        "figaroh-mocap",
+        input.to_str().unwrap(),
+        all.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&all).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let col = header.split(',').position(|c| c == "marker").unwrap();
+    let mut one = format!("{header}\n");
+    for l in lines.filter(|l| l.split(',').nth(col) == Some("1")) {
+        one.push_str(l);
+        one.push('\n');
+    }
+    let bl = dir.join("bl.csv");
+    std::fs::write(&bl, one).unwrap();
+    let setup = setup(&dir);
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        bl.to_str().unwrap(),
+        "--no-diagnose",
+        "--json",
+    ]);
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["method"], "ols");
+    let notes = v["notes"].as_array().expect("notes");
+    assert!(notes[0].as_str().unwrap().contains("OLS"), "{notes:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -894,6 +894,14 @@ fn run(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
+    let mut notes = Vec::new();
+    let mut settings = *settings;
+    if let Some(note) = weighting_fallback(&problem, settings.method) {
+        (progress)(&note);
+        notes.push(note);
+        settings.method = Method::Ols;
+    }
+    let settings = &settings;
     let s = FitSettings {
         method: settings.method,
         weight: problem.weight,
@@ -1099,6 +1107,34 @@ fn run(
         model: current.terms.clone(),
         x: current.fit.x.clone(),
         problem: e.p,
+        notes,
+    })
+}
+
+/// Fewest rows per configuration for IRLS/WLS: each configuration's σ per
+/// axis is estimated from its own rows' residuals, so a configuration with
+/// a single row (one marker, no repetition) has no scatter to weight by.
+pub const MIN_ROWS_PER_GROUP: usize = 2;
+
+/// When IRLS/WLS cannot estimate a σ per configuration and axis (a
+/// configuration with fewer than [`MIN_ROWS_PER_GROUP`] rows), the fit
+/// falls back to OLS; the reason, for the report.
+fn weighting_fallback(p: &Problem, method: Method) -> Option<String> {
+    if method == Method::Ols {
+        return None;
+    }
+    let mut n = vec![0usize; p.configs.len()];
+    for r in &p.rows {
+        n[r.group] += 1;
+    }
+    let (g, &fewest) = n.iter().enumerate().min_by_key(|(_, &c)| c)?;
+    (fewest < MIN_ROWS_PER_GROUP).then(|| {
+        format!(
+            "{} needs a scatter per configuration to weight by, and configuration {} has {fewest} row(s) \
+             (at least {MIN_ROWS_PER_GROUP}): fitted by OLS instead",
+            method.name(),
+            p.configs[g]
+        )
     })
 }
 
