@@ -385,7 +385,8 @@ impl Problem {
             }
         }
         match model_decl.geometry {
-            GeometryModel::None => {}
+            // `select`: offered to the loop as candidates (`effects`).
+            GeometryModel::None | GeometryModel::Select => {}
             GeometryModel::JointOffsets => model.extend((0..dof).map(Term::JointOffset)),
             GeometryModel::Full => {
                 for j in 0..dof {
