@@ -42,7 +42,12 @@ fn ok(out: &Output) {
 /// `data/tiago/setup.toml` itself when `shared/` is beside the repository;
 /// else a copy naming the URDF found by [`data_dir`].
 fn setup(dir: &Path) -> PathBuf {
-    let shipped = root().join("data/tiago/setup.toml");
+    setup_named(dir, "setup.toml")
+}
+
+/// [`setup`] for another setup file of `data/tiago`.
+fn setup_named(dir: &Path, name: &str) -> PathBuf {
+    let shipped = root().join("data/tiago").join(name);
     if root().join("../shared/datasets/tiago-mocap").exists() {
         return shipped;
     }
@@ -52,7 +57,7 @@ fn setup(dir: &Path) -> PathBuf {
         "../../../shared/datasets/tiago-mocap/tiago_48_schunk.urdf",
         &urdf.to_string_lossy(),
     );
-    let copy = dir.join("setup.toml");
+    let copy = dir.join(name);
     std::fs::write(&copy, text).unwrap();
     copy
 }
@@ -114,5 +119,91 @@ fn import_then_calibrate_with_validation() {
     // threshold with room for changes to the loop's defaults, well below
     // the registration-only 4.9 mm.
     assert!(bl < 4.0, "BL validation {bl} mm");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// One point per posture (marker 1 only): no configuration has two rows to
+/// estimate its σ from, so IRLS falls back to OLS and the report says so.
+#[test]
+fn one_marker_per_configuration_falls_back_to_ols() {
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-ols-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let all = dir.join("all.csv");
+    let input = data_dir().join("qualisys_2021-11-30_static_postures.csv");
+    ok(&robcal(&[
+        "import",
+        "figaroh-mocap",
+        input.to_str().unwrap(),
+        all.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&all).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let col = header.split(',').position(|c| c == "marker").unwrap();
+    let mut one = format!("{header}\n");
+    for l in lines.filter(|l| l.split(',').nth(col) == Some("1")) {
+        one.push_str(l);
+        one.push('\n');
+    }
+    let bl = dir.join("bl.csv");
+    std::fs::write(&bl, one).unwrap();
+    let setup = setup(&dir);
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        bl.to_str().unwrap(),
+        "--no-diagnose",
+        "--json",
+    ]);
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["method"], "ols");
+    let notes = v["notes"].as_array().expect("notes");
+    assert!(notes[0].as_str().unwrap().contains("OLS"), "{notes:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `geometry = "select"` (data/tiago/setup-select.toml): the declared model
+/// is the registration only (base frame, the four points); the joint
+/// geometry is left to the loop's candidates.
+#[test]
+fn select_declares_the_registration_only() {
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-sel-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let train = dir.join("train.csv");
+    let input = data_dir().join("qualisys_2021-11-30_static_postures.csv");
+    ok(&robcal(&[
+        "import",
+        "figaroh-mocap",
+        input.to_str().unwrap(),
+        train.to_str().unwrap(),
+    ]));
+    let setup = setup_named(&dir, "setup-select.toml");
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        train.to_str().unwrap(),
+        "--no-diagnose",
+        "--json",
+    ]);
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let names: Vec<&str> = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(!names.is_empty());
+    assert!(
+        names
+            .iter()
+            .all(|n| n.starts_with("base.") || n.starts_with("marker")),
+        "{names:?}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -202,7 +202,7 @@ fn opt_num(v: Option<f64>) -> Value {
 
 /// The contract's JSON (§5).
 fn to_json(r: &Report) -> Value {
-    json!({
+    let mut v = json!({
         "method": r.method,
         "iterations": r.iterations,
         "parameters": r.parameters.iter().map(|p| json!({
@@ -233,7 +233,13 @@ fn to_json(r: &Report) -> Value {
             "per_marker_rms_mm": v.per_marker_rms_mm.iter()
                 .map(|(k, x)| (k.clone(), num(*x))).collect::<serde_json::Map<_, _>>(),
         })),
-    })
+    });
+    // Optional (an extension of the contract's §5): what the run changed on
+    // its own, e.g. IRLS → OLS.
+    if !r.notes.is_empty() {
+        v["notes"] = json!(r.notes);
+    }
+    v
 }
 
 /// Writes `path` atomically: a temporary file in the same directory, then

@@ -385,7 +385,8 @@ impl Problem {
             }
         }
         match model_decl.geometry {
-            GeometryModel::None => {}
+            // `select`: offered to the loop as candidates (`effects`).
+            GeometryModel::None | GeometryModel::Select => {}
             GeometryModel::JointOffsets => model.extend((0..dof).map(Term::JointOffset)),
             GeometryModel::Full => {
                 for j in 0..dof {
@@ -926,6 +927,14 @@ fn run(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
+    let mut notes = Vec::new();
+    let mut settings = *settings;
+    if let Some(note) = weighting_fallback(&problem, settings.method) {
+        (progress)(&note);
+        notes.push(note);
+        settings.method = Method::Ols;
+    }
+    let settings = &settings;
     let s = FitSettings {
         method: settings.method,
         weight: problem.weight,
@@ -1002,17 +1011,50 @@ fn run(
             last_round = tested.iter().map(|t| t.1.clone()).collect();
             let tried = tested.len().max(1) as f64;
             let lof_significant = lof.is_some_and(|l| l.p_value < settings.alpha);
-            let pick = tested.first().filter(|(_, t)| {
-                let significant = t.p_value * tried < settings.alpha;
-                let share_ok = match lof {
-                    Some(l) if lof_significant && l.excess() > 0.0 => {
-                        t.delta_rss >= settings.min_share * l.excess()
+            let eligible: Vec<&(usize, Tested)> = tested
+                .iter()
+                .filter(|(_, t)| {
+                    let significant = t.p_value * tried < settings.alpha;
+                    let share_ok = match lof {
+                        Some(l) if lof_significant && l.excess() > 0.0 => {
+                            t.delta_rss >= settings.min_share * l.excess()
+                        }
+                        _ => true,
+                    };
+                    significant && share_ok
+                })
+                .collect();
+            if !eligible.is_empty() && steps.len() >= settings.max_effects {
+                break;
+            }
+            // The most significant candidate whose estimate is physical
+            // (`inadmissible`); an impossible one is rejected and the next
+            // is tried.
+            let mut accepted = None;
+            for (ci, t) in eligible {
+                let c = &cands[*ci];
+                let new_terms = extended(&e.p, &current.terms, c);
+                let next = e.fit(&new_terms)?;
+                if let Some(why) = inadmissible(&e.p.ctx, &next.terms, &next.fit.x, &c.add) {
+                    let note = format!(
+                        "{}{} rejected: its estimate is not physical ({why})",
+                        c.effect,
+                        t.about
+                            .as_deref()
+                            .map(|a| format!(" on {a}"))
+                            .unwrap_or_default(),
+                    );
+                    if !notes.contains(&note) {
+                        (e.progress)(&note);
+                        notes.push(note);
                     }
-                    _ => true,
-                };
-                significant && share_ok
-            });
-            let Some((ci, t)) = pick.cloned() else {
+                    e.p.set_estimate(&current.terms, &current.fit.x);
+                    continue;
+                }
+                accepted = Some((*ci, t.clone(), next));
+                break;
+            }
+            let Some((ci, t, next)) = accepted else {
                 if lof_significant {
                     let l = lof.unwrap_or(LackOfFit {
                         f: 0.0,
@@ -1031,9 +1073,6 @@ fn run(
                 }
                 break;
             };
-            if steps.len() >= settings.max_effects {
-                break;
-            }
             let c = &cands[ci];
             (e.progress)(&format!(
                 "adding {}{} (p = {:.3e})",
@@ -1044,26 +1083,6 @@ fn run(
                     .unwrap_or_default(),
                 t.p_value
             ));
-            // The effect's terms go where the terms they replace were, else
-            // at the end.
-            let at = current
-                .terms
-                .iter()
-                .position(|t| c.remove.contains(t))
-                .unwrap_or(current.terms.len());
-            let mut new_terms: Vec<Term> = current.terms[..at]
-                .iter()
-                .filter(|t| !c.remove.contains(t))
-                .copied()
-                .collect();
-            new_terms.extend(c.add.iter().filter(|a| !current.terms.contains(a)));
-            new_terms.extend(current.terms[at..].iter().filter(|t| !c.remove.contains(t)));
-            // Keep the identifiable subset of the new model.
-            let d2 = e.p.design(&new_terms);
-            let all: Vec<usize> = (0..new_terms.len()).collect();
-            let keep = problem::independent(&d2, &[], &all);
-            let new_terms: Vec<Term> = keep.iter().map(|&i| new_terms[i]).collect();
-            let next = e.fit(&new_terms)?;
             let next = e.with_heldout(next)?;
             let (var, x) = traced_variable(&e.p, c);
             plots.push(PlotSeries {
@@ -1131,7 +1150,110 @@ fn run(
         model: current.terms.clone(),
         x: current.fit.x.clone(),
         problem: e.p,
+        notes,
     })
+}
+
+/// Fewest rows per configuration for IRLS/WLS: each configuration's σ per
+/// axis is estimated from its own rows' residuals, so a configuration with
+/// a single row (one marker, no repetition) has no scatter to weight by.
+pub const MIN_ROWS_PER_GROUP: usize = 2;
+
+/// When IRLS/WLS cannot estimate a σ per configuration and axis (a
+/// configuration with fewer than [`MIN_ROWS_PER_GROUP`] rows), the fit
+/// falls back to OLS; the reason, for the report.
+fn weighting_fallback(p: &Problem, method: Method) -> Option<String> {
+    if method == Method::Ols {
+        return None;
+    }
+    let mut n = vec![0usize; p.configs.len()];
+    for r in &p.rows {
+        n[r.group] += 1;
+    }
+    let (g, &fewest) = n.iter().enumerate().min_by_key(|(_, &c)| c)?;
+    (fewest < MIN_ROWS_PER_GROUP).then(|| {
+        format!(
+            "{} needs a scatter per configuration to weight by, and configuration {} has {fewest} row(s) \
+             (at least {MIN_ROWS_PER_GROUP}): fitted by OLS instead",
+            method.name(),
+            p.configs[g]
+        )
+    })
+}
+
+/// The model `terms` with candidate `c` added: its terms go where the terms
+/// they replace were, else at the end; then the identifiable subset.
+fn extended(p: &Problem, terms: &[Term], c: &Candidate) -> Vec<Term> {
+    let at = terms
+        .iter()
+        .position(|t| c.remove.contains(t))
+        .unwrap_or(terms.len());
+    let mut new_terms: Vec<Term> = terms[..at]
+        .iter()
+        .filter(|t| !c.remove.contains(t))
+        .copied()
+        .collect();
+    new_terms.extend(c.add.iter().filter(|a| !terms.contains(a)));
+    new_terms.extend(terms[at..].iter().filter(|t| !c.remove.contains(t)));
+    let d2 = p.design(&new_terms);
+    let all: Vec<usize> = (0..new_terms.len()).collect();
+    let keep = problem::independent(&d2, &[], &all);
+    keep.iter().map(|&i| new_terms[i]).collect()
+}
+
+/// Largest admissible first-harmonic gear cyclic error amplitude \[mrad\]
+/// (`hypot(sin, cos)`): a gear's transmission error is a fraction of a
+/// milliradian to a few; 10 mrad (0.6°) would be a broken gear.
+pub const MAX_CYCLIC_MRAD: f64 = 10.0;
+/// Largest admissible measurement drift \[mm/h\] (norm over x, y, z): a
+/// thermal drift of a tracker or of the robot's base is a fraction of a
+/// millimetre per hour; 5 mm/h is not a drift but a moving base.
+pub const MAX_DRIFT_MM_PER_H: f64 = 5.0;
+
+/// Why the estimate `x` of `terms` is not physical for the effect terms
+/// `added`, if it is not. Physics, not tuning:
+/// - a compliance (`k_<joint>`, `k_<joint>@<angle>`) is ≥ 0: a joint
+///   yields in the direction of its torque;
+/// - a backlash (`δq = b · sign τ`) is ≥ 0: the joint rests on the side of
+///   its play that its torque pushes it to;
+/// - a gear cyclic error is at most [`MAX_CYCLIC_MRAD`];
+/// - a drift is at most [`MAX_DRIFT_MM_PER_H`].
+pub fn inadmissible(ctx: &Context, terms: &[Term], x: &[f64], added: &[Term]) -> Option<String> {
+    let value = |t: &Term| terms.iter().position(|u| u == t).map(|i| x[i]);
+    for t in added {
+        let Some(v) = value(t) else { continue };
+        let (unit, _) = ctx.unit(t);
+        let bad = match *t {
+            Term::Compliance(_) | Term::ComplianceAt(..) | Term::Backlash(_) => {
+                (v < 0.0).then(|| format!("{} = {v:.3} {unit} < 0", ctx.name(t)))
+            }
+            Term::GearCyclic(j, false) => {
+                let c = value(&Term::GearCyclic(j, true)).unwrap_or(0.0);
+                let amp = v.hypot(c);
+                (amp > MAX_CYCLIC_MRAD).then(|| {
+                    format!(
+                        "gear_cyclic_{} amplitude {amp:.3} mrad > {MAX_CYCLIC_MRAD} mrad",
+                        ctx.joint_names[j]
+                    )
+                })
+            }
+            Term::Drift(0) => {
+                // µm/s → mm/h.
+                let norm = (0..3)
+                    .map(|a| value(&Term::Drift(a)).unwrap_or(0.0).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+                    * 3.6;
+                (norm > MAX_DRIFT_MM_PER_H)
+                    .then(|| format!("drift {norm:.3} mm/h > {MAX_DRIFT_MM_PER_H} mm/h"))
+            }
+            _ => None,
+        };
+        if bad.is_some() {
+            return bad;
+        }
+    }
+    None
 }
 
 fn about(ctx: &Context, c: &Candidate) -> Option<String> {
@@ -1191,4 +1313,43 @@ pub fn validate(
             .map(|(m, v)| (m.to_string(), rms_um(&v) * 1e-3))
             .collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::chain::JointKind;
+
+    fn ctx() -> Context {
+        Context {
+            joint_names: vec!["a1".into(), "a2".into()],
+            joint_kinds: vec![JointKind::Revolute; 2],
+            markers: vec![(1, Vector3::zeros())],
+            bins: vec![Vec::new(); 2],
+            bin_tolerance: BIN_TOLERANCE_RAD,
+            k: vec![0.0; 2],
+            k_bins: vec![Vec::new(); 2],
+        }
+    }
+
+    #[test]
+    fn physical_limits_reject_impossible_estimates() {
+        let c = ctx();
+        let k = [Term::Compliance(1)];
+        assert!(inadmissible(&c, &k, &[0.5], &k).is_none());
+        assert!(inadmissible(&c, &k, &[-0.5], &k).unwrap().contains("< 0"));
+        let b = [Term::Backlash(0)];
+        assert!(inadmissible(&c, &b, &[-1.0], &b).is_some());
+        assert!(inadmissible(&c, &b, &[1.0], &b).is_none());
+        // A negative compliance already in the model is not the candidate's.
+        let terms = [Term::Compliance(0), Term::Backlash(1)];
+        assert!(inadmissible(&c, &terms, &[-1.0, 1.0], &[Term::Backlash(1)]).is_none());
+        let cyc = [Term::GearCyclic(0, false), Term::GearCyclic(0, true)];
+        assert!(inadmissible(&c, &cyc, &[6.0, 8.0], &cyc).is_none()); // 10 mrad
+        assert!(inadmissible(&c, &cyc, &[6.0, 8.1], &cyc).is_some());
+        let drift = [Term::Drift(0), Term::Drift(1), Term::Drift(2)];
+        // 1 µm/s = 3.6 mm/h.
+        assert!(inadmissible(&c, &drift, &[1.0, 0.0, 0.0], &drift).is_none());
+        assert!(inadmissible(&c, &drift, &[1.0, 1.0, 0.0], &drift).is_some());
+    }
 }

@@ -133,6 +133,9 @@ pub struct Report {
     pub x: Vec<f64>,
     /// The problem (for validation).
     pub problem: Problem,
+    /// What the run changed on its own and why (e.g. IRLS → OLS when a
+    /// configuration has too few rows to estimate its σ).
+    pub notes: Vec<String>,
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -154,6 +157,9 @@ impl fmt::Display for Report {
             "robcal calibrate: {} rows (3 equations each), {} configurations, method {}",
             self.rows, self.configurations, self.method
         )?;
+        for n in &self.notes {
+            writeln!(f, "note: {n}")?;
+        }
         if !self.dropped.is_empty() {
             writeln!(
                 f,

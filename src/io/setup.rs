@@ -21,9 +21,18 @@
 //! | `[noise] lambda` | `1`, `≥ 0` |
 //! | `[model] compliance` | `[]`: joint names, movable joints of the chain |
 //! | `[model] compliance_by_angle` | `[]`: revolute/continuous joints of the chain |
-//! | `[model] geometry` | `"none"` (`"none"` \| `"joint_offsets"` \| `"full"`) |
+//! | `[model] geometry` | `"none"` (`"none"` \| `"joint_offsets"` \| `"full"` \| `"select"`) |
 //! | `[model] base_frame` | `false` |
 //! | `[model] markers` | `"nominal"` (`"nominal"` \| `"identify"`) |
+//!
+//! `geometry = "select"` extends the data contract (an optional value of
+//! an existing key; the contract's three values keep their meaning): no
+//! joint geometry is declared, but the data's absolute positions are
+//! fitted (as for a declared geometry), and the closed loop is offered each
+//! joint's offset (`joint_offset`) and its identifiable joint-frame errors
+//! (`geometry`) as candidates, added only when the data call for them. It
+//! is meant with `base_frame = true` and `markers = "identify"`: the
+//! registration declared, the joint geometry selected.
 //!
 //! A joint may be in both `compliance` and `compliance_by_angle` (as in the
 //! contract's example); what that means is the model's business, not the
@@ -155,6 +164,9 @@ pub enum GeometryModel {
     JointOffsets,
     /// Full joint-frame errors.
     Full,
+    /// None declared; joint offsets and joint-frame errors are candidates
+    /// of the closed loop (an extension of the contract, see the module doc).
+    Select,
 }
 
 /// `[model] markers`: whether marker positions are identified.
