@@ -615,7 +615,10 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
             }
         }
     }
-    let l = cholesky(&kk);
+    // Plain Cholesky (every positive pivot accepted), as in `solve`.
+    let l = crate::solve::cholesky_checked(&kk, T::zero())
+        .ok()
+        .map(|(l, _, _)| l);
     let mut dropped = heapless::Vec::new();
     for d in (0..N).filter(|&d| dropped_flag[d]) {
         let mut entry = Dropped {
@@ -630,7 +633,7 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
                     |i, _| if kept[i] { a[(i, d)] } else { T::zero() },
                 );
             let beta = match &l {
-                Some(l) => solve_llt(l, &rhs),
+                Some(l) => crate::solve::solve_upper_t(l, &crate::solve::solve_lower(l, &rhs)),
                 None => nalgebra::SVector::zeros(),
             };
             entry.residual = (T::one() - beta.dot(&rhs)).max(T::zero());
@@ -667,51 +670,4 @@ pub fn identifiability<T: RealField + Copy, const N: usize>(
             T::zero()
         },
     })
-}
-
-/// Plain Cholesky `A = L Lᵀ`; `None` when a pivot is not positive.
-fn cholesky<T: RealField + Copy, const N: usize>(a: &SMatrix<T, N, N>) -> Option<SMatrix<T, N, N>> {
-    let mut l = SMatrix::<T, N, N>::zeros();
-    for j in 0..N {
-        let mut d = a[(j, j)];
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
-        }
-        if d.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) {
-            return None;
-        }
-        let ljj = d.sqrt();
-        l[(j, j)] = ljj;
-        for i in (j + 1)..N {
-            let mut v = a[(i, j)];
-            for k in 0..j {
-                v -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = v / ljj;
-        }
-    }
-    Some(l)
-}
-
-/// Solves `L Lᵀ x = b`.
-fn solve_llt<T: RealField + Copy, const N: usize>(
-    l: &SMatrix<T, N, N>,
-    b: &nalgebra::SVector<T, N>,
-) -> nalgebra::SVector<T, N> {
-    let mut y = *b;
-    for i in 0..N {
-        let mut v = y[i];
-        for k in 0..i {
-            v -= l[(i, k)] * y[k];
-        }
-        y[i] = v / l[(i, i)];
-    }
-    for i in (0..N).rev() {
-        let mut v = y[i];
-        for k in (i + 1)..N {
-            v -= l[(k, i)] * y[k];
-        }
-        y[i] = v / l[(i, i)];
-    }
-    y
 }

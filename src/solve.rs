@@ -190,7 +190,7 @@ pub fn solve<T: RealField + Copy, const N: usize>(
 
 /// Cholesky `A = L Lᵀ` of a unit-diagonal symmetric matrix, refusing a
 /// pivot `dⱼ ≤ tol`. Returns `L` and the smallest and largest pivot.
-fn cholesky_checked<T: RealField + Copy, const N: usize>(
+pub(crate) fn cholesky_checked<T: RealField + Copy, const N: usize>(
     a: &SMatrix<T, N, N>,
     tol: T,
 ) -> Result<(SMatrix<T, N, N>, T, T), Error> {
@@ -229,7 +229,7 @@ fn cholesky_checked<T: RealField + Copy, const N: usize>(
 }
 
 /// Forward substitution `L y = b`.
-fn solve_lower<T: RealField + Copy, const N: usize>(
+pub(crate) fn solve_lower<T: RealField + Copy, const N: usize>(
     l: &SMatrix<T, N, N>,
     b: &SVector<T, N>,
 ) -> SVector<T, N> {
@@ -245,7 +245,7 @@ fn solve_lower<T: RealField + Copy, const N: usize>(
 }
 
 /// Back substitution `Lᵀ x = y`.
-fn solve_upper_t<T: RealField + Copy, const N: usize>(
+pub(crate) fn solve_upper_t<T: RealField + Copy, const N: usize>(
     l: &SMatrix<T, N, N>,
     y: &SVector<T, N>,
 ) -> SVector<T, N> {
