@@ -5,18 +5,27 @@
 //! ```text
 //!   Job + Measurements ──rows──► Problem (rows in memory, IRLS groups = configurations)
 //!        │
-//!        ├─ fit the declared model (OLS | WLS | IRLS, eq. 6, 10, 14)
+//!        ├─ fit the declared model (OLS | WLS | IRLS, eq. 6, 10, 14), iterated
+//!        │     Gauss–Newton on the geometric terms (`geometry`)
 //!        ├─ residual analysis: lack of fit from the repetitions (pure error)
 //!        ├─ every effect of the library the model lacks (`effects`):
 //!        │     nested F test from the cross-products (`crate::diagnose`)
-//!        ├─ best p · (candidates tried) < α (Bonferroni) → add it, refit, repeat
+//!        ├─ in order of p, the first with p · (candidates tried) < α (Bonferroni),
+//!        │     a physical estimate and a lower leave-one-configuration-out
+//!        │     RMS → add it, refit, repeat
 //!        └─ RMS and leave-one-configuration-out RMS before and after each step
 //! ```
 //!
 //! Rows: the **deflections** (loaded − unloaded, only the load's torques),
 //! and, when the declared model identifies geometry, the base or the markers
 //! (or there is no load), the **absolute** unloaded positions against the
-//! nominal forward kinematics, loaded by the robot's own weight.
+//! forward kinematics of the current model, loaded by the robot's own
+//! weight. The current model starts nominal, with the base placed by a
+//! rigid registration when the base frame is identified, and moves with
+//! each fit of the geometric terms until they settle (Gauss–Newton,
+//! [`Geometry`]): the geometric parameters are reported as their values
+//! in that model (the base as its pose in the measurement frame), with the
+//! σ of the last linearisation.
 //!
 //! Decisions, stated once:
 //! - α = 0.01 for the Bonferroni-corrected effect test (`p · tried < α`) and
@@ -25,6 +34,11 @@
 //!   of fit is significant, explains at least [`Settings::min_share`] of the
 //!   lack-of-fit sum of squares above its noise expectation: an effect that
 //!   only nibbles at a structure it does not describe is not named;
+//! - and only if its estimate is physical ([`inadmissible`]) **and** the
+//!   leave-one-configuration-out RMS drops with it (when it is computed,
+//!   [`Settings::heldout`]): a significant effect that predicts unseen
+//!   configurations worse is fitting this data set, not the robot. The
+//!   candidates are tried in order of p-value until one passes;
 //! - RMS is the RMS of the norm of the 3-D position residual of each row
 //!   (µm, unweighted); held-out RMS is the same over the predictions of
 //!   each configuration from a fit without it (same method);
@@ -46,6 +60,7 @@
 //!   committed): a 128-column problem's fixed-size matrices are 131 kB each.
 
 mod effects;
+mod geometry;
 mod problem;
 mod report;
 mod terms;
@@ -55,6 +70,7 @@ use std::collections::BTreeMap;
 use nalgebra::Vector3;
 
 pub use effects::{Candidate, DataKinds, EFFECTS};
+pub use geometry::{is_geometric, Geometry};
 pub use problem::{Design, FitOut, FitSettings, Method, MAX_COLUMNS, MAX_GROUPS};
 pub use report::{EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
 pub use terms::{Bin, Context, Row, RowKind, Term};
@@ -76,7 +92,8 @@ pub struct Settings {
     pub max_iterations: usize,
     /// Run the diagnosis loop.
     pub diagnose: bool,
-    /// Compute the leave-one-configuration-out RMS.
+    /// Compute the leave-one-configuration-out RMS, and add an effect only
+    /// when it lowers it.
     pub heldout: bool,
     /// Significance level (Bonferroni over the candidates tried).
     pub alpha: f64,
@@ -149,6 +166,8 @@ pub struct Problem {
     pub t_mean: f64,
     /// σ0 \[m\], λ.
     pub weight: RobustWeight<f64>,
+    /// The model the absolute rows are linearised at (Gauss–Newton).
+    pub geometry: Geometry,
 }
 
 fn cluster(values: &[f64], tol: f64) -> Vec<f64> {
@@ -311,6 +330,7 @@ impl Problem {
                 load_force: Some((wrench.point_m, wrench.force_n)),
                 dt,
                 y: Vector3::from(d.dp_m),
+                measured: Vector3::from(d.dp_m),
                 line: d.lines[0],
             });
         }
@@ -339,6 +359,7 @@ impl Problem {
                     load_force: None,
                     dt: o.t_s.map(|t| t - t_mean),
                     y: Vector3::from(o.p_m) - p,
+                    measured: Vector3::from(o.p_m),
                     line: o.line,
                 });
             }
@@ -384,6 +405,17 @@ impl Problem {
                 model.push(Term::Compliance(j));
             }
         }
+        // Base and markers before the joints: where a joint parameter and
+        // the base (or a marker) are the same motion (the first joint's
+        // frame error, the last joint's offset), the joint's is dropped.
+        if model_decl.base_frame {
+            model.extend((0..6).map(Term::Base));
+        }
+        if model_decl.markers == MarkerModel::Identify {
+            for m in 0..markers.len() {
+                model.extend((0..3).map(|a| Term::Marker(m, a)));
+            }
+        }
         match model_decl.geometry {
             // `select`: offered to the loop as candidates (`effects`).
             GeometryModel::None | GeometryModel::Select => {}
@@ -392,14 +424,6 @@ impl Problem {
                 for j in 0..dof {
                     model.extend((0..6).map(|a| Term::JointFrame(j, a)));
                 }
-            }
-        }
-        if model_decl.base_frame {
-            model.extend((0..6).map(Term::Base));
-        }
-        if model_decl.markers == MarkerModel::Identify {
-            for m in 0..markers.len() {
-                model.extend((0..3).map(|a| Term::Marker(m, a)));
             }
         }
         let mut p = Self {
@@ -414,6 +438,7 @@ impl Problem {
             com,
             t_mean,
             weight,
+            geometry: Geometry::nominal(chain, &markers),
         };
         let d = p.design(&model);
         let all: Vec<usize> = (0..model.len()).collect();
@@ -474,6 +499,72 @@ impl Problem {
         Design::new(&self.ctx, &self.rows, terms, self.configs.len())
     }
 
+    /// Recomputes the rows at [`Problem::geometry`]: frames, predicted
+    /// position and torques of every row, and `Δp` of the absolute rows
+    /// (a deflection row's `Δp` is what was measured; its columns move with
+    /// the model, e.g. into the measurement frame once the base is placed).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Core`] when the forward kinematics fails.
+    pub fn relinearise(&mut self) -> Result<(), CalibrationError> {
+        let chain = self.geometry.placed_chain();
+        // The frames are in the measurement frame, gravity is given in the
+        // robot's base frame.
+        let gravity = self.geometry.base.rotation * self.gravity;
+        let core = |what: &'static str| move |e: Error| CalibrationError::Core(what, e);
+        for row in &mut self.rows {
+            let m = self
+                .geometry
+                .markers
+                .iter()
+                .find(|m| m.0 == row.marker)
+                .map(|m| m.1)
+                .unwrap_or_default();
+            row.frames = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+            row.p = row.frames.point_m(&m);
+            match row.kind {
+                RowKind::Absolute => {
+                    elastostatic::gravity_torques(&chain, &row.frames, &gravity, &mut row.tau)
+                        .map_err(core("gravity torques"))?;
+                    row.y = row.measured - row.p;
+                }
+                RowKind::Deflection => {
+                    let load = PointLoad {
+                        mass_kg: row.load_kg,
+                        com_m: self.com,
+                        gravity_mps2: gravity,
+                    };
+                    let wrench = load.wrench(&row.frames);
+                    elastostatic::joint_torques(&row.frames, &wrench, &mut row.tau)
+                        .map_err(core("load torques"))?;
+                    row.load_force = Some((wrench.point_m, wrench.force_n));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Places the base by a rigid registration of the predicted marker
+    /// positions onto the measured ones ([`Geometry::register`]), when the
+    /// model identifies the base and there are absolute rows.
+    ///
+    /// # Errors
+    /// As [`Problem::relinearise`].
+    pub fn register_base(&mut self) -> Result<(), CalibrationError> {
+        let absolute: Vec<&Row> = self
+            .rows
+            .iter()
+            .filter(|r| r.kind == RowKind::Absolute)
+            .collect();
+        if !self.model.iter().any(|t| matches!(t, Term::Base(_))) || absolute.len() < 3 {
+            return Ok(());
+        }
+        let predicted: Vec<Vector3<f64>> = absolute.iter().map(|r| r.p).collect();
+        let measured: Vec<Vector3<f64>> = absolute.iter().map(|r| r.measured).collect();
+        self.geometry.register(&predicted, &measured);
+        self.relinearise()
+    }
+
     /// Sets the compliances the linearised effects use from a fit.
     fn set_estimate(&mut self, terms: &[Term], x: &[f64]) {
         let dof = self.ctx.joint_names.len();
@@ -494,6 +585,11 @@ impl Problem {
 struct Fitted {
     terms: Vec<Term>,
     fit: FitOut,
+    /// The model the fit is linearised at (its geometric steps are below
+    /// [`geometry::STEP_TOLERANCE`]).
+    geometry: Geometry,
+    /// Gauss–Newton relinearisations.
+    relinearisations: usize,
     rms_um: f64,
     heldout_rms_um: Option<f64>,
     residuals: Vec<Vector3<f64>>,
@@ -778,9 +874,13 @@ struct Engine<'a> {
 impl Engine<'_> {
     fn fit(&mut self, terms: &[Term]) -> Result<Fitted, CalibrationError> {
         // Linearised effects: evaluate about the estimate, refit until the
-        // compliances settle (one or two passes).
+        // compliances settle (one or two passes). Geometric terms of
+        // absolute rows: Gauss–Newton (`geometry`), refit at the moved
+        // model until its step is below the tolerance.
         let linearised = terms.iter().any(|t| matches!(t, Term::LoadCom(_)));
-        let mut passes = if linearised { 5 } else { 1 };
+        let geometric = self.p.kinds.absolute && terms.iter().any(is_geometric);
+        let mut passes: u32 = if linearised { 5 } else { 1 };
+        let mut relinearisations = 0;
         loop {
             let d = self.p.design(terms);
             let cols: Vec<usize> = (0..terms.len()).collect();
@@ -788,11 +888,25 @@ impl Engine<'_> {
                 .map_err(|e| CalibrationError::Core("fit", e))?;
             let before = self.p.ctx.k.clone();
             self.p.set_estimate(terms, &fit.x);
-            passes -= 1;
+            passes = passes.saturating_sub(1);
             let moved = before
                 .iter()
                 .zip(&self.p.ctx.k)
                 .any(|(a, b)| (a - b).abs() > 1e-6 * b.abs().max(1e-12));
+            let step = terms
+                .iter()
+                .zip(&fit.x)
+                .filter(|(t, _)| is_geometric(t))
+                .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
+            let relinearise = geometric
+                && step > geometry::STEP_TOLERANCE
+                && relinearisations < geometry::MAX_STEPS;
+            if relinearise {
+                self.p.geometry.apply(terms, &fit.x);
+                self.p.relinearise()?;
+                relinearisations += 1;
+                continue;
+            }
             if passes == 0 || !moved {
                 let residuals: Vec<Vector3<f64>> = (0..d.rows())
                     .map(|i| d.residual(&cols, &fit.x, i))
@@ -801,6 +915,8 @@ impl Engine<'_> {
                     terms: terms.to_vec(),
                     rms_um: rms_um(&residuals),
                     fit,
+                    geometry: self.p.geometry.clone(),
+                    relinearisations,
                     heldout_rms_um: None,
                     residuals,
                 });
@@ -808,12 +924,20 @@ impl Engine<'_> {
         }
     }
 
+    /// Puts the problem back at `f`'s model: its compliances for the
+    /// linearised effects, its geometry for the absolute rows.
+    fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
+        self.p.set_estimate(&f.terms, &f.fit.x);
+        self.p.geometry = f.geometry.clone();
+        self.p.relinearise()
+    }
+
     /// Leave-one-configuration-out prediction RMS \[µm\].
     fn heldout(&mut self, fitted: &Fitted) -> Result<Option<f64>, CalibrationError> {
         if !self.settings.heldout || self.p.configs.len() < 2 {
             return Ok(None);
         }
-        self.p.set_estimate(&fitted.terms, &fitted.fit.x);
+        self.restore(fitted)?;
         let d = self.p.design(&fitted.terms);
         let cols: Vec<usize> = (0..fitted.terms.len()).collect();
         let mut res = Vec::with_capacity(d.rows());
@@ -842,7 +966,7 @@ impl Engine<'_> {
                 }
             }
         }
-        self.p.set_estimate(&fitted.terms, &fitted.fit.x);
+        self.restore(fitted)?;
         Ok(Some(rms_um(&res)))
     }
 
@@ -855,8 +979,13 @@ impl Engine<'_> {
         f.terms
             .iter()
             .zip(f.fit.x.iter().zip(&f.fit.std))
-            .map(|(t, (&value, &std))| {
+            .map(|(t, (&x, &std))| {
                 let (unit, _) = self.p.ctx.unit(t);
+                let value = if is_geometric(t) {
+                    f.geometry.value(t, x)
+                } else {
+                    x
+                };
                 Parameter {
                     name: self.p.ctx.name(t),
                     value,
@@ -947,6 +1076,7 @@ fn run(
         progress,
     };
     let declared = e.p.model.clone();
+    e.p.register_base()?;
     (e.progress)("fitting the declared model");
     let first = e.fit(&declared)?;
     let mut current = e.with_heldout(first)?;
@@ -963,6 +1093,7 @@ fn run(
     let mut unexplained = None;
     let mut last_round: Vec<Tested> = Vec::new();
     let mut plots: Vec<PlotSeries> = Vec::new();
+    let mut rejected: Vec<String> = Vec::new();
     if settings.diagnose {
         loop {
             let lof = lack_of_fit(&e.p, &current);
@@ -977,7 +1108,7 @@ fn run(
                     }
                 }
             }
-            e.p.set_estimate(&current.terms, &current.fit.x);
+            e.restore(&current)?;
             let d = e.p.design(&terms);
             let model_cols: Vec<usize> = (0..current.terms.len()).collect();
             let mut tested: Vec<(usize, Tested)> = Vec::new();
@@ -1028,31 +1159,49 @@ fn run(
                 break;
             }
             // The most significant candidate whose estimate is physical
-            // (`inadmissible`); an impossible one is rejected and the next
-            // is tried.
+            // (`inadmissible`) and that lowers the leave-one-configuration-
+            // out RMS; one that fails is rejected (a note the first time) and
+            // the next is tried.
             let mut accepted = None;
             for (ci, t) in eligible {
                 let c = &cands[*ci];
+                let on = t
+                    .about
+                    .as_deref()
+                    .map(|a| format!(" on {a}"))
+                    .unwrap_or_default();
                 let new_terms = extended(&e.p, &current.terms, c);
                 let next = e.fit(&new_terms)?;
-                if let Some(why) = inadmissible(&e.p.ctx, &next.terms, &next.fit.x, &c.add) {
-                    let note = format!(
-                        "{}{} rejected: its estimate is not physical ({why})",
-                        c.effect,
-                        t.about
-                            .as_deref()
-                            .map(|a| format!(" on {a}"))
-                            .unwrap_or_default(),
-                    );
-                    if !notes.contains(&note) {
+                let why = match inadmissible(&e.p.ctx, &next.terms, &next.fit.x, &c.add) {
+                    Some(why) => Some(format!("rejected: its estimate is not physical ({why})")),
+                    None => {
+                        // Cross-validation: the effect must also predict the
+                        // configurations it was not fitted to better.
+                        let next = e.with_heldout(next)?;
+                        match (current.heldout_rms_um, next.heldout_rms_um) {
+                            (Some(before), Some(after)) if after >= before => Some(format!(
+                                "not added: significant (p = {:.1e}) but the \
+                                 leave-one-configuration-out RMS does not drop \
+                                 ({before:.1} -> {after:.1} um)",
+                                t.p_value
+                            )),
+                            _ => {
+                                accepted = Some((*ci, t.clone(), next));
+                                break;
+                            }
+                        }
+                    }
+                };
+                if let Some(why) = why {
+                    let key = format!("{}{on}", c.effect);
+                    if !rejected.contains(&key) {
+                        let note = format!("{key} {why} (step {})", steps.len() + 1);
                         (e.progress)(&note);
                         notes.push(note);
+                        rejected.push(key);
                     }
-                    e.p.set_estimate(&current.terms, &current.fit.x);
-                    continue;
+                    e.restore(&current)?;
                 }
-                accepted = Some((*ci, t.clone(), next));
-                break;
             }
             let Some((ci, t, next)) = accepted else {
                 if lof_significant {
@@ -1083,7 +1232,6 @@ fn run(
                     .unwrap_or_default(),
                 t.p_value
             ));
-            let next = e.with_heldout(next)?;
             let (var, x) = traced_variable(&e.p, c);
             plots.push(PlotSeries {
                 title: format!(
@@ -1127,10 +1275,11 @@ fn run(
             after_um: Vec::new(),
         });
     }
-    e.p.set_estimate(&current.terms, &current.fit.x);
+    e.restore(&current)?;
     Ok(Report {
         method: settings.method.name(),
         iterations: current.fit.iterations,
+        relinearisations: current.relinearisations,
         converged: current.fit.converged,
         parameters: e.parameters(&current),
         rms_um: current.rms_um,
@@ -1278,6 +1427,9 @@ pub fn validate(
     let p0 = &report.problem;
     let mut p = Problem::new(job, data, None)?;
     p.ctx = p0.ctx.clone();
+    // The calibrated model, nothing re-estimated on these data.
+    p.geometry = p0.geometry.clone();
+    p.relinearise()?;
     // Rows of the kinds the calibration used.
     p.rows.retain(|r| match r.kind {
         RowKind::Deflection => p0.kinds.deflections,

@@ -337,9 +337,17 @@ pub fn test(
     )
 }
 
+/// A column is dependent when less than this share of its norm is left
+/// after projecting out the columns before it. The solver refuses a pivot
+/// of the column-scaled information matrix at or below √ε (a share of
+/// 1.2e-4 in f64); the weights of a fit move the share, so the margin is
+/// ten.
+pub const INDEPENDENCE_SHARE: f64 = 1e-3;
+
 /// Greedy independent subset: of `extra`, the columns that are not
-/// (numerically) combinations of `base` and the extra columns kept before
-/// them, by modified Gram–Schmidt on the unweighted columns.
+/// (numerically, [`INDEPENDENCE_SHARE`]) combinations of `base` and the
+/// extra columns kept before them, by modified Gram–Schmidt on the
+/// unweighted columns.
 pub fn independent(d: &Design, base: &[usize], extra: &[usize]) -> Vec<usize> {
     let mut basis: Vec<Vec<f64>> = Vec::new();
     let mut push = |c: usize| -> bool {
@@ -357,7 +365,7 @@ pub fn independent(d: &Design, base: &[usize], extra: &[usize]) -> Vec<usize> {
             }
         }
         let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if n <= 1e-6 * n0 {
+        if n <= INDEPENDENCE_SHARE * n0 {
             return false;
         }
         v.iter_mut().for_each(|x| *x /= n);

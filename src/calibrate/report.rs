@@ -96,6 +96,9 @@ pub struct Report {
     pub iterations: usize,
     /// Whether IRLS converged.
     pub converged: bool,
+    /// Gauss–Newton relinearisations of the final fit (geometric terms of
+    /// absolute rows; 0 otherwise).
+    pub relinearisations: usize,
     /// The final model.
     pub parameters: Vec<Parameter>,
     /// RMS of the final model's position residuals \[µm\].
@@ -263,9 +266,14 @@ impl fmt::Display for Report {
         writeln!(f)?;
         writeln!(
             f,
-            "final model ({} iterations{}):",
+            "final model ({} iterations{}{}):",
             self.iterations,
-            if self.converged { ", converged" } else { "" }
+            if self.converged { ", converged" } else { "" },
+            if self.relinearisations > 0 {
+                format!(", {} Gauss-Newton relinearisations", self.relinearisations)
+            } else {
+                String::new()
+            }
         )?;
         for p in &self.parameters {
             writeln!(

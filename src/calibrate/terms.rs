@@ -41,9 +41,9 @@ pub struct Row {
     pub load_kg: f64,
     /// Joint values \[rad or m\].
     pub q: Vec<f64>,
-    /// Frames at `q` (nominal geometry).
+    /// Frames at `q` in the current model ([`super::Geometry`]).
     pub frames: Frames<f64, J>,
-    /// Marker position \[m, base frame\] at `q`.
+    /// Predicted marker position \[m, measurement frame\] at `q`.
     pub p: Vector3<f64>,
     /// Joint torques behind the row: the load's (deflection rows) or the
     /// links' own weight (absolute rows) \[N·m or N\].
@@ -53,8 +53,12 @@ pub struct Row {
     /// Time \[s\] relative to the data's mean time (absolute rows) or between
     /// the unloaded and the loaded measurement (deflection rows).
     pub dt: Option<f64>,
-    /// Measured `Δp` \[m\].
+    /// `Δp` \[m\]: measured minus predicted at the current model (absolute
+    /// rows), or the measured deflection.
     pub y: Vector3<f64>,
+    /// What was measured \[m\]: the position (absolute rows, measurement
+    /// frame) or the deflection.
+    pub measured: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
 }
