@@ -115,7 +115,7 @@ fn import_then_calibrate_with_validation() {
         assert!(per[k].as_f64().is_some(), "marker {k}");
     }
     // The CLI's declared model (full geometry, four points, IRLS) plus what
-    // its diagnosis adds: 3.38 mm on BL when written (docs/tiago.md); a
+    // its diagnosis adds: 3.51 mm on BL when written (docs/tiago.md); a
     // threshold with room for changes to the loop's defaults, well below
     // the registration-only 4.9 mm.
     assert!(bl < 4.0, "BL validation {bl} mm");
@@ -205,5 +205,129 @@ fn select_declares_the_registration_only() {
             .all(|n| n.starts_with("base.") || n.starts_with("marker")),
         "{names:?}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Imports both recordings into `dir`: (2021-11-30, 2021-11-26).
+fn import_both(dir: &Path) -> (PathBuf, PathBuf) {
+    let mut out = Vec::new();
+    for (day, name) in [("2021-11-30", "d30.csv"), ("2021-11-26", "d26.csv")] {
+        let input = data_dir().join(format!("qualisys_{day}_static_postures.csv"));
+        let file = dir.join(name);
+        ok(&robcal(&[
+            "import",
+            "figaroh-mocap",
+            input.to_str().unwrap(),
+            file.to_str().unwrap(),
+        ]));
+        out.push(file);
+    }
+    (out.remove(0), out.remove(0))
+}
+
+/// `calibrate --method ols --json` of `setup` on `data` (and `--validate`).
+fn calibrate_ols(setup: &Path, data: &Path, validate: Option<&Path>) -> Value {
+    let mut args = vec![
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--method",
+        "ols",
+        "--json",
+    ];
+    if let Some(v) = validate {
+        args.extend(["--validate", v.to_str().unwrap()]);
+    }
+    let o = robcal(&args);
+    ok(&o);
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+fn effects(v: &Value) -> Vec<String> {
+    v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            format!(
+                "{} {}",
+                e["effect"].as_str().unwrap(),
+                e["joint"].as_str().unwrap_or("")
+            )
+        })
+        .collect()
+}
+
+/// The protocol of docs/tiago.md ("The CLI, second session"), fixed on the
+/// training data and committed before its one validation run; these pins
+/// are that run's numbers (deterministic: OLS, no random input), so a change
+/// of the loop shows here and must be explained there.
+///
+/// - Registration only (base + four points, Gauss–Newton): 4.09 mm on
+///   training, the number of the independent core implementation
+///   (`host-tests/tests/tiago_common`, docs/tiago.md's table).
+/// - The chosen model (lowest training leave-one-out RMS:
+///   `setup-select.toml`, OLS; the IRLS runs' 3.38 and 3.75 mm are pinned in
+///   the docs only, they take a minute each in the test profile) predicts
+///   the other day's BL at 3.31 mm: better than registration (4.87) and
+///   offsets (4.23), not better than FIGAROH's full model (3.07).
+/// - Days swapped (fit and choose on 2021-11-26): BL 2.37 mm on 2021-11-30.
+#[test]
+fn protocol_pins_the_validation_run() {
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-proto-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (d30, d26) = import_both(&dir);
+    let select = setup_named(&dir, "setup-select.toml");
+    let full = setup(&dir);
+    let near = |a: f64, b: f64| (a - b).abs() < 0.005;
+
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        select.to_str().unwrap(),
+        "--data",
+        d30.to_str().unwrap(),
+        "--method",
+        "ols",
+        "--no-diagnose",
+        "--json",
+    ]);
+    ok(&o);
+    let reg: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let reg_mm = reg["rms_um"].as_f64().unwrap() / 1e3;
+    assert!(near(reg_mm, 4.09), "registration {reg_mm} mm");
+
+    // Choice on training: select-OLS has the lower leave-one-out RMS.
+    let chosen = calibrate_ols(&select, &d30, Some(&d26));
+    let other = calibrate_ols(&full, &d30, None);
+    let loo = |v: &Value| v["heldout_rms_um"].as_f64().unwrap() / 1e3;
+    assert!(near(loo(&chosen), 2.349), "{}", loo(&chosen));
+    assert!(near(loo(&other), 2.501), "{}", loo(&other));
+    assert_eq!(
+        effects(&chosen),
+        [
+            "geometry arm_6_joint",
+            "joint_compliance arm_6_joint",
+            "geometry arm_2_joint",
+            "joint_compliance arm_2_joint",
+            "nonlinear_stiffness arm_6_joint"
+        ]
+    );
+    let bl = chosen["validation"]["per_marker_rms_mm"]["1"]
+        .as_f64()
+        .unwrap();
+    assert!(near(bl, 3.311), "BL validation {bl} mm");
+    assert!(bl < 4.23, "not better than FIGAROH's joint offsets");
+
+    // Days swapped.
+    let rev = calibrate_ols(&select, &d26, Some(&d30));
+    let rev_other = calibrate_ols(&full, &d26, None);
+    assert!(loo(&rev) < loo(&rev_other));
+    let bl = rev["validation"]["per_marker_rms_mm"]["1"]
+        .as_f64()
+        .unwrap();
+    assert!(near(bl, 2.369), "BL validation, days swapped: {bl} mm");
     let _ = std::fs::remove_dir_all(&dir);
 }
