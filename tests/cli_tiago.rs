@@ -62,23 +62,26 @@ fn setup_named(dir: &Path, name: &str) -> PathBuf {
     copy
 }
 
+/// `robcal import figaroh-mocap` of the recording of `day` into
+/// `dir/<day>.csv`.
+fn import(dir: &Path, day: &str) -> PathBuf {
+    let input = data_dir().join(format!("qualisys_{day}_static_postures.csv"));
+    let out = dir.join(format!("{day}.csv"));
+    ok(&robcal(&[
+        "import",
+        "figaroh-mocap",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]));
+    out
+}
+
 #[test]
 fn import_then_calibrate_with_validation() {
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (train, held) = (dir.join("train.csv"), dir.join("held.csv"));
-    for (name, out, postures) in [
-        ("qualisys_2021-11-30_static_postures.csv", &train, 37),
-        ("qualisys_2021-11-26_static_postures.csv", &held, 62),
-    ] {
-        let input = data_dir().join(name);
-        let o = robcal(&[
-            "import",
-            "figaroh-mocap",
-            input.to_str().unwrap(),
-            out.to_str().unwrap(),
-        ]);
-        ok(&o);
+    let (train, held) = (import(&dir, "2021-11-30"), import(&dir, "2021-11-26"));
+    for (out, postures) in [(&train, 37), (&held, 62)] {
         let text = std::fs::read_to_string(out).unwrap();
         assert_eq!(text.lines().count(), 1 + 4 * postures);
     }
@@ -128,14 +131,7 @@ fn import_then_calibrate_with_validation() {
 fn one_marker_per_configuration_falls_back_to_ols() {
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-ols-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let all = dir.join("all.csv");
-    let input = data_dir().join("qualisys_2021-11-30_static_postures.csv");
-    ok(&robcal(&[
-        "import",
-        "figaroh-mocap",
-        input.to_str().unwrap(),
-        all.to_str().unwrap(),
-    ]));
+    let all = import(&dir, "2021-11-30");
     let text = std::fs::read_to_string(&all).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap();
@@ -172,14 +168,7 @@ fn one_marker_per_configuration_falls_back_to_ols() {
 fn select_declares_the_registration_only() {
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-sel-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let train = dir.join("train.csv");
-    let input = data_dir().join("qualisys_2021-11-30_static_postures.csv");
-    ok(&robcal(&[
-        "import",
-        "figaroh-mocap",
-        input.to_str().unwrap(),
-        train.to_str().unwrap(),
-    ]));
+    let train = import(&dir, "2021-11-30");
     let setup = setup_named(&dir, "setup-select.toml");
     let o = robcal(&[
         "calibrate",
@@ -206,23 +195,6 @@ fn select_declares_the_registration_only() {
         "{names:?}"
     );
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Imports both recordings into `dir`: (2021-11-30, 2021-11-26).
-fn import_both(dir: &Path) -> (PathBuf, PathBuf) {
-    let mut out = Vec::new();
-    for (day, name) in [("2021-11-30", "d30.csv"), ("2021-11-26", "d26.csv")] {
-        let input = data_dir().join(format!("qualisys_{day}_static_postures.csv"));
-        let file = dir.join(name);
-        ok(&robcal(&[
-            "import",
-            "figaroh-mocap",
-            input.to_str().unwrap(),
-            file.to_str().unwrap(),
-        ]));
-        out.push(file);
-    }
-    (out.remove(0), out.remove(0))
 }
 
 /// `calibrate --method ols --json` of `setup` on `data` (and `--validate`).
@@ -278,7 +250,7 @@ fn effects(v: &Value) -> Vec<String> {
 fn protocol_pins_the_validation_run() {
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-proto-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (d30, d26) = import_both(&dir);
+    let (d30, d26) = (import(&dir, "2021-11-30"), import(&dir, "2021-11-26"));
     let select = setup_named(&dir, "setup-select.toml");
     let full = setup(&dir);
     let near = |a: f64, b: f64| (a - b).abs() < 0.005;

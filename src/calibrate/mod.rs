@@ -292,76 +292,49 @@ impl Problem {
             k_bins: vec![Vec::new(); dof],
         };
 
-        // Rows.
+        // Rows: what was measured; frames, positions, torques and the
+        // absolute rows' `Δp` come from `relinearise` at the nominal model
+        // below.
         let chain = &robot.chain;
         let core = |what: &'static str| move |e: Error| CalibrationError::Core(what, e);
         let mut rows = Vec::new();
+        let mut row = |kind, config, marker, load_kg, q: &[f64], dt, measured: [f64; 3], line| {
+            let frames = chain.frames(q).map_err(core("forward kinematics"))?;
+            let measured = Vector3::from(measured);
+            rows.push(Row {
+                kind,
+                group: group_of(config),
+                config,
+                marker,
+                load_kg,
+                q: q.to_vec(),
+                frames,
+                p: Vector3::zeros(),
+                tau: vec![0.0; dof],
+                load_force: None,
+                dt,
+                y: measured,
+                measured,
+                line,
+            });
+            Ok::<(), CalibrationError>(())
+        };
         for d in &data.deflections {
             let (loaded, unloaded) = (&data.observations[d.rows[0]], &data.observations[d.rows[1]]);
-            let frames = chain.frames(&d.q).map_err(core("forward kinematics"))?;
-            let m = markers
-                .iter()
-                .find(|m| m.0 == d.marker)
-                .map(|m| m.1)
-                .unwrap_or_default();
-            let load = PointLoad {
-                mass_kg: d.load_kg,
-                com_m: com,
-                gravity_mps2: gravity,
-            };
-            let wrench = load.wrench(&frames);
-            let mut tau = vec![0.0; dof];
-            elastostatic::joint_torques(&frames, &wrench, &mut tau)
-                .map_err(core("load torques"))?;
             let dt = match (loaded.t_s, unloaded.t_s) {
                 (Some(a), Some(b)) => Some(a - b),
                 _ => None,
             };
-            rows.push(Row {
-                kind: RowKind::Deflection,
-                group: group_of(d.config),
-                config: d.config,
-                marker: d.marker,
-                load_kg: d.load_kg,
-                q: d.q.clone(),
-                p: frames.point_m(&m),
-                frames,
-                tau,
-                load_force: Some((wrench.point_m, wrench.force_n)),
-                dt,
-                y: Vector3::from(d.dp_m),
-                measured: Vector3::from(d.dp_m),
-                line: d.lines[0],
-            });
+            let kind = RowKind::Deflection;
+            row(
+                kind, d.config, d.marker, d.load_kg, &d.q, dt, d.dp_m, d.lines[0],
+            )?;
         }
         if use_absolute {
             for o in data.unloaded() {
-                let frames = chain.frames(&o.q).map_err(core("forward kinematics"))?;
-                let m = markers
-                    .iter()
-                    .find(|m| m.0 == o.marker)
-                    .map(|m| m.1)
-                    .unwrap_or_default();
-                let p = frames.point_m(&m);
-                let mut tau = vec![0.0; dof];
-                elastostatic::gravity_torques(chain, &frames, &gravity, &mut tau)
-                    .map_err(core("gravity torques"))?;
-                rows.push(Row {
-                    kind: RowKind::Absolute,
-                    group: group_of(o.config),
-                    config: o.config,
-                    marker: o.marker,
-                    load_kg: 0.0,
-                    q: o.q.clone(),
-                    frames,
-                    p,
-                    tau,
-                    load_force: None,
-                    dt: o.t_s.map(|t| t - t_mean),
-                    y: Vector3::from(o.p_m) - p,
-                    measured: Vector3::from(o.p_m),
-                    line: o.line,
-                });
+                let dt = o.t_s.map(|t| t - t_mean);
+                let kind = RowKind::Absolute;
+                row(kind, o.config, o.marker, 0.0, &o.q, dt, o.p_m, o.line)?;
             }
         }
         if rows.is_empty() {
@@ -440,6 +413,7 @@ impl Problem {
             weight,
             geometry: Geometry::nominal(chain, &markers),
         };
+        p.relinearise()?;
         let d = p.design(&model);
         let all: Vec<usize> = (0..model.len()).collect();
         let kept = problem::independent(&d, &[], &all);
