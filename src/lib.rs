@@ -1,4 +1,47 @@
 #![doc = include_str!("../README.md")]
+//!
+//! # Crate map
+//!
+//! How a measurement flows through robcal, with the paper's equation
+//! numbers (Klimchik et al., *Robust algorithm for calibration of robotic
+//! manipulator model*):
+//!
+//! ```text
+//!  URDF, setup, CSV ──io──► Job + Measurements                                 (std)
+//!                              │
+//!                              ▼
+//!  robot    Chain ──frames──► Frames, joint torques of a load / own weight      (no_std)
+//!                              │
+//!  model    Sample (one measured point at the current model)
+//!           Param::column ──► Bᵢ = [Jᵢ Aᵢ] in reported units           (eq. 2, 3, 4)
+//!                              │
+//!  estimate Accumulator  Λ = Σ BᵀW²B, η = Σ BᵀW²Δp                    (eq. 9, 10)
+//!           Factor → Solution  X̂ = Λ⁻¹η, covariances            (eq. 6–8, 11, 13)
+//!           Reweightable: OLS, WLS, iterative WLS, weights from σ    (eq. 12, 14)
+//!           rank (what is identifiable), nested (F test of a candidate effect)
+//!                              │
+//!  calibrate  the closed loop: fit the declared model (Gauss–Newton),           (std)
+//!             diagnose the residuals, add the effect that explains them,
+//!             refit, report before/after; validate on another file
+//!                              │
+//!  bin/robcal  `robcal calibrate`, `robcal import` (data contract)              (cli)
+//! ```
+//!
+//! | module | what | needs |
+//! |---|---|---|
+//! | [`robot`] | the serial chain, forward kinematics, loads and joint torques | — |
+//! | [`model`] | [`model::Param`] (every parameter and effect, with units), [`model::Sample`], the columns, the device's [`model::Layout`] | — |
+//! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests | — |
+//! | [`Error`] | the core's one error type | — |
+//! | `io` | the data contract's files: URDF, setup TOML, measurement CSV, importers | `std` |
+//! | `calibrate` | the one calibration engine: `calibrate::calibrate` | `std` |
+//!
+//! Everything without a feature is `no_std`, allocation-free and free of
+//! `unsafe`; it builds for `thumbv7em-none-eabihf` and `thumbv7m-none-eabi`
+//! and runs in `examples/firmware` on a Cortex-M under QEMU. Sizes are
+//! nalgebra dimensions: `Const<N>` on a device, `Dyn` on the host.
+//! `docs/architecture.md` has the same map, where each equation lives, and
+//! where to add an effect or an importer.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
@@ -6,56 +49,17 @@
 // three parallel arrays would hide them.
 #![allow(clippy::needless_range_loop)]
 
-// How data flows through the crate (the paper's equation numbers):
-//
-//   chain,         robot geometry, forward kinematics        (URDF)
-//   kinematics
-//     ↓
-//   geometric,     identification rows  Bᵢ = [Jᵢ  Aᵢ]         (eq. 2, 3, 4)
-//   elastostatic,  named by `layout`, which also reports what the data
-//   layout         cannot identify
-//     ↓
-//   accumulator    Λ = Σ Bᵀ W² B,  η = Σ Bᵀ W² Δp              (eq. 10)
-//     ↓
-//   solve          X̂ = Λ⁻¹ η and its covariances               (eq. 6–8, 10–13)
-//
-//   grouped, irls  per-configuration, per-axis statistics and the
-//                  iteratively reweighted fit                 (eq. 14, section 5)
-//
-//   diagnose,      does an effect the model lacks explain the residuals?
-//   stats          nested F tests from the accumulated cross-products
-//
-//   kr270          the paper's published numbers (section 5)
-//   paper (std)    the paper's experiment end to end: rows, fits, and the
-//                  Gauss–Newton refinement on the exact deflection model
-//
-// Everything above is no_std and allocation-free. With the `std` feature,
-// `io` reads the data contract's files (URDF, setup TOML, measurement CSV).
-
-pub mod accumulator;
 #[cfg(feature = "std")]
 pub mod calibrate;
-pub mod chain;
-pub mod diagnose;
-pub mod elastostatic;
 mod error;
-pub mod geometric;
-pub mod grouped;
+pub mod estimate;
 #[cfg(feature = "std")]
 pub mod io;
-pub mod irls;
-pub mod kinematics;
-pub mod kr270;
-pub mod layout;
-#[cfg(feature = "std")]
-pub mod paper;
-pub mod solve;
-pub mod stats;
-pub mod weights;
+pub mod model;
+pub mod robot;
 
-pub use accumulator::{Accumulator, Block};
-pub use chain::{Chain, Joint, JointKind, LinkInertia};
 pub use error::Error;
-pub use grouped::GroupedStats;
-pub use irls::{Fit, IrlsSettings, Iteration, Reweightable};
-pub use solve::Solution;
+pub use estimate::{
+    Accumulator, Block, Fit, GroupedStats, IrlsSettings, Iteration, Reweightable, Solution,
+};
+pub use robot::{Chain, Joint, JointKind, LinkInertia};

@@ -7,13 +7,12 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt::{error, info};
 use defmt_semihosting as _; // the global defmt logger (semihosting stdout)
 use nalgebra::Vector3;
-use robcal::irls::Reweightable;
-use robcal::weights::RobustWeight;
-use robcal::{Accumulator, Block, Error, JointKind, LinkInertia};
+use robcal::estimate::RobustWeight;
+use robcal::{Accumulator, Block, Error, JointKind, LinkInertia, Reweightable};
 use semihosting::process::exit;
 
 use crate::kr270::{self, Kr270, G, HISTORY};
-use crate::problem::{self, check, rejects_bad_block, stream, Lcg, N};
+use crate::problem::{self, check, rejects_bad_block, stream, Dn, Lcg, N};
 use crate::SelfTest;
 
 /// Exit status of a failed check (a panic exits 101, a HardFault 3).
@@ -61,8 +60,8 @@ fn main() -> ! {
 /// logs the estimates. Returns whether every check passed.
 #[inline(never)]
 fn fit(fault: SelfTest) -> bool {
-    let mut acc32 = Accumulator::<f32, N>::new();
-    let mut acc64 = Accumulator::<f64, N>::new();
+    let mut acc32 = Accumulator::<f32, Dn>::new();
+    let mut acc64 = Accumulator::<f64, Dn>::new();
     if let Err(e) = stream(&mut acc32, &mut acc64, |b| info!("first block: {}", b)) {
         fail("update refused a valid block", e);
     }
@@ -156,7 +155,7 @@ fn kr270_report(fit: &kr270::Estimate<f32>, fault: SelfTest) -> bool {
     for (i, p) in params.iter().enumerate() {
         info!(
             "{=str}  {=f64} +/- {=f64}  {=f64}  {=f64}  {=f64}",
-            robcal::kr270::PAPER_SYMBOLS[i],
+            robcal_paper::kr270::PAPER_SYMBOLS[i],
             p.x,
             3.0 * p.sd,
             expected[i],
@@ -203,7 +202,7 @@ fn kr270_rows(k: &mut usize, src: &Kr270<f32>) {
 
 #[inline(never)]
 fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
-    let ones = [nalgebra::Vector3::repeat(1.0f32); G];
+    let ones = [nalgebra::Vector3::new(1.0f32, 1.0, 1.0); G];
     let acc = phase(
         k,
         "kr270 pass: weighted statistics f32 (270 rows streamed)",
@@ -226,23 +225,25 @@ fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
 }
 
 #[inline(never)]
-fn solution_x(acc: &Accumulator<f32, { kr270::N }>) -> nalgebra::SVector<f32, { kr270::N }> {
+fn solution_x(acc: &Accumulator<f32, kr270::Dn>) -> nalgebra::SVector<f32, { kr270::N }> {
     acc.solve().unwrap_or_else(|e| fail("solve", e)).x
 }
 
 #[inline(never)]
 fn kr270_iteration(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSettings<f32>) {
     let active = [true; kr270::N];
-    let ols = phase(k, "kr270 OLS start f32 (3 passes, 2 solves)", || {
-        src.fit_ols::<G>(&active)
+    let mut weights = [nalgebra::Vector3::zeros(); G];
+    let mut sigma = [nalgebra::Vector3::zeros(); G];
+    phase(k, "kr270 OLS start f32 (3 passes, 2 solves)", || {
+        src.fit_ols(&active, &mut weights, &mut sigma)
     })
     .unwrap_or_else(|e| fail("OLS", e));
     let one = phase(
         k,
         "kr270 one IRLS iteration f32 (weights, 3 passes, solve, sandwich)",
         || {
-            robcal::irls::robust_weights::<f32, G>(&ols.sigma, &settings.weight)
-                .and_then(|w| src.fit_weighted::<G>(&w, &active))
+            robcal::estimate::robust_weights(&sigma, &settings.weight, &mut weights)
+                .and_then(|()| src.fit_weighted(&weights, &active, &mut sigma))
         },
     )
     .unwrap_or_else(|e| fail("one iteration", e));
@@ -258,10 +259,22 @@ fn kr270_irls(
     settings: &robcal::IrlsSettings<f32>,
 ) -> kr270::Estimate<f32> {
     let mut history = heapless::Vec::<_, HISTORY>::new();
+    let mut weights = [nalgebra::Vector3::zeros(); G];
+    let mut sigma = [nalgebra::Vector3::zeros(); G];
     let fit = phase(
         k,
         "kr270 whole iterative WLS f32 (OLS start + iterations)",
-        || src.fit_irls::<G, HISTORY>(settings, &[true; kr270::N], &mut history),
+        || {
+            src.fit_irls(
+                settings,
+                &[true; kr270::N],
+                &mut weights,
+                &mut sigma,
+                |it| {
+                    let _ = history.push(*it);
+                },
+            )
+        },
     )
     .unwrap_or_else(|e| fail("iterative WLS", e));
     info!("convergence of k21 (Figure 3): iteration, k21, 3 sigma, change [sigma]");
@@ -300,7 +313,7 @@ fn fail(what: &str, e: Error) -> ! {
 /// are logged field by field in `main`.
 #[inline(never)]
 fn log_types() {
-    let e = Accumulator::<f32, N>::new().solve().err();
+    let e = Accumulator::<f32, Dn>::new().solve().err();
     info!("Error (solving an empty accumulator): {}", e);
     info!("RobustWeight: {}", RobustWeight::new(10e-6f32, 1.0).ok());
     let joint = robcal::Joint::from_urdf(
@@ -362,10 +375,10 @@ fn benchmarks(k: &mut usize) {
 fn bench_precision<T: nalgebra::RealField + Copy>(
     k: &mut usize,
     precision: &str,
-    convert: impl Fn(&Block<f64, N>) -> Block<T, N>,
+    convert: impl Fn(&Block<f64, Dn>) -> Block<T, Dn>,
 ) -> bool {
     let mut gen = Lcg::new(problem::SEED ^ 0xBEEF);
-    let mut acc = Accumulator::<T, N>::new();
+    let mut acc = Accumulator::<T, Dn>::new();
     for _ in 0..8 {
         let _ = acc.update(&convert(&gen.block()));
     }

@@ -20,20 +20,24 @@
 //!
 //! Units: the estimate in µrad/(N·m) (the layout's unit), `Δp` and σ in m.
 
-use nalgebra::{Isometry3, RealField, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
-use robcal::elastostatic::{joint_torques, PointLoad};
-use robcal::layout::{Layout, Marker};
-use robcal::weights::RobustWeight;
+use nalgebra::{
+    Const, Isometry3, RealField, SMatrix, SVector, Translation3, UnitQuaternion, Vector3,
+};
+use robcal::estimate::RobustWeight;
+use robcal::model::{Layout, Marker, Sample};
+use robcal::robot::{joint_torques, PointLoad};
 use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Joint, JointKind, Reweightable};
 
 // The generated data: `Q_CDEG`, `LOAD_DKG`, `KEYS`, `DP_NM`, `DP_QUANTUM_M`
 // and the host's reference result `HOST_*`.
 include!("kr270_table.rs");
 
-/// Parameters: k21…k25, k3, k4, k5, k6 (`robcal::kr270::PARAM_NAMES`).
-pub const N: usize = robcal::kr270::PARAMS;
+/// Parameters: k21…k25, k3, k4, k5, k6 (`robcal_paper::kr270::PARAM_NAMES`).
+pub const N: usize = robcal_paper::kr270::PARAMS;
+/// The parameters as a nalgebra dimension.
+pub type Dn = Const<N>;
 /// Groups: the 15 configurations of Table 2.
-pub const G: usize = robcal::kr270::CONFIGS;
+pub const G: usize = robcal_paper::kr270::CONFIGS;
 /// Movable joints.
 pub const J: usize = 6;
 
@@ -92,7 +96,7 @@ pub fn chain<T: RealField + Copy>() -> Result<Chain<T, J>, Error> {
 /// The paper's layout: k21…k25 (A2's compliance by angle, one per q2 group
 /// of Table 2), then k3…k6.
 pub fn layout<T: RealField + Copy>(chain: &Chain<T, J>) -> Result<Layout<N>, Error> {
-    robcal::kr270::layout(chain)
+    robcal_paper::kr270::layout(chain)
 }
 
 fn c<T: RealField + Copy>(x: f64) -> T {
@@ -129,14 +133,14 @@ impl<T: RealField + Copy> Kr270<T> {
         let layout = layout(&chain)?;
         let v = |a: [f64; 3]| Vector3::new(c(a[0]), c(a[1]), c(a[2]));
         let markers = core::array::from_fn(|i| Marker {
-            id: i as u8 + 1,
-            xyz_m: v(robcal::kr270::MARKERS_M[i]),
+            index: i as u8,
+            xyz_m: v(robcal_paper::kr270::MARKERS_M[i]),
         });
         Ok(Self {
             chain,
             layout,
             markers,
-            com_m: v(robcal::kr270::LOAD_COM_M),
+            com_m: v(robcal_paper::kr270::LOAD_COM_M),
             gravity_mps2: v([0.0, 0.0, -9.80665]),
         })
     }
@@ -157,10 +161,13 @@ impl<T: RealField + Copy> Kr270<T> {
             gravity_mps2: self.gravity_mps2,
         };
         let mut tau = [T::zero(); J];
-        joint_torques(&frames, &load.wrench(&frames), &mut tau)?;
+        let wrench = load.wrench(&frames);
+        joint_torques(&frames, &wrench, &mut tau)?;
         let mut blocks = [SMatrix::zeros(); 3];
         for (b, m) in blocks.iter_mut().zip(&self.markers) {
-            self.layout.fill(&frames, m, &tau, b)?;
+            let point = frames.point_m(&m.xyz_m);
+            let sample = Sample::deflection(&frames, point, m.index, &tau, Some(wrench));
+            self.layout.fill(&sample, b)?;
         }
         Ok(blocks)
     }
@@ -192,7 +199,7 @@ impl<T: RealField + Copy> Kr270<T> {
     }
 }
 
-impl<T: RealField + Copy> Reweightable<T, N> for Kr270<T> {
+impl<T: RealField + Copy> Reweightable<T, Dn> for Kr270<T> {
     fn group_count(&self) -> usize {
         G
     }
@@ -204,7 +211,7 @@ impl<T: RealField + Copy> Reweightable<T, N> for Kr270<T> {
         &self,
         weights: &[Vector3<T>],
         sigma: Option<&[Vector3<T>]>,
-    ) -> Result<Accumulator<T, N>, Error> {
+    ) -> Result<Accumulator<T, Dn>, Error> {
         if weights.len() != G || sigma.is_some_and(|s| s.len() != G) {
             return Err(Error::Mismatch {
                 what: "one weight (and sigma) per group",
@@ -224,7 +231,7 @@ impl<T: RealField + Copy> Reweightable<T, N> for Kr270<T> {
     /// One pass over the table: the residuals `Δp − B x` directly (no
     /// difference of large sums), σ per configuration and axis with the
     /// global correction `m / (m − parameters)`, as
-    /// [`robcal::GroupedStats::residual_sigma`].
+    /// [`robcal::GroupedStats::residual_sigma_into`].
     fn residual_sigma_into(
         &self,
         x: &SVector<T, N>,
@@ -312,8 +319,8 @@ pub struct Estimate<T: RealField + Copy> {
     pub converged: bool,
 }
 
-impl<T: RealField + Copy> From<&Fit<T, N, G>> for Estimate<T> {
-    fn from(fit: &Fit<T, N, G>) -> Self {
+impl<T: RealField + Copy> From<&Fit<T, Dn>> for Estimate<T> {
+    fn from(fit: &Fit<T, Dn>) -> Self {
         Self {
             x: fit.solution.x,
             sd: fit.std(),
@@ -357,7 +364,7 @@ fn to_f64<T: RealField + Copy>(x: T) -> f64 {
 #[cfg(not(target_os = "none"))]
 pub fn grouped<T: RealField + Copy>(
     source: &Kr270<T>,
-) -> Result<robcal::GroupedStats<T, N, G>, Error> {
+) -> Result<robcal::GroupedStats<T, Dn, G>, Error> {
     let mut stats = robcal::GroupedStats::new();
     source.stream(|g, b, dp| stats.update(g as i32, b, dp))?;
     Ok(stats)

@@ -132,13 +132,20 @@ fn main() {
 /// also against `GroupedStats` on the same rows.
 #[cfg(not(target_os = "none"))]
 fn host_kr270(fault: SelfTest) -> bool {
-    use kr270::{check, Kr270, G, HISTORY, N};
-    use robcal::irls::{Fit, Reweightable};
+    use kr270::{check, Dn, Kr270, G, N};
+    use robcal::{Fit, Reweightable};
 
-    fn run<T: nalgebra::RealField + Copy, R: Reweightable<T, N>>(src: &R) -> Fit<T, N, G> {
-        let mut h = heapless::Vec::<_, HISTORY>::new();
-        src.fit_irls(&kr270::settings().unwrap(), &[true; N], &mut h)
-            .expect("fit")
+    fn run<T: nalgebra::RealField + Copy, R: Reweightable<T, Dn>>(src: &R) -> Fit<T, Dn> {
+        let mut weights = [nalgebra::Vector3::zeros(); G];
+        let mut sigma = [nalgebra::Vector3::zeros(); G];
+        src.fit_irls(
+            &kr270::settings().unwrap(),
+            &[true; N],
+            &mut weights,
+            &mut sigma,
+            |_| {},
+        )
+        .expect("fit")
     }
     let expected = kr270_expected(fault);
     let s32 = Kr270::<f32>::new().expect("model");
@@ -169,7 +176,7 @@ fn host_kr270(fault: SelfTest) -> bool {
     for i in 0..N {
         println!(
             "{:>5} {:10.6} +/- {:.6} {:12.2e} {:9.2e} {:12.2e}",
-            robcal::kr270::PAPER_SYMBOLS[i],
+            robcal_paper::kr270::PAPER_SYMBOLS[i],
             p32[i].x,
             3.0 * p32[i].sd,
             p32[i].x_sigmas,

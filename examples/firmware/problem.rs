@@ -9,11 +9,13 @@
 //! every run sees the same numbers and the checks below are deterministic;
 //! nothing is stored, every block is generated, streamed in and dropped.
 
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::{Const, SMatrix, SVector, Vector3};
 use robcal::{Accumulator, Block, Error, Solution};
 
 /// Parameters.
 pub const N: usize = 9;
+/// The parameters as a nalgebra dimension.
+pub type Dn = Const<N>;
 /// Measurement blocks (3 rows each) streamed in: 180 equations.
 pub const BLOCKS: usize = 60;
 /// Seed of the row generator.
@@ -57,7 +59,7 @@ impl Lcg {
 
     /// The next measurement: three rows of `B`, `Δp = B X_true + ε`, unit
     /// weights and the known σ per row.
-    pub fn block(&mut self) -> Block<f64, N> {
+    pub fn block(&mut self) -> Block<f64, Dn> {
         let b = SMatrix::<f64, 3, N>::from_fn(|_, _| self.uniform());
         let noise = Vector3::from_fn(|_, _| self.uniform() * SIGMA * SQRT_3);
         let dp = b * SVector::<f64, N>::from(X_TRUE) + noise;
@@ -66,7 +68,7 @@ impl Lcg {
 }
 
 /// The same block in single precision.
-pub fn to_f32(b: &Block<f64, N>) -> Block<f32, N> {
+pub fn to_f32(b: &Block<f64, Dn>) -> Block<f32, Dn> {
     Block {
         b: b.b.cast(),
         dp: b.dp.cast(),
@@ -82,9 +84,9 @@ pub fn to_f32(b: &Block<f64, N>) -> Block<f32, N> {
 // before the next step (the firmware's stack budget).
 #[inline(never)]
 pub fn stream(
-    acc32: &mut Accumulator<f32, N>,
-    acc64: &mut Accumulator<f64, N>,
-    mut first: impl FnMut(&Block<f32, N>),
+    acc32: &mut Accumulator<f32, Dn>,
+    acc64: &mut Accumulator<f64, Dn>,
+    mut first: impl FnMut(&Block<f32, Dn>),
 ) -> Result<(), Error> {
     let mut gen = Lcg::new(SEED);
     for k in 0..BLOCKS {
@@ -105,7 +107,7 @@ pub fn stream(
 // Not inlined: its temporaries get their own stack frame, which is gone
 // before the next step (the firmware's stack budget).
 #[inline(never)]
-pub fn rejects_bad_block(acc: &mut Accumulator<f32, N>) -> Option<Error> {
+pub fn rejects_bad_block(acc: &mut Accumulator<f32, Dn>) -> Option<Error> {
     let before = acc.clone();
     let mut bad = to_f32(&Lcg::new(SEED).block());
     bad.dp[1] = f32::NAN;
@@ -144,12 +146,12 @@ pub struct Verdict {
 // before the next step (the firmware's stack budget).
 #[inline(never)]
 pub fn check(
-    s32: &Solution<f32, N>,
-    s64: &Solution<f64, N>,
-    acc64: &Accumulator<f64, N>,
+    s32: &Solution<f32, Dn>,
+    s64: &Solution<f64, Dn>,
+    acc64: &Accumulator<f64, Dn>,
     x_true: &[f64; N],
 ) -> Verdict {
-    let sd = robcal::solve::std_devs(&s64.cov_sandwich(&acc64.middle()));
+    let sd = robcal::estimate::std_devs(&s64.cov_sandwich(&acc64.middle()));
     let params = core::array::from_fn(|i| {
         let x64 = s64.x[i];
         let x32 = s32.x[i];

@@ -176,7 +176,8 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         );
     }
     if let Some(v) = &validation_data {
-        report.validation = Some(calibrate::validate(&report, &job, v).map_err(|e| e.to_string())?);
+        report.validation =
+            Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
     }
     if let Some(dir) = &a.plots {
         write_plots(dir, &report)?;
@@ -212,7 +213,7 @@ fn to_json(r: &Report) -> Value {
         "heldout_rms_um": opt_num(r.heldout_rms_um),
         "effects": r.effects.iter().map(|s| {
             let mut e = json!({
-                "effect": s.effect,
+                "effect": s.effect.name(),
                 "joint": s.joint,
                 "p_value": num(s.p_value),
                 "rms_um_before": num(s.rms_um_before),
@@ -242,22 +243,6 @@ fn to_json(r: &Report) -> Value {
     v
 }
 
-/// Writes `path` atomically: a temporary file in the same directory, then
-/// a rename.
-fn write_atomic(path: &Path, content: &str) -> Result<(), String> {
-    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(content.as_bytes())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("{}: cannot write: {e}", path.display())
-    })
-}
-
 fn slug(s: &str) -> String {
     s.chars()
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
@@ -279,7 +264,8 @@ fn write_plots(dir: &Path, r: &Report) -> Result<(), String> {
         ));
     }
     for (path, svg) in svgs {
-        write_atomic(&path, &svg)?;
+        robcal::io::write_atomic(&path, svg.as_bytes())
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
     }
     Ok(())
 }

@@ -1,74 +1,141 @@
 //! The effect library (data contract §6): for a model, every effect it
-//! lacks, as the [`Term`]s to test and how the model changes when the
-//! effect is added.
+//! lacks, as the [`Param`]s to test and how the model changes when the
+//! effect is added; and which estimates of an added effect are physical.
+//!
+//! To add an effect: a [`Param`] with its column (`crate::model::columns`)
+//! and unit (`crate::model::param`), a variant of [`Effect`] with its
+//! contract name, its candidates in [`candidates`], its physical limit (if
+//! any) in [`inadmissible`], and a test in `host-tests/tests/loop_effects.rs`
+//! that simulates data with the effect and checks that the loop names it.
 
-use super::terms::{Context, Term};
+use super::names::Names;
+use super::rows::{revolute, DataKinds};
+use super::Policy;
+use crate::model::Param;
 
-/// Effect names of the data contract, §6.
-pub const EFFECTS: [&str; 12] = [
-    "compensator",
-    "joint_compliance",
-    "nonlinear_stiffness",
-    "backlash",
-    "link_compliance",
-    "load_com",
-    "drift",
-    "joint_offset",
-    "geometry",
-    "gear_cyclic",
-    "marker",
-    "base_frame",
-];
+/// An effect of the library (data contract §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// A joint's compliance varies with that joint's angle (gravity
+    /// compensator): one compliance per angle.
+    Compensator,
+    /// A joint compliance that the declared model left out.
+    JointCompliance,
+    /// A joint's deflection is not linear in its torque (`τ|τ|`).
+    NonlinearStiffness,
+    /// A joint deflects by a constant angle in the direction of its torque.
+    Backlash,
+    /// A link bends under the load.
+    LinkCompliance,
+    /// The load acts at another point than the declared one.
+    LoadCom,
+    /// The measurement drifts with time (needs `t`).
+    Drift,
+    /// A joint's zero is off.
+    JointOffset,
+    /// A joint frame's position or orientation is off.
+    Geometry,
+    /// A joint has a periodic error over its angle (first harmonic).
+    GearCyclic,
+    /// A marker sits elsewhere than declared.
+    Marker,
+    /// The base is placed or turned elsewhere than declared.
+    BaseFrame,
+}
+
+impl Effect {
+    /// Every effect, in the contract's order.
+    pub const ALL: [Effect; 12] = [
+        Effect::Compensator,
+        Effect::JointCompliance,
+        Effect::NonlinearStiffness,
+        Effect::Backlash,
+        Effect::LinkCompliance,
+        Effect::LoadCom,
+        Effect::Drift,
+        Effect::JointOffset,
+        Effect::Geometry,
+        Effect::GearCyclic,
+        Effect::Marker,
+        Effect::BaseFrame,
+    ];
+
+    /// Its name in the data contract (§6).
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::Compensator => "compensator",
+            Effect::JointCompliance => "joint_compliance",
+            Effect::NonlinearStiffness => "nonlinear_stiffness",
+            Effect::Backlash => "backlash",
+            Effect::LinkCompliance => "link_compliance",
+            Effect::LoadCom => "load_com",
+            Effect::Drift => "drift",
+            Effect::JointOffset => "joint_offset",
+            Effect::Geometry => "geometry",
+            Effect::GearCyclic => "gear_cyclic",
+            Effect::Marker => "marker",
+            Effect::BaseFrame => "base_frame",
+        }
+    }
+
+    /// Whether the effect is traced along a joint's angle (its plot's
+    /// variable), rather than along a torque, the load or the time.
+    pub fn follows_angle(self) -> bool {
+        matches!(
+            self,
+            Effect::Compensator | Effect::JointOffset | Effect::GearCyclic | Effect::Geometry
+        )
+    }
+}
+
+impl core::fmt::Display for Effect {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// One candidate extension of the model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
-    /// Contract name (§6).
-    pub effect: &'static str,
+    /// The effect.
+    pub effect: Effect,
     /// Joint index, for per-joint effects.
     pub joint: Option<usize>,
-    /// Marker index (into [`Context::markers`]), for `marker`.
-    pub marker: Option<usize>,
-    /// Columns whose significance is tested (added to the model as it is).
-    pub test: Vec<Term>,
-    /// Terms the model loses when the effect is accepted (a constant
+    /// Marker index, for [`Effect::Marker`].
+    pub marker: Option<u8>,
+    /// Parameters whose significance is tested (added to the model as it is).
+    pub test: Vec<Param>,
+    /// Parameters the model loses when the effect is accepted (a constant
     /// compliance replaced by its angle bins).
-    pub remove: Vec<Term>,
-    /// Terms the model gains when the effect is accepted.
-    pub add: Vec<Term>,
+    pub remove: Vec<Param>,
+    /// Parameters the model gains when the effect is accepted.
+    pub add: Vec<Param>,
 }
 
-/// What the data can show: which kinds of rows there are.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DataKinds {
-    /// Deflection rows (a load).
-    pub deflections: bool,
-    /// Absolute rows (geometric calibration).
-    pub absolute: bool,
-    /// A time column.
-    pub time: bool,
+impl Candidate {
+    /// `on <joint>` or `on marker <id>` (empty for a model-wide effect).
+    pub fn about(&self, names: &Names) -> Option<String> {
+        if let Some(j) = self.joint {
+            return Some(names.joint(j as u8).to_string());
+        }
+        self.marker
+            .map(|m| format!("marker {}", names.marker_id(m)))
+    }
 }
 
-/// Joint angle bins that make a compensator candidate: 2 to 8 distinct
-/// angles, each seen in at least two configurations.
-pub fn compensator_eligible(bin_configs: &[usize]) -> bool {
-    (2..=8).contains(&bin_configs.len()) && bin_configs.iter().all(|&n| n >= 2)
-}
-
-/// Every candidate effect `model` lacks. `compensator_ok[j]` says whether
-/// joint `j`'s angle bins make a compensator candidate.
+/// Every candidate effect `model` lacks, given the data's row kinds, the
+/// angle bins of each joint and whether they make a compensator candidate.
 pub fn candidates(
-    ctx: &Context,
-    model: &[Term],
+    names: &Names,
+    model: &[Param],
     kinds: DataKinds,
+    bins: &[Vec<i32>],
     compensator_ok: &[bool],
 ) -> Vec<Candidate> {
-    let has = |t: &Term| model.contains(t);
-    let any = |f: &dyn Fn(&Term) -> bool| model.iter().any(f);
+    let has = |p: &Param| model.contains(p);
+    let any = |f: &dyn Fn(&Param) -> bool| model.iter().any(f);
     let mut out = Vec::new();
-    let dof = ctx.joint_names.len();
-    let revolute = |j: usize| ctx.joint_kinds[j] == crate::chain::JointKind::Revolute;
-    let cand = |effect, joint, test: Vec<Term>, remove: Vec<Term>, add: Vec<Term>| Candidate {
+    let cand = |effect, joint, test: Vec<Param>, remove: Vec<Param>, add: Vec<Param>| Candidate {
         effect,
         joint,
         marker: None,
@@ -76,85 +143,161 @@ pub fn candidates(
         remove,
         add,
     };
-    let any_compliance = any(&|t| matches!(t, Term::Compliance(_) | Term::ComplianceAt(..)));
-    for j in 0..dof {
-        let k = Term::Compliance(j);
-        let binned = any(&|t| matches!(t, Term::ComplianceAt(i, _) if *i == j));
+    let any_compliance = any(&|p| p.is_compliance());
+    for j in 0..names.joints.len() {
+        let joint = j as u8;
+        let k = Param::Compliance { joint };
+        let binned = any(&|p| matches!(p, Param::ComplianceAt { joint: i, .. } if *i == joint));
         let compliant = has(&k) || binned;
         if kinds.deflections || kinds.absolute {
             if !binned && compensator_ok.get(j).copied().unwrap_or(false) {
-                let bins: Vec<Term> = (0..ctx.bins[j].len())
-                    .map(|b| Term::ComplianceAt(j, b))
+                let per_bin: Vec<Param> = bins[j]
+                    .iter()
+                    .map(|&angle_urad| Param::ComplianceAt { joint, angle_urad })
                     .collect();
+                // With a constant k in the model, the bins minus one are
+                // tested (the constant stays); on acceptance k is replaced by
+                // one compliance per bin.
                 let (test, remove) = if has(&k) {
-                    (bins[1..].to_vec(), vec![k])
+                    (per_bin[1..].to_vec(), vec![k])
                 } else {
-                    (bins.clone(), vec![])
+                    (per_bin.clone(), vec![])
                 };
-                out.push(cand("compensator", Some(j), test, remove, bins));
+                out.push(cand(Effect::Compensator, Some(j), test, remove, per_bin));
             }
             if !compliant {
-                out.push(cand("joint_compliance", Some(j), vec![k], vec![], vec![k]));
-            }
-            let t = Term::NonlinearStiffness(j);
-            if compliant && !has(&t) {
                 out.push(cand(
-                    "nonlinear_stiffness",
+                    Effect::JointCompliance,
                     Some(j),
-                    vec![t],
+                    vec![k],
                     vec![],
-                    vec![t],
+                    vec![k],
                 ));
             }
-            let t = Term::Backlash(j);
-            if !has(&t) {
-                out.push(cand("backlash", Some(j), vec![t], vec![], vec![t]));
+            let p = Param::NonlinearStiffness { joint };
+            if compliant && !has(&p) {
+                out.push(cand(
+                    Effect::NonlinearStiffness,
+                    Some(j),
+                    vec![p],
+                    vec![],
+                    vec![p],
+                ));
+            }
+            let p = Param::Backlash { joint };
+            if !has(&p) {
+                out.push(cand(Effect::Backlash, Some(j), vec![p], vec![], vec![p]));
             }
         }
-        let t = Term::LinkCompliance(j);
-        if kinds.deflections && revolute(j) && !has(&t) {
-            out.push(cand("link_compliance", Some(j), vec![t], vec![], vec![t]));
+        let p = Param::LinkCompliance { joint };
+        if kinds.deflections && revolute(names, j) && !has(&p) {
+            out.push(cand(
+                Effect::LinkCompliance,
+                Some(j),
+                vec![p],
+                vec![],
+                vec![p],
+            ));
         }
         if kinds.absolute {
-            let t = Term::JointOffset(j);
-            let frame = any(&|t| matches!(t, Term::JointFrame(i, _) if *i == j));
-            if !has(&t) && !frame {
-                out.push(cand("joint_offset", Some(j), vec![t], vec![], vec![t]));
+            let p = Param::JointOffset { joint };
+            let frame = any(&|p| matches!(p, Param::JointFrame { joint: i, .. } if *i == joint));
+            if !has(&p) && !frame {
+                out.push(cand(Effect::JointOffset, Some(j), vec![p], vec![], vec![p]));
             }
             // The first joint's frame error is, to first order, a base pose
             // error (both are a rigid transform before the first motion):
             // that is `base_frame`.
             if !frame && j > 0 {
-                let terms: Vec<Term> = (0..6).map(|a| Term::JointFrame(j, a)).collect();
-                out.push(cand("geometry", Some(j), terms.clone(), vec![], terms));
+                let ps: Vec<Param> = (0..6)
+                    .map(|axis| Param::JointFrame { joint, axis })
+                    .collect();
+                out.push(cand(Effect::Geometry, Some(j), ps.clone(), vec![], ps));
             }
-            if revolute(j) && !has(&Term::GearCyclic(j, false)) {
-                let terms = vec![Term::GearCyclic(j, false), Term::GearCyclic(j, true)];
-                out.push(cand("gear_cyclic", Some(j), terms.clone(), vec![], terms));
+            if revolute(names, j) && !has(&Param::GearCyclic { joint, cos: false }) {
+                let ps = vec![
+                    Param::GearCyclic { joint, cos: false },
+                    Param::GearCyclic { joint, cos: true },
+                ];
+                out.push(cand(Effect::GearCyclic, Some(j), ps.clone(), vec![], ps));
             }
         }
     }
-    if kinds.deflections && any_compliance && !any(&|t| matches!(t, Term::LoadCom(_))) {
-        let terms: Vec<Term> = (0..3).map(Term::LoadCom).collect();
-        out.push(cand("load_com", None, terms.clone(), vec![], terms));
+    if kinds.deflections && any_compliance && !any(&|p| matches!(p, Param::LoadCom { .. })) {
+        let ps: Vec<Param> = (0..3).map(|axis| Param::LoadCom { axis }).collect();
+        out.push(cand(Effect::LoadCom, None, ps.clone(), vec![], ps));
     }
-    if kinds.time && !any(&|t| matches!(t, Term::Drift(_))) {
-        let terms: Vec<Term> = (0..3).map(Term::Drift).collect();
-        out.push(cand("drift", None, terms.clone(), vec![], terms));
+    if kinds.time && !any(&|p| matches!(p, Param::Drift { .. })) {
+        let ps: Vec<Param> = (0..3).map(|axis| Param::Drift { axis }).collect();
+        out.push(cand(Effect::Drift, None, ps.clone(), vec![], ps));
     }
     if kinds.absolute {
-        for m in 0..ctx.markers.len() {
-            if !any(&|t| matches!(t, Term::Marker(i, _) if *i == m)) {
-                let terms: Vec<Term> = (0..3).map(|a| Term::Marker(m, a)).collect();
-                let mut c = cand("marker", None, terms.clone(), vec![], terms);
+        for m in 0..names.markers.len() as u8 {
+            if !any(&|p| matches!(p, Param::Marker { marker, .. } if *marker == m)) {
+                let ps: Vec<Param> = (0..3)
+                    .map(|axis| Param::Marker { marker: m, axis })
+                    .collect();
+                let mut c = cand(Effect::Marker, None, ps.clone(), vec![], ps);
                 c.marker = Some(m);
                 out.push(c);
             }
         }
-        if !any(&|t| matches!(t, Term::Base(_))) {
-            let terms: Vec<Term> = (0..6).map(Term::Base).collect();
-            out.push(cand("base_frame", None, terms.clone(), vec![], terms));
+        if !any(&|p| matches!(p, Param::Base { .. })) {
+            let ps: Vec<Param> = (0..6).map(|axis| Param::Base { axis }).collect();
+            out.push(cand(Effect::BaseFrame, None, ps.clone(), vec![], ps));
         }
     }
     out
+}
+
+/// Why the estimate `x` of `params` is not physical for the effect
+/// parameters `added`, if it is not. Physics, not tuning:
+/// - a compliance (`k_<joint>`, `k_<joint>@<angle>`) is ≥ 0: a joint
+///   yields in the direction of its torque;
+/// - a backlash (`δq = b · sign τ`) is ≥ 0: the joint rests on the side of
+///   its play that its torque pushes it to;
+/// - a gear cyclic error is at most [`Policy::max_cyclic_mrad`];
+/// - a drift is at most [`Policy::max_drift_mm_per_h`].
+pub fn inadmissible(
+    names: &Names,
+    policy: &Policy,
+    params: &[Param],
+    x: &[f64],
+    added: &[Param],
+) -> Option<String> {
+    let value = |p: &Param| params.iter().position(|u| u == p).map(|i| x[i]);
+    for p in added {
+        let Some(v) = value(p) else { continue };
+        let bad = match *p {
+            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
+                (v < 0.0).then(|| format!("{} = {v:.3} {} < 0", names.name(p), names.unit(p).name))
+            }
+            Param::GearCyclic { joint, cos: false } => {
+                let c = value(&Param::GearCyclic { joint, cos: true }).unwrap_or(0.0);
+                let amp = v.hypot(c);
+                (amp > policy.max_cyclic_mrad).then(|| {
+                    format!(
+                        "gear_cyclic_{} amplitude {amp:.3} mrad > {} mrad",
+                        names.joint(joint),
+                        policy.max_cyclic_mrad
+                    )
+                })
+            }
+            Param::Drift { axis: 0 } => {
+                // µm/s → mm/h.
+                let norm = (0..3)
+                    .map(|axis| value(&Param::Drift { axis }).unwrap_or(0.0).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+                    * 3.6;
+                (norm > policy.max_drift_mm_per_h)
+                    .then(|| format!("drift {norm:.3} mm/h > {} mm/h", policy.max_drift_mm_per_h))
+            }
+            _ => None,
+        };
+        if bad.is_some() {
+            return bad;
+        }
+    }
+    None
 }

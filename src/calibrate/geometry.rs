@@ -10,15 +10,15 @@
 //! iterated: each estimate of the geometric terms is applied to this model,
 //! the absolute rows (`Δp`, columns, gravity torques) are recomputed at it,
 //! and the fit is repeated until the geometric step is below
-//! [`STEP_TOLERANCE`]. With the base frame declared, the first model places
+//! [`super::Policy::step_tolerance`]. With the base frame declared, the first model places
 //! the base by a rigid registration (Kabsch) of the nominal marker positions
 //! onto the measured ones.
 //!
 //! How a step `x` (reported units) is applied, as the columns define it:
 //! - base: `base ← E(x) · base`, `E = Trans(δt)·Rot(δr)` in the measurement
 //!   frame;
-//! - joint offset: `originⱼ ← originⱼ · Motion(δqⱼ)` (the same as adding
-//!   `δqⱼ` to the joint value);
+//! - joint offset: `originⱼ ← originⱼ · motionⱼ(δqⱼ)` ([`crate::Joint::motion`],
+//!   the same as adding `δqⱼ` to the joint value);
 //! - joint-frame error: `originⱼ ← originⱼ · E(x)`;
 //! - marker: `markerₘ ← markerₘ + δ` (tip frame).
 //!
@@ -31,23 +31,9 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
-use super::terms::{Term, J};
-use crate::chain::{Chain, JointKind};
-
-/// Gauss–Newton stops when no geometric step exceeds this (reported units:
-/// 1 nm, 1 µrad).
-pub const STEP_TOLERANCE: f64 = 1e-6;
-
-/// Gauss–Newton iterations at most.
-pub const MAX_STEPS: usize = 50;
-
-/// Whether `t` is a geometric term (applied to the model, not a column).
-pub fn is_geometric(t: &Term) -> bool {
-    matches!(
-        t,
-        Term::Base(_) | Term::JointOffset(_) | Term::JointFrame(..) | Term::Marker(..)
-    )
-}
+use super::rows::J;
+use crate::model::Param;
+use crate::robot::Chain;
 
 /// The current model: chain, base pose, markers, and what has been applied.
 #[derive(Debug, Clone)]
@@ -57,14 +43,14 @@ pub struct Geometry {
     pub chain: Chain<f64, J>,
     /// The robot base in the measurement frame.
     pub base: Isometry3<f64>,
-    /// Marker ids and positions \[m, tip frame\].
-    pub markers: Vec<(u32, Vector3<f64>)>,
+    /// Marker positions \[m, tip frame\], by marker index.
+    pub markers: Vec<Vector3<f64>>,
     /// Nominal marker positions \[m, tip frame\].
     nominal_markers: Vec<Vector3<f64>>,
-    /// Sum of the applied steps of each joint-offset and joint-frame term
-    /// (reported units; first order for the frame errors, whose steps compose
-    /// on the chain).
-    applied: BTreeMap<Term, f64>,
+    /// Sum of the applied steps of each joint-offset and joint-frame
+    /// parameter (reported units; first order for the frame errors, whose
+    /// steps compose on the chain).
+    applied: BTreeMap<Param, f64>,
 }
 
 fn small_pose(t: Vector3<f64>, r: Vector3<f64>) -> Isometry3<f64> {
@@ -73,12 +59,12 @@ fn small_pose(t: Vector3<f64>, r: Vector3<f64>) -> Isometry3<f64> {
 
 impl Geometry {
     /// The nominal model (base at the measurement frame's origin).
-    pub fn nominal(chain: &Chain<f64, J>, markers: &[(u32, Vector3<f64>)]) -> Self {
+    pub fn nominal(chain: &Chain<f64, J>, markers: &[Vector3<f64>]) -> Self {
         Self {
             chain: chain.clone(),
             base: Isometry3::identity(),
             markers: markers.to_vec(),
-            nominal_markers: markers.iter().map(|m| m.1).collect(),
+            nominal_markers: markers.to_vec(),
             applied: BTreeMap::new(),
         }
     }
@@ -124,40 +110,32 @@ impl Geometry {
         self.base = Isometry3::from_parts(Translation3::from(cb - rot * ca), rot);
     }
 
-    /// Applies the geometric part of the estimate `x` of `terms` (reported
+    /// Applies the geometric part of the estimate `x` of `params` (reported
     /// units: mm, mrad) to the model; returns the largest step applied.
-    pub fn apply(&mut self, terms: &[Term], x: &[f64]) -> f64 {
+    pub fn apply(&mut self, params: &[Param], x: &[f64]) -> f64 {
         let dof = self.chain.dof();
         let mut base = [Vector3::zeros(); 2];
         let mut frame = vec![[Vector3::zeros(); 2]; dof];
         let mut largest: f64 = 0.0;
-        for (t, &v) in terms.iter().zip(x) {
-            if !is_geometric(t) || v == 0.0 {
+        for (p, &v) in params.iter().zip(x) {
+            if !p.is_geometric() || v == 0.0 {
                 continue;
             }
             largest = largest.max(v.abs());
             let si = v * 1e-3;
-            match *t {
-                Term::Base(a) => base[a / 3][a % 3] = si,
-                Term::Marker(m, a) => self.markers[m].1[a] += si,
-                Term::JointOffset(j) => {
-                    let jt = &mut self.chain.joints_mut()[j];
-                    let motion = match jt.kind {
-                        JointKind::Revolute => Isometry3::from_parts(
-                            Translation3::identity(),
-                            UnitQuaternion::from_axis_angle(&jt.axis, si),
-                        ),
-                        JointKind::Prismatic => Isometry3::from_parts(
-                            Translation3::from(jt.axis.into_inner() * si),
-                            UnitQuaternion::identity(),
-                        ),
-                    };
-                    jt.origin *= motion;
-                    *self.applied.entry(*t).or_insert(0.0) += v;
+            match *p {
+                Param::Base { axis } => base[usize::from(axis / 3)][usize::from(axis % 3)] = si,
+                Param::Marker { marker, axis } => {
+                    self.markers[usize::from(marker)][usize::from(axis)] += si;
                 }
-                Term::JointFrame(j, a) => {
-                    frame[j][a / 3][a % 3] = si;
-                    *self.applied.entry(*t).or_insert(0.0) += v;
+                Param::JointOffset { joint } => {
+                    let jt = &mut self.chain.joints_mut()[usize::from(joint)];
+                    jt.origin *= jt.motion(si);
+                    *self.applied.entry(*p).or_insert(0.0) += v;
+                }
+                Param::JointFrame { joint, axis } => {
+                    frame[usize::from(joint)][usize::from(axis / 3)][usize::from(axis % 3)] = si;
+                    *self.applied.entry(*p).or_insert(0.0) += v;
                 }
                 _ => {}
             }
@@ -173,17 +151,24 @@ impl Geometry {
         largest
     }
 
-    /// The value of geometric term `t` in the model, plus a last step `dx`
-    /// not applied (reported units): the base as its translation \[mm\] and
-    /// rotation vector (axis × angle) \[mrad\] in the measurement frame;
+    /// The value of geometric parameter `p` in the model, plus a last step
+    /// `dx` not applied (reported units): the base as its translation \[mm\]
+    /// and rotation vector (axis × angle) \[mrad\] in the measurement frame;
     /// offsets and frame errors as the sum of their steps; a marker as its
     /// displacement from the nominal position \[mm\].
-    pub fn value(&self, t: &Term, dx: f64) -> f64 {
-        match *t {
-            Term::Base(a) if a < 3 => self.base.translation.vector[a] * 1e3 + dx,
-            Term::Base(a) => self.base.rotation.scaled_axis()[a - 3] * 1e3 + dx,
-            Term::Marker(m, a) => (self.markers[m].1[a] - self.nominal_markers[m][a]) * 1e3 + dx,
-            _ => self.applied.get(t).copied().unwrap_or(0.0) + dx,
+    pub fn value(&self, p: &Param, dx: f64) -> f64 {
+        match *p {
+            Param::Base { axis } if axis < 3 => {
+                self.base.translation.vector[usize::from(axis)] * 1e3 + dx
+            }
+            Param::Base { axis } => {
+                self.base.rotation.scaled_axis()[usize::from(axis - 3)] * 1e3 + dx
+            }
+            Param::Marker { marker, axis } => {
+                let (m, a) = (usize::from(marker), usize::from(axis));
+                (self.markers[m][a] - self.nominal_markers[m][a]) * 1e3 + dx
+            }
+            _ => self.applied.get(p).copied().unwrap_or(0.0) + dx,
         }
     }
 }

@@ -7,7 +7,10 @@ use std::fmt;
 
 use nalgebra::Vector3;
 
-use super::{LackOfFit, Problem, Term, Tested};
+use super::calibrated::CalibratedModel;
+use super::diagnosis::Tested;
+use super::effects::Effect;
+use super::residuals::LackOfFit;
 
 /// One estimated parameter.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,8 +28,8 @@ pub struct Parameter {
 /// One effect the diagnosis added.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EffectStep {
-    /// Effect name (contract §6).
-    pub effect: String,
+    /// The effect (contract §6).
+    pub effect: Effect,
     /// Joint, for per-joint effects.
     pub joint: Option<String>,
     /// Marker id, for `marker`.
@@ -130,12 +133,8 @@ pub struct Report {
     pub configurations: usize,
     /// Plot data.
     pub plots: Vec<PlotSeries>,
-    /// Final model terms.
-    pub model: Vec<Term>,
-    /// Final estimate.
-    pub x: Vec<f64>,
-    /// The problem (for validation).
-    pub problem: Problem,
+    /// The calibrated model (for validation and prediction).
+    pub model: CalibratedModel,
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
     /// configuration has too few rows to estimate its σ).
     pub notes: Vec<String>,

@@ -355,27 +355,13 @@ fn write_plain(path: &Path, names: &[String], rows: &[Observation]) -> Result<()
         }
         text.push('\n');
     }
-    let io_err = |e: std::io::Error| {
+    super::atomic::write_atomic(path, text.as_bytes()).map_err(|e| {
         InputError::new(
             path,
             ErrorKind::Io,
             format!("cannot write the measurements: {e}"),
         )
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| InputError::new(path, ErrorKind::Io, "not a file path"))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    std::fs::write(&tmp, text)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            io_err(e)
-        })
+    })
 }
 
 #[cfg(test)]

@@ -732,25 +732,7 @@ pub fn write_measurements(
     }
     let bytes = out.into_inner().map_err(|e| io_err(&e))?;
 
-    let name = path
-        .file_name()
-        .ok_or_else(|| InputError::new(path, ErrorKind::Io, "not a file path"))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let written = (|| -> std::io::Result<()> {
-        use std::io::Write;
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    written.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io_err(&e)
-    })
+    super::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 //!   setup.toml ──Setup::load──► Setup ─┐
 //!   robot.urdf ──Robot::load──► Robot ─┴─► Job ──read_measurements──► Measurements
 //!                                                 (Observation, Deflection)
+//!   FIGAROH mocap CSV ──figaroh::import_mocap──► measurement CSV (write_atomic)
 //! ```
 //!
 //! Everything is converted to SI on reading (rad, m, kg, s); the CSV's
@@ -54,18 +55,21 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod atomic;
 pub mod figaroh;
+pub mod job;
 pub mod measurements;
 pub mod setup;
 pub mod urdf;
 
+pub use atomic::write_atomic;
+pub use job::Job;
 pub use measurements::{
     parse_measurements, read_measurements, write_measurements, Deflection, Measurements,
     Observation,
 };
 pub use setup::{
-    AngleUnit, GeometryModel, Job, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup,
-    Units,
+    AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,
 };
 pub use urdf::{JointLimits, OffChainBranch, Robot, UrdfJointKind, MAX_JOINTS};
 

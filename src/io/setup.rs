@@ -1,5 +1,4 @@
-//! The setup file (TOML, data contract section 2) and the [`Job`] it makes
-//! together with the robot.
+//! The setup file (TOML, data contract section 2).
 //!
 //! Keys and defaults (every table rejects unknown keys, so a typo is an
 //! error naming the key):
@@ -42,7 +41,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::measurements::{read_measurements, write_measurements, Measurements, Observation};
 use super::urdf::Robot;
 use super::{ErrorKind, InputError};
 
@@ -252,7 +250,8 @@ impl Setup {
         }
     }
 
-    /// Reads and checks a setup file (without the robot; see [`Job::load`]).
+    /// Reads and checks a setup file (without the robot; see
+    /// [`super::Job::load`]).
     ///
     /// # Errors
     /// Unreadable file, TOML syntax, unknown key, wrong type, or a value
@@ -419,58 +418,5 @@ impl Setup {
             Some(dir) if self.robot.is_relative() => dir.join(&self.robot),
             _ => self.robot.clone(),
         }
-    }
-}
-
-/// A calibration job: the setup, and the robot it names.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Job {
-    /// The setup file.
-    pub setup_path: PathBuf,
-    /// Its content.
-    pub setup: Setup,
-    /// The robot, read from [`Setup::robot_path`] with the setup's base and tip.
-    pub robot: Robot,
-}
-
-impl Job {
-    /// Reads the setup and the robot it names, and checks one against the other.
-    ///
-    /// # Errors
-    /// Any [`Setup::load`], [`Robot::load`] or [`Setup::check_robot`] error.
-    pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
-        let setup_path = setup_path.as_ref();
-        let setup = Setup::load(setup_path)?;
-        let robot = Robot::load(
-            setup.robot_path(setup_path),
-            setup.base_link.as_deref(),
-            setup.tip_link.as_deref(),
-        )?;
-        setup.check_robot(&robot, setup_path)?;
-        Ok(Self {
-            setup_path: setup_path.to_owned(),
-            setup,
-            robot,
-        })
-    }
-
-    /// Reads a measurement file of this job ([`read_measurements`]).
-    ///
-    /// # Errors
-    /// See [`read_measurements`].
-    pub fn read_measurements(&self, path: impl AsRef<Path>) -> Result<Measurements, InputError> {
-        read_measurements(path, &self.robot, &self.setup)
-    }
-
-    /// Writes a measurement file in this job's units ([`write_measurements`]).
-    ///
-    /// # Errors
-    /// See [`write_measurements`].
-    pub fn write_measurements(
-        &self,
-        path: impl AsRef<Path>,
-        rows: &[Observation],
-    ) -> Result<(), InputError> {
-        write_measurements(path, &self.robot, self.setup.units, rows)
     }
 }

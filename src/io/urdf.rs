@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::{ErrorKind, InputError};
-use crate::chain::{Chain, Joint, JointKind, LinkInertia};
+use crate::robot::{Chain, Joint, JointKind, LinkInertia};
 
 /// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
 pub const MAX_JOINTS: usize = 16;

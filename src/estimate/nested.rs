@@ -18,10 +18,13 @@
 //! several candidates are tried, compare `p · (number tried)` with the
 //! significance level (Bonferroni).
 
-use nalgebra::{RealField, SMatrix, SVector};
+use super::Alloc;
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
-use crate::solve::{self, Active, Solution};
-use crate::{stats, Accumulator, Error};
+use super::accumulator::Accumulator;
+use super::distributions;
+use super::factor::{pivot_tolerance, Solution};
+use crate::Error;
 
 /// The outcome of one nested test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,30 +45,35 @@ pub struct NestedTest {
     pub p_value: f64,
 }
 
-/// Tests adding the columns `candidate` to a fitted `model`.
+/// Tests adding the columns marked in `candidate` to a fitted `model` (one
+/// flag per parameter each).
 ///
 /// `fit` must be `acc.solve_active(model)`.
 ///
 /// # Errors
-/// - [`Error::Mismatch`] when `candidate` overlaps the model, is empty, or
-///   `fit` was not solved on `model`;
+/// - [`Error::Mismatch`] when `candidate` overlaps the model, is empty, a
+///   mask has the wrong length, or `fit` was not solved on `model`;
 /// - [`Error::TooFewEquations`] when no degrees of freedom are left;
 /// - [`Error::NotIdentifiable`] when a candidate column is (numerically) a
 ///   combination of the model's columns and the candidate's columns before
 ///   it: the data cannot tell that effect from the model.
-pub fn nested_test<T: RealField + Copy, const N: usize>(
-    acc: &Accumulator<T, N>,
-    model: &Active<N>,
-    fit: &Solution<T, N>,
-    candidate: &Active<N>,
-) -> Result<NestedTest, Error> {
-    if fit.active != *model {
+pub fn nested_test<T: RealField + Copy, D: Dim>(
+    acc: &Accumulator<T, D>,
+    model: &[bool],
+    fit: &Solution<T, D>,
+    candidate: &[bool],
+) -> Result<NestedTest, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = acc.parameters();
+    if model.len() != n || candidate.len() != n || fit.active.as_slice() != model {
         return Err(Error::Mismatch {
             what: "fit was not solved on this model",
         });
     }
     let q = candidate.iter().filter(|c| **c).count();
-    if q == 0 || (0..N).any(|i| candidate[i] && model[i]) {
+    if q == 0 || (0..n).any(|i| candidate[i] && model[i]) {
         return Err(Error::Mismatch {
             what: "candidate must be non-empty and outside the model",
         });
@@ -78,30 +86,25 @@ pub fn nested_test<T: RealField + Copy, const N: usize>(
             parameters: p + q,
         });
     }
+    let dim = acc.dim();
     let lambda = acc.information();
     // Λ_CA Λ_AA⁻¹ Λ_AC: `lambda_inv` is zero outside A.
-    let through_model: SMatrix<T, N, N> = lambda * fit.lambda_inv * lambda;
-    let lx: SVector<T, N> = lambda * fit.x;
-    let mut schur = SMatrix::<T, N, N>::zeros();
-    let mut g = SVector::<T, N>::zeros();
-    for j in 0..N {
-        if !candidate[j] {
-            continue;
-        }
+    let through_model: OMatrix<T, D, D> = &lambda * &fit.lambda_inv * &lambda;
+    let lx: OVector<T, D> = &lambda * &fit.x;
+    let mut schur = OMatrix::<T, D, D>::zeros_generic(dim, dim);
+    let mut g = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+    for j in (0..n).filter(|&j| candidate[j]) {
         g[j] = acc.eta()[j] - lx[j];
-        for i in 0..N {
-            if candidate[i] {
-                schur[(i, j)] = lambda[(i, j)] - through_model[(i, j)];
-            }
+        for i in (0..n).filter(|&i| candidate[i]) {
+            schur[(i, j)] = lambda[(i, j)] - through_model[(i, j)];
         }
     }
     // A candidate column the model absorbs: what is left of it after the
     // model, `S_jj / Λ_jj = 1 − R²`, is at rounding level. (The solve below
     // scales S by its own diagonal, so it cannot see this.)
-    let tol = solve::pivot_tolerance::<T>();
-    for j in 0..N {
-        let left_enough = schur[(j, j)] > tol * lambda[(j, j)];
-        if candidate[j] && !left_enough {
+    let tol = pivot_tolerance::<T>();
+    for j in (0..n).filter(|&j| candidate[j]) {
+        if !(schur[(j, j)] > tol * lambda[(j, j)]) {
             let left = schur[(j, j)] / lambda[(j, j)];
             return Err(Error::NotIdentifiable {
                 column: j,
@@ -113,7 +116,7 @@ pub fn nested_test<T: RealField + Copy, const N: usize>(
     }
     // S⁻¹ g on the candidate block; its pivot check tells when candidate
     // columns are combinations of each other (after the model).
-    let z = solve::solve(&schur, &g, T::zero(), m, candidate)?;
+    let z = Solution::new(&schur, &g, T::zero(), m, candidate)?;
     let to_f64 = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
     let rss_before = to_f64(fit.wrss);
     let delta = to_f64(z.x.dot(&g)).clamp(0.0, rss_before);
@@ -127,7 +130,7 @@ pub fn nested_test<T: RealField + Copy, const N: usize>(
         f64::INFINITY
     };
     let p_value = if f.is_finite() {
-        stats::f_sf(f, q, dof_den)
+        distributions::f_sf(f, q, dof_den)
     } else {
         0.0
     };

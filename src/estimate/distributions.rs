@@ -18,7 +18,7 @@ const MAX_TERMS: usize = 1000;
 ///
 /// ```
 /// // χ²₂ has survival exp(−x/2).
-/// let p = robcal::stats::chi2_sf(3.0, 2);
+/// let p = robcal::estimate::distributions::chi2_sf(3.0, 2);
 /// assert!((p - (-1.5f64).exp()).abs() < 1e-14);
 /// ```
 pub fn chi2_sf(x: f64, k: usize) -> f64 {

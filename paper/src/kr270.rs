@@ -3,7 +3,7 @@
 //!
 //! Everything here is data, shared by the data generator
 //! (`examples/generate_kr270.rs`), the main job (`examples/kr270.rs`), the
-//! host tests and the firmware.
+//! host tests and the firmware (`examples/firmware`).
 //!
 //! [`layout`] builds the paper's 9-parameter model for any chain with the
 //! KR-270's six joints.
@@ -14,10 +14,8 @@
 //! with ~2.6 kN on a 2.7 m arm they give deflections of 2–11 mm.
 
 use nalgebra::RealField;
-
-use crate::chain::Chain;
-use crate::layout::{angle_urad, Layout, Param};
-use crate::Error;
+use robcal::model::{angle_urad, Layout, Param};
+use robcal::{Chain, Error};
 
 /// Number of configurations (Table 2).
 pub const CONFIGS: usize = 15;
@@ -141,7 +139,8 @@ pub fn q2_group(q2_deg: f64) -> Option<usize> {
 
 /// The paper's parameter layout, in [`PARAM_NAMES`] order: k21…k25 (the
 /// compliance of A2, one per q2 group of Table 2 — the gravity compensator,
-/// section 5), then k3…k6. Columns in µrad/(N·m).
+/// section 5), then k3…k6. Columns in µrad/(N·m). The setup
+/// `data/kr270/setup.toml` declares the same model to `robcal calibrate`.
 ///
 /// # Errors
 /// From [`Layout::push`]: the chain has fewer than six joints.
@@ -149,12 +148,11 @@ pub fn layout<T: RealField + Copy, const J: usize>(
     chain: &Chain<T, J>,
 ) -> Result<Layout<PARAMS>, Error> {
     let mut l = Layout::new();
-    for (bin, q2) in Q2_GROUPS_DEG.iter().enumerate() {
+    for q2 in Q2_GROUPS_DEG {
         l.push(
             chain,
-            Param::ComplianceByAngle {
+            Param::ComplianceAt {
                 joint: 1,
-                bin: bin as u8,
                 angle_urad: angle_urad(q2.to_radians()),
             },
         )?;

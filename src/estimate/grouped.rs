@@ -6,7 +6,7 @@
 //! weights (eq. 14) and fits again. Within one group and axis `(g, a)` every
 //! row shares one weight, so the unweighted moments
 //!
-//! - `S = Σ b bᵀ` (N × N, symmetric), `u = Σ b y`, `yy = Σ y²`, `n`
+//! - `S = Σ b bᵀ` (n × n, symmetric), `u = Σ b y`, `yy = Σ y²`, `n`
 //!
 //! are sufficient. From them, exactly (up to rounding):
 //!
@@ -15,7 +15,7 @@
 //! - the re-weighted statistics `Λ = Σ w²_ga S_ga`, `η = Σ w²_ga u_ga`;
 //! - the sandwich middle term `M = Σ w⁴_ga σ²_ga S_ga` (eq. 11).
 //!
-//! Memory is `G · 3 · (N² + N + 2)` scalars, fixed: it grows with the number
+//! Memory is `G · 3 · (n² + n + 2)` scalars, fixed: it grows with the number
 //! of configurations, never with the number of measurements.
 //!
 //! The residual sum of squares is a difference of large terms; it keeps its
@@ -23,37 +23,44 @@
 //! sum of squares. Feed `Δp` as deviations from a nominal model (deflections,
 //! or measured − nominal positions), not as raw absolute coordinates.
 
-use nalgebra::{RealField, SMatrix, SVector, Vector3};
+use super::Alloc;
+use nalgebra::{Const, DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField, Vector3, U3};
 
-use crate::accumulator::{symmetric, Accumulator};
+use super::accumulator::{symmetric, Accumulator};
 use crate::Error;
 
 /// Moments of the rows of one group and one axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct AxisMoments<T: RealField + Copy, const N: usize> {
+pub struct AxisMoments<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// `S = Σ b bᵀ`, upper triangle.
-    pub s_upper: SMatrix<T, N, N>,
+    pub s_upper: OMatrix<T, D, D>,
     /// `u = Σ b y`.
-    pub u: SVector<T, N>,
+    pub u: OVector<T, D>,
     /// `Σ y²`.
     pub yy: T,
     /// Rows.
     pub n: usize,
 }
 
-impl<T: RealField + Copy, const N: usize> AxisMoments<T, N> {
-    fn new() -> Self {
+impl<T: RealField + Copy, D: Dim> AxisMoments<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn zeros(dim: D) -> Self {
         Self {
-            s_upper: SMatrix::zeros(),
-            u: SVector::zeros(),
+            s_upper: OMatrix::zeros_generic(dim, dim),
+            u: OVector::zeros_generic(dim, Const::<1>),
             yy: T::zero(),
             n: 0,
         }
     }
 
     /// Residual sum of squares `Σ (y − bᵀX)² = yy − 2Xᵀu + XᵀSX`, clamped at 0.
-    pub fn rss(&self, x: &SVector<T, N>) -> T {
+    pub fn rss(&self, x: &OVector<T, D>) -> T {
         let s = symmetric(&self.s_upper);
         let two = T::one() + T::one();
         (self.yy - two * x.dot(&self.u) + (s * x).dot(x)).max(T::zero())
@@ -61,39 +68,68 @@ impl<T: RealField + Copy, const N: usize> AxisMoments<T, N> {
 }
 
 /// The moments of one group (robot configuration), per axis x, y, z.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct GroupMoments<T: RealField + Copy, const N: usize> {
+pub struct GroupMoments<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// The group's id (e.g. the configuration number of the CSV).
     pub id: i32,
     /// Moments per axis: x, y, z.
-    pub axes: [AxisMoments<T, N>; 3],
+    pub axes: [AxisMoments<T, D>; 3],
 }
 
-/// Grouped sufficient statistics for at most `G` groups. See the
-/// [module docs](self).
+/// Grouped sufficient statistics of `D` parameters for at most `G` groups.
+/// See the [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct GroupedStats<T: RealField + Copy, const N: usize, const G: usize> {
-    groups: heapless::Vec<GroupMoments<T, N>, G>,
+pub struct GroupedStats<T: RealField + Copy, D: Dim, const G: usize>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    dim: D,
+    groups: heapless::Vec<GroupMoments<T, D>, G>,
 }
 
-impl<T: RealField + Copy, const N: usize, const G: usize> Default for GroupedStats<T, N, G> {
+impl<T: RealField + Copy, D: DimName, const G: usize> Default for GroupedStats<T, D, G>
+where
+    DefaultAllocator: Alloc<D>,
+{
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> {
-    /// No groups yet.
-    pub const fn new() -> Self {
+impl<T: RealField + Copy, D: DimName, const G: usize> GroupedStats<T, D, G>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// No groups yet (a fixed number of parameters).
+    pub fn new() -> Self {
+        Self::with_dim(D::name())
+    }
+}
+
+impl<T: RealField + Copy, D: Dim, const G: usize> GroupedStats<T, D, G>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// No groups yet, `dim` parameters.
+    pub fn with_dim(dim: D) -> Self {
         Self {
+            dim,
             groups: heapless::Vec::new(),
         }
     }
 
+    /// The number of parameters.
+    pub fn dim(&self) -> D {
+        self.dim
+    }
+
     /// The groups, in the order they first appeared.
-    pub fn groups(&self) -> &[GroupMoments<T, N>] {
+    pub fn groups(&self) -> &[GroupMoments<T, D>] {
         &self.groups
     }
 
@@ -109,10 +145,20 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
     /// Weights are not given here: they are chosen later, per group and axis.
     ///
     /// # Errors
+    /// [`Error::Mismatch`] when `b` has not one column per parameter;
     /// [`Error::NonFinite`] for a non-finite value or an overflowing sum,
     /// [`Error::CapacityExceeded`] when `id` is new and `G` groups exist
     /// already. The statistics are unchanged on error.
-    pub fn update(&mut self, id: i32, b: &SMatrix<T, 3, N>, dp: &Vector3<T>) -> Result<(), Error> {
+    pub fn update(&mut self, id: i32, b: &OMatrix<T, U3, D>, dp: &Vector3<T>) -> Result<(), Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        let p = self.dim.value();
+        if b.ncols() != p {
+            return Err(Error::Mismatch {
+                what: "block size differs from the statistics'",
+            });
+        }
         if !b.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "row" });
         }
@@ -132,25 +178,26 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
             }
         };
         // Overflow guard on the new diagonals (they bound the off-diagonals).
-        let empty = AxisMoments::new();
+        let existing = self.groups.get(index);
         for a in 0..3 {
-            let row = b.row(a);
-            let ax = self.groups.get(index).map_or(&empty, |g| &g.axes[a]);
-            if !(ax.yy + dp[a] * dp[a]).is_finite() {
+            let ax = existing.map(|g| &g.axes[a]);
+            let yy = ax.map_or(T::zero(), |ax| ax.yy);
+            if !(yy + dp[a] * dp[a]).is_finite() {
                 return Err(Error::NonFinite { what: "overflow" });
             }
-            for i in 0..N {
-                let d = ax.s_upper[(i, i)] + row[i] * row[i];
-                let e = ax.u[i] + row[i] * dp[a];
-                if !(d.is_finite() && e.is_finite()) {
+            for i in 0..p {
+                let bi = b[(a, i)];
+                let (s, u) = ax.map_or((T::zero(), T::zero()), |ax| (ax.s_upper[(i, i)], ax.u[i]));
+                if !((s + bi * bi).is_finite() && (u + bi * dp[a]).is_finite()) {
                     return Err(Error::NonFinite { what: "overflow" });
                 }
             }
         }
         if index == self.groups.len() {
+            let dim = self.dim;
             let fresh = GroupMoments {
                 id,
-                axes: [AxisMoments::new(); 3],
+                axes: core::array::from_fn(|_| AxisMoments::zeros(dim)),
             };
             // Cannot fail: checked `is_full` above.
             self.groups
@@ -162,39 +209,46 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
         }
         let g = &mut self.groups[index];
         for (a, ax) in g.axes.iter_mut().enumerate() {
-            let row: SVector<T, N> = b.row(a).transpose();
-            for j in 0..N {
+            for j in 0..p {
                 for i in 0..=j {
-                    ax.s_upper[(i, j)] += row[i] * row[j];
+                    ax.s_upper[(i, j)] += b[(a, i)] * b[(a, j)];
                 }
+                ax.u[j] += b[(a, j)] * dp[a];
             }
-            ax.u += row * dp[a];
             ax.yy += dp[a] * dp[a];
             ax.n += 1;
         }
         Ok(())
     }
 
-    /// σ per group and axis of the residuals of `x`:
+    /// σ per group and axis of the residuals of `x`, written to `out` (one
+    /// entry per group, in [`Self::groups`] order):
     /// `σ²_ga = RSS_ga / n_ga · m / (m − p)`, where `m` is the total number of
     /// rows and `p` the number of estimated parameters (a global
     /// degrees-of-freedom correction, so that σ² is unbiased on average).
-    /// In the unit of `Δp`. One entry per group, in [`Self::groups`] order.
-    #[must_use]
-    pub fn residual_sigma(
+    /// In the unit of `Δp`.
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] when `out` does not have one entry per group.
+    pub fn residual_sigma_into(
         &self,
-        x: &SVector<T, N>,
+        x: &OVector<T, D>,
         parameters: usize,
-    ) -> heapless::Vec<Vector3<T>, G> {
+        out: &mut [Vector3<T>],
+    ) -> Result<(), Error> {
+        if out.len() != self.groups.len() {
+            return Err(Error::Mismatch {
+                what: "one sigma per group",
+            });
+        }
         let m = self.equations();
         let correction = if m > parameters {
             nalgebra::convert::<f64, T>(m as f64 / (m - parameters) as f64)
         } else {
             T::one()
         };
-        let mut out = heapless::Vec::new();
-        for g in &self.groups {
-            let s = Vector3::from_fn(|a, _| {
+        for (o, g) in out.iter_mut().zip(&self.groups) {
+            *o = Vector3::from_fn(|a, _| {
                 let ax = &g.axes[a];
                 if ax.n == 0 {
                     return T::zero();
@@ -202,10 +256,8 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
                 let n = nalgebra::convert::<f64, T>(ax.n as f64);
                 (ax.rss(x) / n * correction).sqrt()
             });
-            // Same length as `groups`: cannot overflow.
-            let _ = out.push(s);
         }
-        out
+        Ok(())
     }
 
     /// The weighted statistics: every row of group `g`, axis `a` carries the
@@ -220,14 +272,14 @@ impl<T: RealField + Copy, const N: usize, const G: usize> GroupedStats<T, N, G> 
         &self,
         weights: &[Vector3<T>],
         sigma: Option<&[Vector3<T>]>,
-    ) -> Result<Accumulator<T, N>, Error> {
+    ) -> Result<Accumulator<T, D>, Error> {
         if weights.len() != self.groups.len() || sigma.is_some_and(|s| s.len() != self.groups.len())
         {
             return Err(Error::Mismatch {
                 what: "one weight (and sigma) per group",
             });
         }
-        let mut acc = Accumulator::new();
+        let mut acc = Accumulator::zeros(self.dim);
         for (gi, g) in self.groups.iter().enumerate() {
             for (a, ax) in g.axes.iter().enumerate() {
                 let s = sigma.map(|s| s[gi][a]);

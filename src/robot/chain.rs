@@ -11,7 +11,7 @@
 //! `q_j` \[rad\] about `axis_j` (revolute) or a translation of `q_j` \[m\] along
 //! it (prismatic). `T_tip = T_last · tip`. All lengths in metres.
 
-use nalgebra::{Isometry3, RealField, Unit, Vector3};
+use nalgebra::{Isometry3, RealField, Translation3, Unit, UnitQuaternion, Vector3};
 
 /// How a joint moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -68,6 +68,24 @@ impl<T: RealField + Copy> Joint<T> {
             kind,
             link: None,
         })
+    }
+
+    /// `motion_j(q)`: the joint's own motion at value `q` — a rotation of
+    /// `q` \[rad\] about the axis (revolute) or a translation of `q` \[m\]
+    /// along it (prismatic). The joint frame is `T_j = T_{j-1} · origin_j ·
+    /// motion_j(q_j)`; a joint offset `δq` is the same motion applied to the
+    /// origin, `origin_j · motion_j(δq)`.
+    pub fn motion(&self, q: T) -> Isometry3<T> {
+        match self.kind {
+            JointKind::Revolute => Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_axis_angle(&self.axis, q),
+            ),
+            JointKind::Prismatic => Isometry3::from_parts(
+                Translation3::from(self.axis.into_inner() * q),
+                UnitQuaternion::identity(),
+            ),
+        }
     }
 }
 

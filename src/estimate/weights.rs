@@ -52,7 +52,7 @@ impl<T: RealField + Copy> RobustWeight<T> {
     /// (σ = 0 is allowed: a group with no scatter gets weight 1).
     ///
     /// ```
-    /// # use robcal::weights::RobustWeight;
+    /// # use robcal::estimate::RobustWeight;
     /// let rw = RobustWeight::new(10.0_f64, 1.0).unwrap();
     /// // σ = σ0: half weight.
     /// assert_eq!(rw.weight(10.0).unwrap(), 0.5);
@@ -76,7 +76,7 @@ impl<T: RealField + Copy> RobustWeight<T> {
 /// positive finite number.
 ///
 /// ```
-/// assert_eq!(robcal::weights::inverse_sigma(2.0_f64, 4.0).unwrap(), 0.5);
+/// assert_eq!(robcal::estimate::inverse_sigma(2.0_f64, 4.0).unwrap(), 0.5);
 /// ```
 pub fn inverse_sigma<T: RealField + Copy>(a: T, sigma: T) -> Result<T, Error> {
     if !a.is_finite() || !sigma.is_finite() {

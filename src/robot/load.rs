@@ -1,25 +1,21 @@
-//! Elastostatic identification columns (eq. 3, `Δpᵉ = A⁽ᵖ⁾ k`), virtual-joint
-//! model: rigid links, one linear spring per joint.
+//! Loads on the chain: a wrench at or beyond the tip, a hanging mass (the
+//! paper's calibration tool, section 5), and the robot's own weight — and
+//! the joint torques `τ` they cause.
 //!
 //! A wrench (force `F` \[N\] acting at point `c` \[m\], plus a moment `M`
 //! \[N·m\], all in the base frame) loads joint `j` with
 //!
 //! - `τⱼ = zⱼᵀ((c − oⱼ) × F + M)` \[N·m\] (revolute),
-//! - `τⱼ = zⱼᵀ F` \[N\] (prismatic),
+//! - `τⱼ = zⱼᵀ F` \[N\] (prismatic).
 //!
-//! and the joint yields by `δqⱼ = kⱼ τⱼ` (`kⱼ` in rad/(N·m), or m/N for a
-//! prismatic joint). To first order a marker at `p` moves by
-//!
-//! `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` (prismatic: `kⱼ τⱼ zⱼ`),
-//!
-//! which is linear in `k`: the column of `kⱼ` is `τⱼ (zⱼ × (p − oⱼ))`
-//! [m per rad/(N·m)]. A wrench acting at or beyond the tip loads every joint;
-//! the weight of link `l` (carried by joint `l`) loads joints `0..=l` only
-//! ([`gravity_torques`]).
+//! A wrench acting at or beyond the tip loads every joint
+//! ([`joint_torques`]); the weight of link `l` (carried by joint `l`) loads
+//! joints `0..=l` only ([`gravity_torques`]). How a joint yields under its
+//! torque is the model's business ([`crate::model`]: compliance, eq. 3).
 //!
 //! ```
 //! use nalgebra::Vector3;
-//! use robcal::elastostatic::{compliance_columns, joint_torques, Wrench};
+//! use robcal::robot::{joint_torques, Wrench};
 //! use robcal::{Chain, Joint, JointKind};
 //!
 //! // One horizontal 1 m link about y, 100 N down at its end: τ = 100 N·m.
@@ -30,16 +26,12 @@
 //! let mut tau = [0.0];
 //! joint_torques(&frames, &w, &mut tau).unwrap();
 //! assert!((tau[0] - 100.0).abs() < 1e-12);
-//! let mut col = [Vector3::zeros()];
-//! compliance_columns(&frames, &Vector3::x(), &tau, &mut col).unwrap();
-//! // k = 1e-6 rad/(N·m) lowers the end by 100 µm.
-//! assert!((col[0] * 1e-6 - Vector3::new(0.0, 0.0, -1e-4)).norm() < 1e-15);
 //! ```
 
 use nalgebra::{Point3, RealField, Vector3};
 
-use crate::chain::{Chain, JointKind};
-use crate::kinematics::{Frames, JointFrame};
+use super::chain::{Chain, JointKind};
+use super::kinematics::{Frames, JointFrame};
 use crate::Error;
 
 /// A force and a moment, in the base frame.
@@ -152,50 +144,7 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
     Ok(())
 }
 
-/// Compliance columns at a marker `p_m` \[m, base frame\] for joint torques
-/// `tau` (from [`joint_torques`], [`gravity_torques`] or their sum), written
-/// to `out[..dof]`: `τⱼ (zⱼ × (p − oⱼ))` [m per rad/(N·m)] (revolute) or
-/// `τⱼ zⱼ` \[m per m/N\] (prismatic).
-///
-/// # Errors
-/// [`Error::Mismatch`] when `tau` or `out` is shorter than the number of
-/// joints.
-pub fn compliance_columns<T: RealField + Copy, const J: usize>(
-    frames: &Frames<T, J>,
-    p_m: &Vector3<T>,
-    tau: &[T],
-    out: &mut [Vector3<T>],
-) -> Result<(), Error> {
-    check_len(frames, tau.len())?;
-    check_len(frames, out.len())?;
-    for ((o, jf), &t) in out.iter_mut().zip(frames.joints()).zip(tau) {
-        *o = jf.twist_column(p_m) * t;
-    }
-    Ok(())
-}
-
-/// First-order deflection `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` \[m\] of a marker at
-/// `p_m` under joint torques `tau`, with compliances `k` \[rad/(N·m) or m/N\].
-///
-/// # Errors
-/// [`Error::Mismatch`] when `tau` or `k` is shorter than the number of
-/// joints.
-pub fn deflection_m<T: RealField + Copy, const J: usize>(
-    frames: &Frames<T, J>,
-    p_m: &Vector3<T>,
-    tau: &[T],
-    k: &[T],
-) -> Result<Vector3<T>, Error> {
-    check_len(frames, tau.len())?;
-    check_len(frames, k.len())?;
-    let mut dp = Vector3::zeros();
-    for ((jf, &t), &kj) in frames.joints().iter().zip(tau).zip(k) {
-        dp += jf.twist_column(p_m) * (t * kj);
-    }
-    Ok(dp)
-}
-
-fn check_len<T: RealField + Copy, const J: usize>(
+pub(crate) fn check_len<T: RealField + Copy, const J: usize>(
     frames: &Frames<T, J>,
     len: usize,
 ) -> Result<(), Error> {

@@ -1,5 +1,5 @@
-//! Ordinary, weighted and iteratively reweighted least squares on
-//! [`GroupedStats`] (sections 3–5 of the paper).
+//! Ordinary, weighted and iteratively reweighted least squares (sections
+//! 3–5 of the paper) on anything [`Reweightable`].
 //!
 //! - **OLS** (eq. 6): all weights 1. Its covariance is the sandwich (eq. 8)
 //!   with σ per group and axis estimated from the OLS residuals.
@@ -10,22 +10,25 @@
 //! - **Iterative WLS** (section 5, Fig. 3): repeat — σ from the last fit's
 //!   residuals, new weights, new fit — until no parameter moves by more than
 //!   `tolerance` of its own standard deviation, or `max_iterations` is
-//!   reached. Every iteration's estimate and standard deviation can be kept
-//!   in a caller-provided history (the paper's Figure 3).
+//!   reached. Every iteration's estimate and standard deviation goes to a
+//!   caller's callback (the paper's Figure 3).
 //!
 //! The fits work on anything that can re-weight its rows per group and
 //! axis and report the residual σ of an estimate: [`Reweightable`].
-//! [`GroupedStats`] does it from sufficient statistics (firmware); a host
-//! program that keeps its rows can do it from them.
+//! [`super::GroupedStats`] does it from sufficient statistics (firmware); a
+//! host program that keeps its rows can do it from them. The weights and σ
+//! per group and axis live in the caller's memory (two slices of one
+//! `Vector3` per group), so nothing here allocates.
 //!
 //! Units: σ0 must be given in the unit of `Δp` (metres in robcal's rows).
 
-use nalgebra::{RealField, SMatrix, SVector, Vector3};
+use super::Alloc;
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector3};
 
-use crate::accumulator::Accumulator;
-use crate::grouped::GroupedStats;
-use crate::solve::{std_devs, Active, Solution};
-use crate::weights::RobustWeight;
+use super::accumulator::Accumulator;
+use super::factor::{std_devs, Solution};
+use super::grouped::GroupedStats;
+use super::weights::RobustWeight;
 use crate::Error;
 
 /// Settings of the iteration.
@@ -53,30 +56,40 @@ impl<T: RealField + Copy> IrlsSettings<T> {
 }
 
 /// One iteration's estimate (for the convergence plot, Fig. 3).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Iteration<T: RealField + Copy, const N: usize> {
+pub struct Iteration<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// The estimate `X̂ₖ`.
-    pub x: SVector<T, N>,
+    pub x: OVector<T, D>,
     /// Its standard deviations (sandwich, eq. 8 for k = 0, eq. 11 after).
-    pub std: SVector<T, N>,
+    pub std: OVector<T, D>,
     /// `max_i |X̂ₖ,ᵢ − X̂ₖ₋₁,ᵢ| / σᵢ` (0 for the OLS start).
     pub change: T,
 }
 
-/// A fit and its noise model.
+impl<T: RealField + Copy, D: Dim> Copy for Iteration<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+    OVector<T, D>: Copy,
+{
+}
+
+/// A fit and its covariance. The weights it used and the residual σ per
+/// group and axis are in the slices the caller passed.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Fit<T: RealField + Copy, const N: usize, const G: usize> {
+pub struct Fit<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// The estimate and `Λ⁻¹`.
-    pub solution: Solution<T, N>,
+    pub solution: Solution<T, D>,
     /// Sandwich covariance (eq. 8 for OLS, eq. 11 for WLS) with σ per group
     /// and axis estimated from this fit's residuals.
-    pub covariance: SMatrix<T, N, N>,
-    /// Weights the fit used, per group and axis.
-    pub weights: heapless::Vec<Vector3<T>, G>,
-    /// Residual σ per group and axis of this fit, in the unit of `Δp`.
-    pub sigma: heapless::Vec<Vector3<T>, G>,
+    pub covariance: OMatrix<T, D, D>,
     /// WLS fits after the OLS start (0 for OLS).
     pub iterations: usize,
     /// Whether the last step moved every parameter by less than the
@@ -84,16 +97,22 @@ pub struct Fit<T: RealField + Copy, const N: usize, const G: usize> {
     pub converged: bool,
 }
 
-impl<T: RealField + Copy, const N: usize, const G: usize> Fit<T, N, G> {
+impl<T: RealField + Copy, D: Dim> Fit<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// Standard deviations of the estimate.
     #[must_use]
-    pub fn std(&self) -> SVector<T, N> {
+    pub fn std(&self) -> OVector<T, D> {
         std_devs(&self.covariance)
     }
 }
 
 /// Data that can be re-weighted per group (configuration) and axis.
-pub trait Reweightable<T: RealField + Copy, const N: usize> {
+pub trait Reweightable<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
     /// Number of groups.
     fn group_count(&self) -> usize;
 
@@ -106,7 +125,7 @@ pub trait Reweightable<T: RealField + Copy, const N: usize> {
         &self,
         weights: &[Vector3<T>],
         sigma: Option<&[Vector3<T>]>,
-    ) -> Result<Accumulator<T, N>, Error>;
+    ) -> Result<Accumulator<T, D>, Error>;
 
     /// σ per group and axis of the residuals of `x`, with the global
     /// degrees-of-freedom correction `m / (m − parameters)`, written to
@@ -116,78 +135,66 @@ pub trait Reweightable<T: RealField + Copy, const N: usize> {
     /// [`Error::Mismatch`] when `out` does not have one entry per group.
     fn residual_sigma_into(
         &self,
-        x: &SVector<T, N>,
+        x: &OVector<T, D>,
         parameters: usize,
         out: &mut [Vector3<T>],
     ) -> Result<(), Error>;
 
-    /// Fit with given weights per group and axis; covariance by the
-    /// sandwich (eq. 11) with σ from this fit's residuals. `G` bounds the
-    /// number of groups.
+    /// Fit with the given weights per group and axis; covariance by the
+    /// sandwich (eq. 11) with σ from this fit's residuals, which are
+    /// written to `sigma` (one entry per group).
     ///
     /// # Errors
-    /// From [`Reweightable::weighted`] and the solve;
-    /// [`Error::CapacityExceeded`] with more than `G` groups.
-    fn fit_weighted<const G: usize>(
+    /// From [`Reweightable::weighted`] and the solve.
+    fn fit_weighted(
         &self,
         weights: &[Vector3<T>],
-        active: &Active<N>,
-    ) -> Result<Fit<T, N, G>, Error> {
+        active: &[bool],
+        sigma: &mut [Vector3<T>],
+    ) -> Result<Fit<T, D>, Error> {
         let acc = self.weighted(weights, None)?;
         let solution = acc.solve_active(active)?;
-        let mut sigma: heapless::Vec<Vector3<T>, G> = heapless::Vec::new();
-        sigma
-            .resize(self.group_count(), Vector3::zeros())
-            .map_err(|_| Error::CapacityExceeded {
-                what: "groups",
-                capacity: G,
-            })?;
-        self.residual_sigma_into(&solution.x, solution.parameters(), &mut sigma)?;
-        let middle = self.weighted(weights, Some(&sigma))?.middle();
+        self.residual_sigma_into(&solution.x, solution.parameters(), sigma)?;
+        let middle = self.weighted(weights, Some(sigma))?.middle();
         let covariance = solution.cov_sandwich(&middle);
-        let mut w = heapless::Vec::new();
-        for v in weights {
-            w.push(*v).map_err(|_| Error::CapacityExceeded {
-                what: "groups",
-                capacity: G,
-            })?;
-        }
         Ok(Fit {
             solution,
             covariance,
-            weights: w,
-            sigma,
             iterations: 0,
             converged: false,
         })
     }
 
     /// Ordinary least squares (eq. 6) with the sandwich covariance (eq. 8).
+    /// `weights` is set to one and `sigma` to the residual σ.
     ///
     /// # Errors
     /// As [`Reweightable::fit_weighted`].
-    fn fit_ols<const G: usize>(&self, active: &Active<N>) -> Result<Fit<T, N, G>, Error> {
-        let mut ones: heapless::Vec<Vector3<T>, G> = heapless::Vec::new();
-        ones.resize(self.group_count(), Vector3::repeat(T::one()))
-            .map_err(|_| Error::CapacityExceeded {
-                what: "groups",
-                capacity: G,
-            })?;
-        self.fit_weighted(&ones, active)
+    fn fit_ols(
+        &self,
+        active: &[bool],
+        weights: &mut [Vector3<T>],
+        sigma: &mut [Vector3<T>],
+    ) -> Result<Fit<T, D>, Error> {
+        weights.fill(Vector3::repeat(T::one()));
+        self.fit_weighted(weights, active, sigma)
     }
 
     /// Iteratively reweighted least squares from the OLS start (section 5).
-    /// The OLS start and every iteration are pushed to `history` while it
-    /// has room (it is cleared first); the fit goes on when it is full.
+    /// On return `weights` and `sigma` hold the final fit's weights and
+    /// residual σ. The OLS start and every iteration are passed to
+    /// `history`.
     ///
     /// # Errors
     /// [`Error::OutOfRange`] for `max_iterations == 0`; errors of the fits.
-    fn fit_irls<const G: usize, const H: usize>(
+    fn fit_irls(
         &self,
         settings: &IrlsSettings<T>,
-        active: &Active<N>,
-        history: &mut heapless::Vec<Iteration<T, N>, H>,
-    ) -> Result<Fit<T, N, G>, Error> {
+        active: &[bool],
+        weights: &mut [Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        mut history: impl FnMut(&Iteration<T, D>),
+    ) -> Result<Fit<T, D>, Error> {
         if settings.max_iterations == 0 {
             return Err(Error::OutOfRange {
                 what: "max_iterations",
@@ -195,25 +202,24 @@ pub trait Reweightable<T: RealField + Copy, const N: usize> {
                 len: 0,
             });
         }
-        history.clear();
-        let mut fit: Fit<T, N, G> = self.fit_ols(active)?;
-        let _ = history.push(Iteration {
-            x: fit.solution.x,
+        let mut fit = self.fit_ols(active, weights, sigma)?;
+        history(&Iteration {
+            x: fit.solution.x.clone(),
             std: fit.std(),
             change: T::zero(),
         });
         for k in 1..=settings.max_iterations {
-            let weights = robust_weights::<T, G>(&fit.sigma, &settings.weight)?;
-            let next: Fit<T, N, G> = self.fit_weighted(&weights, active)?;
+            robust_weights(sigma, &settings.weight, weights)?;
+            let next = self.fit_weighted(weights, active, sigma)?;
             let std = next.std();
             let mut change = T::zero();
-            for i in 0..N {
+            for i in 0..active.len() {
                 if active[i] && std[i] > T::zero() {
                     change = change.max((next.solution.x[i] - fit.solution.x[i]).abs() / std[i]);
                 }
             }
-            let _ = history.push(Iteration {
-                x: next.solution.x,
+            history(&Iteration {
+                x: next.solution.x.clone(),
                 std,
                 change,
             });
@@ -228,32 +234,37 @@ pub trait Reweightable<T: RealField + Copy, const N: usize> {
     }
 }
 
-/// The weights of eq. 14 from a fit's residual σ, per group and axis.
+/// The weights of eq. 14 from a fit's residual σ, per group and axis,
+/// written to `out`.
 ///
 /// # Errors
-/// [`Error::NonFinite`] / [`Error::NotPositive`] for a bad σ;
-/// [`Error::CapacityExceeded`] with more than `G` groups.
-pub fn robust_weights<T: RealField + Copy, const G: usize>(
+/// [`Error::Mismatch`] when `out` and `sigma` differ in length;
+/// [`Error::NonFinite`] / [`Error::NotPositive`] for a bad σ. `out` is
+/// unchanged on error.
+pub fn robust_weights<T: RealField + Copy>(
     sigma: &[Vector3<T>],
     weight: &RobustWeight<T>,
-) -> Result<heapless::Vec<Vector3<T>, G>, Error> {
-    let mut out = heapless::Vec::new();
-    for s in sigma {
-        let w = Vector3::new(
-            weight.weight(s.x)?,
-            weight.weight(s.y)?,
-            weight.weight(s.z)?,
-        );
-        out.push(w).map_err(|_| Error::CapacityExceeded {
-            what: "groups",
-            capacity: G,
-        })?;
+    out: &mut [Vector3<T>],
+) -> Result<(), Error> {
+    if out.len() != sigma.len() {
+        return Err(Error::Mismatch {
+            what: "one weight per group",
+        });
     }
-    Ok(out)
+    for s in sigma {
+        for a in 0..3 {
+            weight.weight(s[a])?;
+        }
+    }
+    for (o, s) in out.iter_mut().zip(sigma) {
+        *o = s.map(|v| weight.weight(v).unwrap_or(T::zero()));
+    }
+    Ok(())
 }
 
-impl<T: RealField + Copy, const N: usize, const G: usize> Reweightable<T, N>
-    for GroupedStats<T, N, G>
+impl<T: RealField + Copy, D: Dim, const G: usize> Reweightable<T, D> for GroupedStats<T, D, G>
+where
+    DefaultAllocator: Alloc<D>,
 {
     fn group_count(&self) -> usize {
         self.groups().len()
@@ -263,24 +274,16 @@ impl<T: RealField + Copy, const N: usize, const G: usize> Reweightable<T, N>
         &self,
         weights: &[Vector3<T>],
         sigma: Option<&[Vector3<T>]>,
-    ) -> Result<Accumulator<T, N>, Error> {
+    ) -> Result<Accumulator<T, D>, Error> {
         GroupedStats::weighted(self, weights, sigma)
     }
 
     fn residual_sigma_into(
         &self,
-        x: &SVector<T, N>,
+        x: &OVector<T, D>,
         parameters: usize,
         out: &mut [Vector3<T>],
     ) -> Result<(), Error> {
-        if out.len() != self.groups().len() {
-            return Err(Error::Mismatch {
-                what: "one sigma per group",
-            });
-        }
-        for (o, s) in out.iter_mut().zip(self.residual_sigma(x, parameters)) {
-            *o = s;
-        }
-        Ok(())
+        GroupedStats::residual_sigma_into(self, x, parameters, out)
     }
 }

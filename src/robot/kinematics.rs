@@ -1,10 +1,10 @@
 //! Forward kinematics of a [`Chain`]: joint frames, joint origins `oⱼ` and
 //! axes `zⱼ` in the base frame, the tip pose and marker positions.
 //!
-//! Convention (see [`crate::chain`]): `T_j = T_{j-1} · origin_j · motion_j(q_j)`,
+//! Convention (see [`super::chain`]): `T_j = T_{j-1} · origin_j · motion_j(q_j)`,
 //! `T_tip = T_last · tip`. For every joint [`Frames`] keeps both the frame at
 //! zero joint value, `Z_j = T_{j-1} · origin_j` (where the joint-frame errors
-//! of [`crate::geometric`] act), and the moved frame `T_j`. All lengths in m,
+//! of [`crate::model::columns`] act), and the moved frame `T_j`. All lengths in m,
 //! revolute joint values in rad, prismatic ones in m.
 //!
 //! ```
@@ -21,9 +21,9 @@
 //! assert!((p - Vector3::new(0.0, 2.0, 0.0)).norm() < 1e-12);
 //! ```
 
-use nalgebra::{Isometry3, Point3, RealField, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, RealField, Unit, Vector3};
 
-use crate::chain::{Chain, JointKind};
+use super::chain::{Chain, JointKind};
 use crate::Error;
 
 /// One joint of a posed chain, in the base frame.
@@ -129,17 +129,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         let mut t = Isometry3::identity();
         for (joint, &qj) in self.joints().iter().zip(q) {
             let zero = t * joint.origin;
-            let motion = match joint.kind {
-                JointKind::Revolute => Isometry3::from_parts(
-                    Translation3::identity(),
-                    UnitQuaternion::from_axis_angle(&joint.axis, qj),
-                ),
-                JointKind::Prismatic => Isometry3::from_parts(
-                    Translation3::from(joint.axis.into_inner() * qj),
-                    UnitQuaternion::identity(),
-                ),
-            };
-            t = zero * motion;
+            t = zero * joint.motion(qj);
             let axis = Unit::new_normalize(zero.rotation * joint.axis.into_inner());
             // Capacity equals the chain's, so this cannot fail; map it anyway.
             joints

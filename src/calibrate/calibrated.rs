@@ -1,0 +1,30 @@
+//! The calibrated model: what a calibration hands back, enough to predict
+//! the rows of another measurement file of the same job.
+
+use super::geometry::Geometry;
+use super::names::Names;
+use super::rows::{Compliances, DataKinds};
+use super::Policy;
+use crate::model::Param;
+
+/// The final model of a calibration: the geometry it converged to, the
+/// estimate of every parameter, and how its rows were built.
+#[derive(Debug, Clone)]
+pub struct CalibratedModel {
+    /// Names of joints, markers, bins.
+    pub names: Names,
+    /// The calibrated geometry (base, chain with offsets and frame errors,
+    /// markers).
+    pub geometry: Geometry,
+    /// The model's parameters.
+    pub params: Vec<Param>,
+    /// Their estimate (reported units; geometric ones are the last, unapplied
+    /// Gauss–Newton step).
+    pub x: Vec<f64>,
+    /// The compliances the linearised effects were taken about.
+    pub compliances: Compliances,
+    /// The kinds of rows the calibration used.
+    pub kinds: DataKinds,
+    /// The decision constants of the run.
+    pub policy: Policy,
+}

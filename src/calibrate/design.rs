@@ -1,0 +1,129 @@
+//! The design: the columns of a list of parameters at every row (`B` of
+//! eq. 4, stacked), and which of them the data can tell apart.
+
+use nalgebra::{DMatrix, Dyn, Vector3};
+
+use super::rows::{Compliances, Row};
+use crate::estimate::{identifiability, Accumulator, Block, IdentifiabilitySettings};
+use crate::model::Param;
+use crate::Error;
+
+/// The columns of some parameters at every row: `b` is `3·rows × params`,
+/// row `3i + a` is axis `a` of row `i`, each column in its parameter's
+/// reported unit.
+#[derive(Debug, Clone)]
+pub struct Design {
+    /// The parameters, in column order.
+    pub params: Vec<Param>,
+    /// Columns in the reported units.
+    pub b: DMatrix<f64>,
+    /// Measured `Δp` \[m\], `3·rows`.
+    pub y: Vec<f64>,
+    /// Group (configuration index) of every row.
+    pub group: Vec<usize>,
+    /// Number of groups.
+    pub groups: usize,
+}
+
+impl Design {
+    /// Columns of `params` at `rows`, the linearised effects about
+    /// `compliances`.
+    ///
+    /// # Errors
+    /// [`Error`] when a column cannot be computed (a parameter naming a
+    /// joint the chain does not have).
+    pub fn new(
+        rows: &[Row],
+        params: &[Param],
+        compliances: &Compliances,
+        names: &super::names::Names,
+        groups: usize,
+    ) -> Result<Self, Error> {
+        let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
+        let mut b = DMatrix::zeros(3 * rows.len(), params.len());
+        let mut y = Vec::with_capacity(3 * rows.len());
+        for (i, row) in rows.iter().enumerate() {
+            let k = if linearised {
+                compliances.at(row)
+            } else {
+                Vec::new()
+            };
+            let sample = row.sample(&k);
+            for (c, p) in params.iter().enumerate() {
+                let col = p.column_si(&sample)? * names.unit(p).si;
+                for a in 0..3 {
+                    b[(3 * i + a, c)] = col[a];
+                }
+            }
+            y.extend_from_slice(row.y.as_slice());
+        }
+        Ok(Self {
+            params: params.to_vec(),
+            b,
+            y,
+            group: rows.iter().map(|r| r.group).collect(),
+            groups,
+        })
+    }
+
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.group.len()
+    }
+
+    /// Column index of a parameter.
+    pub fn index(&self, p: &Param) -> Option<usize> {
+        self.params.iter().position(|u| u == p)
+    }
+
+    /// Residual `Δp − B x` \[m\] of row `i` for `x` on columns `cols`.
+    pub fn residual(&self, cols: &[usize], x: &[f64], i: usize) -> Vector3<f64> {
+        let mut r = Vector3::new(self.y[3 * i], self.y[3 * i + 1], self.y[3 * i + 2]);
+        for (&c, &v) in cols.iter().zip(x) {
+            for a in 0..3 {
+                r[a] -= self.b[(3 * i + a, c)] * v;
+            }
+        }
+        r
+    }
+
+    /// Of the columns `extra`, those that are not (numerically) combinations
+    /// of the columns `base` and of the extra columns kept before them: the
+    /// one column-independence test of robcal
+    /// ([`crate::estimate::rank`]), on the unweighted columns, in order.
+    pub fn independent(&self, base: &[usize], extra: &[usize]) -> Vec<usize> {
+        let cols: Vec<usize> = base.iter().chain(extra).copied().collect();
+        let n = cols.len();
+        if n == 0 {
+            return Vec::new();
+        }
+        let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(n));
+        let mut block = Block::new(
+            DMatrix::zeros(3, n).fixed_rows::<3>(0).into_owned(),
+            Vector3::zeros(),
+        );
+        for i in 0..self.rows() {
+            for (k, &c) in cols.iter().enumerate() {
+                for a in 0..3 {
+                    block.b[(a, k)] = self.b[(3 * i + a, c)];
+                }
+            }
+            // Finite by construction (the columns were checked when built).
+            let _ = acc.update(&block);
+        }
+        let all = vec![true; n];
+        let Ok(rank) = identifiability(
+            &acc.information(),
+            &all,
+            &IdentifiabilitySettings::default(),
+        ) else {
+            return Vec::new();
+        };
+        extra
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| rank.kept[base.len() + k])
+            .map(|(_, &c)| c)
+            .collect()
+    }
+}

@@ -1,0 +1,320 @@
+//! The closed loop: fit the declared model, test every effect it lacks
+//! against the residuals, add the first that passes, refit, repeat; report
+//! the errors before and after each step.
+
+use super::effects::{candidates, inadmissible, Candidate, Effect};
+use super::engine::{Engine, Fitted};
+use super::report::{EffectStep, PlotSeries, Report, Unexplained};
+use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
+use super::{fit, CalibrationError, Method, Settings};
+use crate::model::Param;
+use crate::Error;
+
+/// One candidate's test in a diagnosis round.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tested {
+    /// The effect.
+    pub effect: Effect,
+    /// Joint or marker it is about.
+    pub about: Option<String>,
+    /// Columns tested.
+    pub q: usize,
+    /// F statistic.
+    pub f: f64,
+    /// p-value.
+    pub p_value: f64,
+    /// Drop of the weighted RSS.
+    pub delta_rss: f64,
+}
+
+/// When IRLS/WLS cannot estimate a σ per configuration and axis (a
+/// configuration with fewer than [`super::Policy::min_rows_per_group`]
+/// rows), the fit falls back to OLS; the reason, for the report.
+pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
+    if method == Method::Ols {
+        return None;
+    }
+    let n = e.rows.per_group();
+    let least = e.policy.min_rows_per_group;
+    let (g, &fewest) = n.iter().enumerate().min_by_key(|(_, &c)| c)?;
+    (fewest < least).then(|| {
+        format!(
+            "{} needs a scatter per configuration to weight by, and configuration {} has {fewest} row(s) \
+             (at least {least}): fitted by OLS instead",
+            method.name(),
+            e.rows.configs[g]
+        )
+    })
+}
+
+/// The model `params` with candidate `c` added: its parameters go where the
+/// parameters they replace were, else at the end; then the identifiable
+/// subset.
+fn extended(
+    e: &Engine<'_>,
+    params: &[Param],
+    c: &Candidate,
+) -> Result<Vec<Param>, CalibrationError> {
+    let at = params
+        .iter()
+        .position(|p| c.remove.contains(p))
+        .unwrap_or(params.len());
+    let mut new: Vec<Param> = params[..at]
+        .iter()
+        .filter(|p| !c.remove.contains(p))
+        .copied()
+        .collect();
+    new.extend(c.add.iter().filter(|a| !params.contains(a)));
+    new.extend(params[at..].iter().filter(|p| !c.remove.contains(p)));
+    let d = e.design(&new)?;
+    let all: Vec<usize> = (0..new.len()).collect();
+    Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
+}
+
+/// Every candidate `current` lacks, tested against its residuals; most
+/// significant first.
+fn test_round(
+    e: &mut Engine<'_>,
+    current: &Fitted,
+) -> Result<(Vec<Candidate>, Vec<(usize, Tested)>), CalibrationError> {
+    let cands = candidates(
+        &e.names,
+        &current.params,
+        e.rows.kinds,
+        &e.rows.bins,
+        &e.rows.compensator_ok,
+    );
+    // Every parameter any candidate may test, after the model.
+    let mut params = current.params.clone();
+    for c in &cands {
+        for p in &c.test {
+            if !params.contains(p) {
+                params.push(*p);
+            }
+        }
+    }
+    e.restore(current)?;
+    let d = e.design(&params)?;
+    let model: Vec<usize> = (0..current.params.len()).collect();
+    let mut tested: Vec<(usize, Tested)> = Vec::new();
+    for (ci, c) in cands.iter().enumerate() {
+        let cols: Vec<usize> = c.test.iter().filter_map(|p| d.index(p)).collect();
+        let cols = d.independent(&model, &cols);
+        if cols.is_empty() {
+            continue;
+        }
+        match fit::test(&d, &model, &cols, &current.fit.weights) {
+            Ok(t) => tested.push((
+                ci,
+                Tested {
+                    effect: c.effect,
+                    about: c.about(&e.names),
+                    q: t.dof_num,
+                    f: t.f,
+                    p_value: t.p_value,
+                    delta_rss: t.delta_rss,
+                },
+            )),
+            Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => {}
+            Err(err) => return Err(CalibrationError::Core("effect test", err)),
+        }
+    }
+    tested.sort_by(|a, b| {
+        a.1.p_value
+            .total_cmp(&b.1.p_value)
+            .then(b.1.f.total_cmp(&a.1.f))
+    });
+    Ok((cands, tested))
+}
+
+/// The calibration on a prepared engine: the declared model, then (unless
+/// `settings.diagnose` is off) the diagnosis loop.
+///
+/// Decisions (constants in [`super::Policy`]):
+/// - an effect is added only if it passes the Bonferroni-corrected test
+///   (`p · tried < α`) and, when the lack of fit is significant, explains
+///   at least `min_share` of the lack-of-fit sum of squares above its noise
+///   expectation: an effect that only nibbles at a structure it does not
+///   describe is not named;
+/// - and only if its estimate is physical ([`inadmissible`]) and the
+///   leave-one-configuration-out RMS drops with it (when it is computed):
+///   a significant effect that predicts unseen configurations worse is
+///   fitting this data set, not the robot. The candidates are tried in
+///   order of p-value until one passes.
+///
+/// # Errors
+/// [`CalibrationError`] from the fits.
+pub fn run(
+    mut e: Engine<'_>,
+    declared: Vec<Param>,
+    dropped: Vec<String>,
+    settings: &Settings,
+    mut notes: Vec<String>,
+) -> Result<Report, CalibrationError> {
+    let alpha = e.policy.alpha;
+    e.register_base(&declared)?;
+    (e.progress)("fitting the declared model");
+    let first = e.fit(&declared)?;
+    let mut current = e.with_heldout(first)?;
+    let declared_rms = (current.rms_um, current.heldout_rms_um);
+    let declared_structure = lack_of_fit(&e.rows, &current).map(|l| {
+        let (variable, _) = most_followed(&e.rows, &e.names, &current);
+        Unexplained {
+            variable,
+            statistic: l.f,
+            p_value: l.p_value,
+        }
+    });
+    let mut steps: Vec<EffectStep> = Vec::new();
+    let mut unexplained = None;
+    let mut last_round: Vec<Tested> = Vec::new();
+    let mut plots: Vec<PlotSeries> = Vec::new();
+    let mut rejected: Vec<String> = Vec::new();
+    while settings.diagnose {
+        let lof = lack_of_fit(&e.rows, &current);
+        let (cands, tested) = test_round(&mut e, &current)?;
+        last_round = tested.iter().map(|t| t.1.clone()).collect();
+        let tried = tested.len().max(1) as f64;
+        let lof_significant = lof.is_some_and(|l| l.p_value < alpha);
+        let eligible: Vec<&(usize, Tested)> = tested
+            .iter()
+            .filter(|(_, t)| {
+                let significant = t.p_value * tried < alpha;
+                let share_ok = match lof {
+                    Some(l) if lof_significant && l.excess() > 0.0 => {
+                        t.delta_rss >= e.policy.min_share * l.excess()
+                    }
+                    _ => true,
+                };
+                significant && share_ok
+            })
+            .collect();
+        if !eligible.is_empty() && steps.len() >= e.policy.max_effects {
+            break;
+        }
+        // The most significant candidate whose estimate is physical and that
+        // lowers the leave-one-configuration-out RMS; one that fails is
+        // rejected (a note the first time) and the next is tried.
+        let mut accepted = None;
+        for (ci, t) in eligible {
+            let c = &cands[*ci];
+            let on = t
+                .about
+                .as_deref()
+                .map(|a| format!(" on {a}"))
+                .unwrap_or_default();
+            let new_params = extended(&e, &current.params, c)?;
+            let next = e.fit(&new_params)?;
+            let why = match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add) {
+                Some(why) => Some(format!("rejected: its estimate is not physical ({why})")),
+                None => {
+                    let next = e.with_heldout(next)?;
+                    match (current.heldout_rms_um, next.heldout_rms_um) {
+                        (Some(before), Some(after)) if after >= before => Some(format!(
+                            "not added: significant (p = {:.1e}) but the \
+                             leave-one-configuration-out RMS does not drop \
+                             ({before:.1} -> {after:.1} um)",
+                            t.p_value
+                        )),
+                        _ => {
+                            accepted = Some((*ci, t.clone(), next));
+                            break;
+                        }
+                    }
+                }
+            };
+            if let Some(why) = why {
+                let key = format!("{}{on}", c.effect);
+                if !rejected.contains(&key) {
+                    let note = format!("{key} {why} (step {})", steps.len() + 1);
+                    (e.progress)(&note);
+                    notes.push(note);
+                    rejected.push(key);
+                }
+                e.restore(&current)?;
+            }
+        }
+        let Some((ci, t, next)) = accepted else {
+            if let Some(l) = lof.filter(|_| lof_significant) {
+                let (variable, _) = most_followed(&e.rows, &e.names, &current);
+                unexplained = Some(Unexplained {
+                    variable,
+                    statistic: l.f,
+                    p_value: l.p_value,
+                });
+            }
+            break;
+        };
+        let c = &cands[ci];
+        let on = t
+            .about
+            .as_deref()
+            .map(|a| format!(" on {a}"))
+            .unwrap_or_default();
+        (e.progress)(&format!("adding {}{on} (p = {:.3e})", c.effect, t.p_value));
+        let (variable, x) = traced_variable(&e.rows, &e.names, c);
+        plots.push(PlotSeries {
+            title: format!(
+                "{}{}",
+                c.effect,
+                t.about
+                    .as_deref()
+                    .map(|a| format!(" {a}"))
+                    .unwrap_or_default()
+            ),
+            variable,
+            x,
+            before_um: current.residuals.iter().map(|r| r * 1e6).collect(),
+            after_um: next.residuals.iter().map(|r| r * 1e6).collect(),
+        });
+        steps.push(EffectStep {
+            effect: c.effect,
+            joint: c.joint.map(|j| e.names.joints[j].clone()),
+            marker: c.marker.map(|m| e.names.marker_id(m)),
+            p_value: t.p_value,
+            f: t.f,
+            tried: tested.len(),
+            rms_um_before: current.rms_um,
+            rms_um_after: next.rms_um,
+            heldout_rms_um_before: current.heldout_rms_um,
+            heldout_rms_um_after: next.heldout_rms_um,
+            parameters_before: e.parameters(&current),
+            parameters_after: e.parameters(&next),
+        });
+        current = next;
+    }
+    let final_lof: Option<LackOfFit> = lack_of_fit(&e.rows, &current);
+    if let Some(u) = &unexplained {
+        plots.push(PlotSeries {
+            title: format!("unexplained: {}", u.variable),
+            variable: u.variable.clone(),
+            x: variable_values(&e.rows, &e.names, &u.variable),
+            before_um: current.residuals.iter().map(|r| r * 1e6).collect(),
+            after_um: Vec::new(),
+        });
+    }
+    e.restore(&current)?;
+    Ok(Report {
+        method: e.fit_settings.method.name(),
+        iterations: current.fit.iterations,
+        relinearisations: current.relinearisations,
+        converged: current.fit.converged,
+        parameters: e.parameters(&current),
+        rms_um: current.rms_um,
+        heldout_rms_um: current.heldout_rms_um,
+        declared_rms_um: declared_rms.0,
+        declared_heldout_rms_um: declared_rms.1,
+        declared_structure,
+        effects: steps,
+        unexplained,
+        lack_of_fit: final_lof,
+        validation: None,
+        last_round,
+        dropped,
+        rows: e.rows.rows.len(),
+        configurations: e.rows.configs.len(),
+        plots,
+        model: e.calibrated(&current),
+        notes,
+    })
+}

@@ -1,0 +1,260 @@
+//! The fit of a model: rows at the current linearisation, the estimator
+//! (`fit`), Gauss–Newton on the geometry and the linearised effects, and
+//! the leave-one-configuration-out prediction error.
+
+use nalgebra::Vector3;
+
+use super::calibrated::CalibratedModel;
+use super::design::Design;
+use super::fit::{fit, FitOut, FitSettings};
+use super::geometry::Geometry;
+use super::names::Names;
+use super::report::Parameter;
+use super::residuals::rms_um;
+use super::rows::{Compliances, RowKind, Rows};
+use super::{CalibrationError, Policy, Progress};
+use crate::model::Param;
+use crate::Error;
+
+/// A fitted model: its parameters, estimate and errors, and the
+/// linearisation it was fitted at.
+#[derive(Debug, Clone)]
+pub struct Fitted {
+    /// The model's parameters.
+    pub params: Vec<Param>,
+    /// The fit (all columns of `params`, in order).
+    pub fit: FitOut,
+    /// The geometry the fit is linearised at (its geometric steps are below
+    /// [`Policy::step_tolerance`]).
+    pub geometry: Geometry,
+    /// The compliances the linearised effects were taken about.
+    pub compliances: Compliances,
+    /// Gauss–Newton relinearisations.
+    pub relinearisations: usize,
+    /// RMS of the position residuals \[µm\].
+    pub rms_um: f64,
+    /// Leave-one-configuration-out RMS \[µm\], when computed.
+    pub heldout_rms_um: Option<f64>,
+    /// Residual \[m\] of every row.
+    pub residuals: Vec<Vector3<f64>>,
+}
+
+/// The problem being solved: rows, names, the current linearisation, and
+/// how to fit.
+pub struct Engine<'a> {
+    /// The rows at the current linearisation.
+    pub rows: Rows,
+    /// Names of joints, markers, bins.
+    pub names: Names,
+    /// The current geometry (Gauss–Newton).
+    pub geometry: Geometry,
+    /// The current compliances (linearised effects).
+    pub compliances: Compliances,
+    /// How each fit is made.
+    pub fit_settings: FitSettings,
+    /// Decision constants.
+    pub policy: Policy,
+    /// Compute the held-out RMS (and require it to drop for an effect).
+    pub heldout: bool,
+    /// Progress messages.
+    pub progress: Progress<'a>,
+}
+
+impl Engine<'_> {
+    /// The design of `params` at the current linearisation.
+    ///
+    /// # Errors
+    /// [`CalibrationError::Core`] when a column cannot be computed.
+    pub fn design(&self, params: &[Param]) -> Result<Design, CalibrationError> {
+        Design::new(
+            &self.rows.rows,
+            params,
+            &self.compliances,
+            &self.names,
+            self.rows.configs.len(),
+        )
+        .map_err(|e| CalibrationError::Core("columns", e))
+    }
+
+    /// Recomputes the rows at the current geometry.
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`].
+    pub fn relinearise(&mut self) -> Result<(), CalibrationError> {
+        self.rows.relinearise(&self.geometry)
+    }
+
+    /// Places the base by a rigid registration of the predicted marker
+    /// positions onto the measured ones ([`Geometry::register`]), when
+    /// `model` identifies the base and there are absolute rows.
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`].
+    pub fn register_base(&mut self, model: &[Param]) -> Result<(), CalibrationError> {
+        let absolute: Vec<_> = self
+            .rows
+            .rows
+            .iter()
+            .filter(|r| r.kind == RowKind::Absolute)
+            .collect();
+        if !model.iter().any(|p| matches!(p, Param::Base { .. })) || absolute.len() < 3 {
+            return Ok(());
+        }
+        let predicted: Vec<Vector3<f64>> = absolute.iter().map(|r| r.p).collect();
+        let measured: Vec<Vector3<f64>> = absolute.iter().map(|r| r.measured).collect();
+        self.geometry.register(&predicted, &measured);
+        self.relinearise()
+    }
+
+    /// Fits `params`: linearised effects are evaluated about the estimate
+    /// and refitted until the compliances settle (at most
+    /// [`Policy::linearised_passes`]); geometric parameters of absolute rows
+    /// by Gauss–Newton, refitted at the moved model until the step is below
+    /// [`Policy::step_tolerance`] (at most [`Policy::max_steps`]).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Core`] from the estimator.
+    pub fn fit(&mut self, params: &[Param]) -> Result<Fitted, CalibrationError> {
+        let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
+        let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
+        let mut passes: u32 = if linearised {
+            self.policy.linearised_passes
+        } else {
+            1
+        };
+        let mut relinearisations = 0;
+        let cols: Vec<usize> = (0..params.len()).collect();
+        loop {
+            let d = self.design(params)?;
+            let out = fit(&d, &cols, None, &self.fit_settings)
+                .map_err(|e| CalibrationError::Core("fit", e))?;
+            let before = std::mem::replace(
+                &mut self.compliances,
+                Compliances::of(params, &out.x, &self.names),
+            );
+            passes = passes.saturating_sub(1);
+            let moved = self.compliances.moved(&before, 1e-6);
+            let step = params
+                .iter()
+                .zip(&out.x)
+                .filter(|(p, _)| p.is_geometric())
+                .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
+            if geometric
+                && step > self.policy.step_tolerance
+                && relinearisations < self.policy.max_steps
+            {
+                self.geometry.apply(params, &out.x);
+                self.relinearise()?;
+                relinearisations += 1;
+                continue;
+            }
+            if passes == 0 || !moved {
+                let residuals: Vec<Vector3<f64>> = (0..d.rows())
+                    .map(|i| d.residual(&cols, &out.x, i))
+                    .collect();
+                return Ok(Fitted {
+                    params: params.to_vec(),
+                    rms_um: rms_um(&residuals),
+                    fit: out,
+                    geometry: self.geometry.clone(),
+                    compliances: self.compliances.clone(),
+                    relinearisations,
+                    heldout_rms_um: None,
+                    residuals,
+                });
+            }
+        }
+    }
+
+    /// Puts the problem back at `f`'s linearisation: its compliances and its
+    /// geometry.
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`].
+    pub fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
+        self.compliances = f.compliances.clone();
+        self.geometry = f.geometry.clone();
+        self.relinearise()
+    }
+
+    /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
+    /// configuration predicted by a fit (same method, same linearisation)
+    /// without it. Parameters the other configurations cannot identify are
+    /// held at zero (their error then shows in the prediction).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Core`] from the estimator.
+    pub fn heldout(&mut self, fitted: &Fitted) -> Result<Option<f64>, CalibrationError> {
+        if !self.heldout || self.rows.configs.len() < 2 {
+            return Ok(None);
+        }
+        self.restore(fitted)?;
+        let d = self.design(&fitted.params)?;
+        let cols: Vec<usize> = (0..fitted.params.len()).collect();
+        let mut res = Vec::with_capacity(d.rows());
+        (self.progress)(&format!(
+            "held-out RMS: {} fits, one without each configuration",
+            self.rows.configs.len()
+        ));
+        for g in 0..self.rows.configs.len() {
+            let mut use_cols = cols.clone();
+            let out = loop {
+                match fit(&d, &use_cols, Some(g), &self.fit_settings) {
+                    Ok(f) => break Some(f),
+                    Err(Error::NotIdentifiable { column, .. }) if column < use_cols.len() => {
+                        use_cols.remove(column);
+                    }
+                    Err(Error::TooFewEquations { .. }) => break None,
+                    Err(e) => return Err(CalibrationError::Core("held-out fit", e)),
+                }
+            };
+            let Some(out) = out else { return Ok(None) };
+            for i in (0..d.rows()).filter(|&i| d.group[i] == g) {
+                res.push(d.residual(&use_cols, &out.x, i));
+            }
+        }
+        self.restore(fitted)?;
+        Ok(Some(rms_um(&res)))
+    }
+
+    /// `f` with its held-out RMS.
+    ///
+    /// # Errors
+    /// As [`Engine::heldout`].
+    pub fn with_heldout(&mut self, mut f: Fitted) -> Result<Fitted, CalibrationError> {
+        f.heldout_rms_um = self.heldout(&f)?;
+        Ok(f)
+    }
+
+    /// The report's parameters of `f`: geometric ones as their values in
+    /// the model (the base as its pose in the measurement frame).
+    pub fn parameters(&self, f: &Fitted) -> Vec<Parameter> {
+        f.params
+            .iter()
+            .zip(f.fit.x.iter().zip(&f.fit.std))
+            .map(|(p, (&x, &std))| Parameter {
+                name: self.names.name(p),
+                value: if p.is_geometric() {
+                    f.geometry.value(p, x)
+                } else {
+                    x
+                },
+                std,
+                unit: self.names.unit(p).name.to_string(),
+            })
+            .collect()
+    }
+
+    /// The calibrated model of `f`, for validation and prediction.
+    pub fn calibrated(&self, f: &Fitted) -> CalibratedModel {
+        CalibratedModel {
+            names: self.names.clone(),
+            geometry: f.geometry.clone(),
+            params: f.params.clone(),
+            x: f.fit.x.clone(),
+            compliances: f.compliances.clone(),
+            kinds: self.rows.kinds,
+            policy: self.policy,
+        }
+    }
+}

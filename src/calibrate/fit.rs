@@ -1,0 +1,225 @@
+//! The estimator on the host: the rows of a [`Design`] as a
+//! [`Reweightable`] source of the core, at the exact number of parameters
+//! (`Dyn`), and the fits and tests the engine asks for.
+
+use nalgebra::{Dyn, OMatrix, OVector, Vector3, U3};
+
+use super::design::Design;
+use crate::estimate::{
+    nested_test, robust_weights, Accumulator, Block, Fit, IrlsSettings, NestedTest, Reweightable,
+    RobustWeight,
+};
+use crate::Error;
+
+/// Estimation method (data contract §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Iteratively reweighted least squares (eq. 14, section 5).
+    Irls,
+    /// One reweighting step from OLS (eq. 10, 14).
+    Wls,
+    /// Ordinary least squares (eq. 6).
+    Ols,
+}
+
+impl Method {
+    /// Its name in the contract.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Irls => "irls",
+            Method::Wls => "wls",
+            Method::Ols => "ols",
+        }
+    }
+}
+
+/// How one fit is made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitSettings {
+    /// OLS, one WLS step or IRLS.
+    pub method: Method,
+    /// σ0 \[m\] and λ of eq. 14.
+    pub weight: RobustWeight<f64>,
+    /// IRLS iterations at most.
+    pub max_iterations: usize,
+    /// IRLS stops when no parameter moves by more than this many of its σ.
+    pub tolerance: f64,
+}
+
+/// A fit on some columns of a design: the estimate and its noise model.
+#[derive(Debug, Clone)]
+pub struct FitOut {
+    /// Column indices into the [`Design`].
+    pub cols: Vec<usize>,
+    /// Estimate, one per column, in the reported units.
+    pub x: Vec<f64>,
+    /// One standard deviation (sandwich covariance, eq. 8 / 11).
+    pub std: Vec<f64>,
+    /// The covariance (sandwich, eq. 8 / 11), in the reported units.
+    pub covariance: OMatrix<f64, Dyn, Dyn>,
+    /// Weights per group and axis the fit used.
+    pub weights: Vec<Vector3<f64>>,
+    /// Residual σ per group and axis \[m\].
+    pub sigma: Vec<Vector3<f64>>,
+    /// Reweighting iterations.
+    pub iterations: usize,
+    /// Whether IRLS converged.
+    pub converged: bool,
+}
+
+/// The rows of a [`Design`] on some of its columns, optionally without one
+/// group (leave-one-out).
+struct View<'a> {
+    d: &'a Design,
+    cols: &'a [usize],
+    skip_group: Option<usize>,
+}
+
+impl View<'_> {
+    fn included(&self, i: usize) -> bool {
+        Some(self.d.group[i]) != self.skip_group
+    }
+}
+
+impl Reweightable<f64, Dyn> for View<'_> {
+    fn group_count(&self) -> usize {
+        self.d.groups
+    }
+
+    fn weighted(
+        &self,
+        weights: &[Vector3<f64>],
+        sigma: Option<&[Vector3<f64>]>,
+    ) -> Result<Accumulator<f64, Dyn>, Error> {
+        if weights.len() != self.d.groups || sigma.is_some_and(|s| s.len() != self.d.groups) {
+            return Err(Error::Mismatch {
+                what: "one weight per group",
+            });
+        }
+        let n = self.cols.len();
+        let mut acc = Accumulator::zeros(Dyn(n));
+        // One block, refilled for every row.
+        let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
+        for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
+            let g = self.d.group[i];
+            for (k, &c) in self.cols.iter().enumerate() {
+                for a in 0..3 {
+                    block.b[(a, k)] = self.d.b[(3 * i + a, c)];
+                }
+            }
+            block.dp = Vector3::new(self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]);
+            block.w = weights[g];
+            block.sigma = sigma.map(|s| s[g]);
+            acc.update(&block)?;
+        }
+        Ok(acc)
+    }
+
+    fn residual_sigma_into(
+        &self,
+        x: &OVector<f64, Dyn>,
+        parameters: usize,
+        out: &mut [Vector3<f64>],
+    ) -> Result<(), Error> {
+        if out.len() != self.d.groups {
+            return Err(Error::Mismatch {
+                what: "one sigma per group",
+            });
+        }
+        let mut ss = vec![Vector3::<f64>::zeros(); self.d.groups];
+        let mut n = vec![0usize; self.d.groups];
+        let mut m = 0usize;
+        for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
+            let r = self.d.residual(self.cols, x.as_slice(), i);
+            let g = self.d.group[i];
+            ss[g] += r.component_mul(&r);
+            n[g] += 1;
+            m += 3;
+        }
+        let dof = m as f64 / (m.saturating_sub(parameters).max(1)) as f64;
+        for g in 0..self.d.groups {
+            out[g] = if n[g] == 0 {
+                Vector3::zeros()
+            } else {
+                (ss[g] * (dof / n[g] as f64)).map(f64::sqrt)
+            };
+        }
+        Ok(())
+    }
+}
+
+/// Fits the columns `cols` of `d` (all rows, or all but group `skip_group`)
+/// by the method of `s`.
+///
+/// # Errors
+/// From the solve ([`Error::NotIdentifiable`], …).
+pub fn fit(
+    d: &Design,
+    cols: &[usize],
+    skip_group: Option<usize>,
+    s: &FitSettings,
+) -> Result<FitOut, Error> {
+    let view = View {
+        d,
+        cols,
+        skip_group,
+    };
+    let active = vec![true; cols.len()];
+    let mut weights = vec![Vector3::zeros(); d.groups];
+    let mut sigma = vec![Vector3::zeros(); d.groups];
+    let fit: Fit<f64, Dyn> = match s.method {
+        Method::Ols => view.fit_ols(&active, &mut weights, &mut sigma)?,
+        Method::Wls => {
+            view.fit_ols(&active, &mut weights, &mut sigma)?;
+            let ols_sigma = sigma.clone();
+            robust_weights(&ols_sigma, &s.weight, &mut weights)?;
+            let mut f = view.fit_weighted(&weights, &active, &mut sigma)?;
+            f.iterations = 1;
+            f
+        }
+        Method::Irls => {
+            let settings = IrlsSettings {
+                weight: s.weight,
+                tolerance: s.tolerance,
+                max_iterations: s.max_iterations.max(1),
+            };
+            view.fit_irls(&settings, &active, &mut weights, &mut sigma, |_| {})?
+        }
+    };
+    let std = fit.std();
+    Ok(FitOut {
+        cols: cols.to_vec(),
+        x: fit.solution.x.as_slice().to_vec(),
+        std: std.as_slice().to_vec(),
+        covariance: fit.covariance,
+        weights,
+        sigma,
+        iterations: fit.iterations,
+        converged: fit.converged,
+    })
+}
+
+/// Nested F test ([`nested_test`]) of adding the columns `candidate` to the
+/// columns `model`, with the model's weights per group and axis.
+///
+/// # Errors
+/// As [`nested_test`].
+pub fn test(
+    d: &Design,
+    model: &[usize],
+    candidate: &[usize],
+    weights: &[Vector3<f64>],
+) -> Result<NestedTest, Error> {
+    let mut cols = model.to_vec();
+    cols.extend_from_slice(candidate);
+    let view = View {
+        d,
+        cols: &cols,
+        skip_group: None,
+    };
+    let acc = view.weighted(weights, None)?;
+    let m: Vec<bool> = (0..cols.len()).map(|i| i < model.len()).collect();
+    let c: Vec<bool> = m.iter().map(|v| !v).collect();
+    let sol = acc.solve_active(&m)?;
+    nested_test(&acc, &m, &sol, &c)
+}

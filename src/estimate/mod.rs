@@ -1,0 +1,69 @@
+//! The estimator (`no_std`, allocation-free): weighted least squares from
+//! streamed identification rows `Δp = B X` (eq. 4), sections 3–5 of the
+//! paper.
+//!
+//! ```text
+//!   rows B, Δp, w ──update──► Accumulator  Λ = Σ BᵀW²B, η = Σ BᵀW²Δp     (eq. 9, 10)
+//!                                  │ solve_active
+//!                                  ▼
+//!                 Factor (scaled Cholesky) ──► Solution  X̂, Λ⁻¹, RSS    (eq. 6, 10)
+//!                                                 covariances            (eq. 7, 8, 11, 13)
+//!
+//!   rows per configuration ──► GroupedStats ─┐
+//!   rows kept elsewhere (the host) ──────────┴─► Reweightable: OLS, WLS, iterative WLS
+//!                                                 weights from σ per group and axis (eq. 14)
+//!
+//!   Λ of model + candidates ──► rank::identifiability   what the data can identify
+//!                          ──► nested::nested_test     does a candidate explain the residuals
+//! ```
+//!
+//! Every type is generic over the scalar `T` (f32 on a microcontroller, f64
+//! on the host) and over the number of parameters as a nalgebra dimension
+//! `D`: `Const<N>` on the device (fixed size, no allocator), `Dyn` on the
+//! host (the exact number of parameters of the model).
+//!
+//! | module | what |
+//! |---|---|
+//! | [`accumulator`] | [`Accumulator`], [`Block`]: the streaming sufficient statistics (eq. 9, 10) |
+//! | [`factor`] | [`Factor`], [`Solution`]: the scaled Cholesky and the covariances (eq. 6–8, 10–13) |
+//! | [`grouped`] | [`GroupedStats`]: moments per configuration and axis |
+//! | [`weights`] | [`RobustWeight`]: eq. 12 and 14 |
+//! | [`irls`] | [`Reweightable`], [`Fit`]: OLS, WLS, iterative WLS (section 5) |
+//! | [`rank`] | [`identifiability`]: the one column-independence test |
+//! | [`nested`] | [`nested_test`]: the F test of a candidate effect from cross-products |
+//! | [`distributions`] | χ² and F tail probabilities (no std) |
+
+use nalgebra::allocator::Allocator;
+use nalgebra::{DefaultAllocator, Dim, U3};
+
+/// The storage the estimator needs for `D` parameters: `D × D` matrices,
+/// `D`-vectors and `3 × D` blocks. nalgebra's `DefaultAllocator` provides it
+/// for every `Const<N>` (on the stack) and, with `std`, for `Dyn` (on the
+/// heap); every type of this module is bounded by
+/// `DefaultAllocator: Alloc<D>`.
+pub trait Alloc<D: Dim>: Allocator<D, D> + Allocator<D> + Allocator<U3, D> {}
+
+impl<D: Dim> Alloc<D> for DefaultAllocator where
+    DefaultAllocator: Allocator<D, D> + Allocator<D> + Allocator<U3, D>
+{
+}
+
+pub mod accumulator;
+pub mod distributions;
+pub mod factor;
+pub mod grouped;
+pub mod irls;
+pub mod nested;
+pub mod rank;
+pub mod weights;
+
+pub use accumulator::{Accumulator, Block};
+pub use factor::{pivot_tolerance, std_devs, Factor, Solution};
+pub use grouped::{AxisMoments, GroupMoments, GroupedStats};
+pub use irls::{robust_weights, Fit, IrlsSettings, Iteration, Reweightable};
+pub use nested::{nested_test, NestedTest};
+pub use rank::{
+    identifiability, independence_tolerance, Absorber, Identifiability, IdentifiabilitySettings,
+    Pivoting,
+};
+pub use weights::{inverse_sigma, RobustWeight};

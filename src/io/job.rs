@@ -1,0 +1,62 @@
+//! A calibration job: the setup file and the robot it names (data
+//! contract §1–2), and the measurement files read against them (§3).
+
+use std::path::{Path, PathBuf};
+
+use super::measurements::{read_measurements, write_measurements, Measurements, Observation};
+use super::setup::Setup;
+use super::urdf::Robot;
+use super::InputError;
+
+/// A calibration job: the setup, and the robot it names.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    /// The setup file.
+    pub setup_path: PathBuf,
+    /// Its content.
+    pub setup: Setup,
+    /// The robot, read from [`Setup::robot_path`] with the setup's base and tip.
+    pub robot: Robot,
+}
+
+impl Job {
+    /// Reads the setup and the robot it names, and checks one against the other.
+    ///
+    /// # Errors
+    /// Any [`Setup::load`], [`Robot::load`] or [`Setup::check_robot`] error.
+    pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
+        let setup_path = setup_path.as_ref();
+        let setup = Setup::load(setup_path)?;
+        let robot = Robot::load(
+            setup.robot_path(setup_path),
+            setup.base_link.as_deref(),
+            setup.tip_link.as_deref(),
+        )?;
+        setup.check_robot(&robot, setup_path)?;
+        Ok(Self {
+            setup_path: setup_path.to_owned(),
+            setup,
+            robot,
+        })
+    }
+
+    /// Reads a measurement file of this job ([`read_measurements`]).
+    ///
+    /// # Errors
+    /// See [`read_measurements`].
+    pub fn read_measurements(&self, path: impl AsRef<Path>) -> Result<Measurements, InputError> {
+        read_measurements(path, &self.robot, &self.setup)
+    }
+
+    /// Writes a measurement file in this job's units ([`write_measurements`]).
+    ///
+    /// # Errors
+    /// See [`write_measurements`].
+    pub fn write_measurements(
+        &self,
+        path: impl AsRef<Path>,
+        rows: &[Observation],
+    ) -> Result<(), InputError> {
+        write_measurements(path, &self.robot, self.setup.units, rows)
+    }
+}

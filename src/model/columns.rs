@@ -1,0 +1,309 @@
+//! The identification columns `∂p/∂x` of every [`Param`] (eq. 2, 3 and the
+//! effect library), at one [`Sample`].
+//!
+//! A *column* is the derivative of one marker's position `p` \[m, base or
+//! measurement frame\] with respect to one parameter; the free functions
+//! give it in SI units (m/m, m/rad, m per rad/(N·m)), [`Param::column`] in
+//! the parameter's reported unit ([`super::param`]).
+//!
+//! **Geometric parameters** (eq. 2, `Δpᵍ = J⁽ᵖ⁾ ΔΠ`), with the error
+//! transforms that define them (first order, `Rot(δr) ≈ I + [δr]×`):
+//!
+//! - **joint offset** `δqⱼ`: added to joint `j`'s value. Column
+//!   `zⱼ × (p − oⱼ)` (revolute, m/rad) or `zⱼ` (prismatic, m/m).
+//! - **joint-frame error** `(δx, δy, δz, δrx, δry, δrz)` of joint `j`: a small
+//!   transform `E = Trans(δt) · Rot(δr)` *right*-multiplying the joint's
+//!   origin, `origin_j → origin_j · E`, i.e. expressed in joint `j`'s own
+//!   frame at zero joint value `Z_j = T_{j-1} · origin_j` (axes `Rᶻ eₖ`,
+//!   origin `aⱼ`), before the joint's motion. Columns: translation `Rᶻ eₖ`,
+//!   rotation `(Rᶻ eₖ) × (p − aⱼ)`. The URDF `xyz` of joint `j` is the same
+//!   translation expressed in the parent frame: `∂p/∂xyz = Rᶻ R_originᵀ`
+//!   times the translation columns.
+//! - **base frame** `(δx, δy, δz, δrx, δry, δrz)`: the robot base placed in
+//!   the measurement frame by `E = Trans(δt) · Rot(δr)`, `p_meas = E · p`;
+//!   rotation about the measurement frame's axes through its origin. Columns
+//!   `eₖ` and `eₖ × p`.
+//! - **marker position** `(δx, δy, δz)` in the tip frame. Columns
+//!   `R_tip eₖ`.
+//!
+//! These act on absolute positions only: a deflection (loaded minus
+//! unloaded position at the same pose) does not see them.
+//!
+//! **Elastostatic parameters** (eq. 3, `Δpᵉ = A⁽ᵖ⁾ k`, the virtual-joint
+//! model: rigid links, one linear spring per joint). A joint under torque
+//! `τⱼ` ([`crate::robot::load`]) yields by `δqⱼ = kⱼ τⱼ`; to first order a
+//! marker at `p` moves by `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` (prismatic:
+//! `kⱼ τⱼ zⱼ`), which is linear in `k`: the column of `kⱼ` is
+//! `τⱼ (zⱼ × (p − oⱼ))`.
+//!
+//! **Effects** of the library (data contract §6) follow the same pattern: a
+//! joint-value change `δqⱼ = x · f(sample)` has the column
+//! `f · (zⱼ × (p − oⱼ))` — `f = τ|τ|` (nonlinear stiffness), `sign τ`
+//! (backlash), `sin qⱼ`, `cos qⱼ` (gear cyclic error).
+//!
+//! ```
+//! use nalgebra::Vector3;
+//! use robcal::model::compliance_columns;
+//! use robcal::robot::{joint_torques, Wrench};
+//! use robcal::{Chain, Joint, JointKind};
+//!
+//! // One horizontal 1 m link about y, 100 N down at its end: τ = 100 N·m.
+//! let mut chain = Chain::<f64, 1>::new();
+//! chain.push(Joint::from_urdf(Vector3::zeros(), Vector3::zeros(), Vector3::y(), JointKind::Revolute).unwrap()).unwrap();
+//! let frames = chain.frames(&[0.0]).unwrap();
+//! let mut tau = [0.0];
+//! joint_torques(&frames, &Wrench::force(Vector3::new(0.0, 0.0, -100.0), Vector3::x()), &mut tau).unwrap();
+//! let mut col = [Vector3::zeros()];
+//! compliance_columns(&frames, &Vector3::x(), &tau, &mut col).unwrap();
+//! // k = 1e-6 rad/(N·m) lowers the end by 100 µm.
+//! assert!((col[0] * 1e-6 - Vector3::new(0.0, 0.0, -1e-4)).norm() < 1e-15);
+//! ```
+
+use nalgebra::{RealField, Vector3};
+
+use super::layout::in_bin;
+use super::param::Param;
+use super::sample::Sample;
+use crate::robot::load::check_len;
+use crate::robot::{Frames, JointKind};
+use crate::Error;
+
+impl Param {
+    /// The column `∂p/∂x` \[m per reported unit\] of this parameter at
+    /// `sample` (see the [module docs](self)); zero where the parameter
+    /// does not act on the sample (a geometric parameter on a deflection,
+    /// another marker's position, a bin the joint is not in, …).
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for a joint the sample's frames do not have or
+    /// an axis out of range; [`Error::Mismatch`] when the sample's torques
+    /// are shorter than the chain.
+    pub fn column<T: RealField + Copy, const J: usize>(
+        &self,
+        sample: &Sample<'_, T, J>,
+    ) -> Result<Vector3<T>, Error> {
+        let kind = match self.joint() {
+            Some(j) => sample.frames.joint(usize::from(j))?.kind,
+            None => JointKind::Revolute,
+        };
+        let si: T = nalgebra::convert(self.unit(kind).si);
+        Ok(self.column_si(sample)? * si)
+    }
+
+    /// [`Param::column`] in SI units.
+    ///
+    /// # Errors
+    /// As [`Param::column`].
+    pub fn column_si<T: RealField + Copy, const J: usize>(
+        &self,
+        s: &Sample<'_, T, J>,
+    ) -> Result<Vector3<T>, Error> {
+        let zero = Vector3::zeros();
+        let p = &s.point_m;
+        let twist = |j: u8| -> Result<Vector3<T>, Error> {
+            Ok(s.frames.joint(usize::from(j))?.twist_column(p))
+        };
+        let tau = |j: u8| -> Result<T, Error> {
+            s.tau.get(usize::from(j)).copied().ok_or(Error::Mismatch {
+                what: "joint torques shorter than the chain's dof",
+            })
+        };
+        let axis = |a: u8, len: usize| -> Result<usize, Error> {
+            let a = usize::from(a);
+            if a < len {
+                Ok(a)
+            } else {
+                Err(Error::OutOfRange {
+                    what: "axis",
+                    index: a,
+                    len,
+                })
+            }
+        };
+        Ok(match *self {
+            Param::Compliance { joint } => twist(joint)? * tau(joint)?,
+            Param::ComplianceAt { joint, angle_urad } => {
+                if in_bin(angle_urad, s.q(joint)?) {
+                    twist(joint)? * tau(joint)?
+                } else {
+                    zero
+                }
+            }
+            Param::NonlinearStiffness { joint } => {
+                let t = tau(joint)?;
+                twist(joint)? * (t * t.abs())
+            }
+            Param::Backlash { joint } => {
+                let t = tau(joint)?;
+                if t.abs() < nalgebra::convert(1e-9) {
+                    zero
+                } else {
+                    twist(joint)? * t.signum()
+                }
+            }
+            Param::LinkCompliance { joint } => match (&s.load, s.absolute) {
+                (Some(w), false) => {
+                    let jf = s.frames.joint(usize::from(joint))?;
+                    let o = jf.origin_m();
+                    let m = (w.point_m - o).cross(&w.force_n);
+                    let z = jf.axis.into_inner();
+                    let m_perp = m - z * z.dot(&m);
+                    m_perp.cross(&(p - o))
+                }
+                _ => zero,
+            },
+            Param::LoadCom { axis: a } => match (&s.load, s.absolute) {
+                (Some(w), false) => {
+                    let dir = s.frames.tip().rotation * Vector3::ith(axis(a, 3)?, T::one());
+                    let mut col = zero;
+                    for (jf, &k) in s.frames.joints().iter().zip(s.compliance) {
+                        if k == T::zero() || jf.kind != JointKind::Revolute {
+                            continue;
+                        }
+                        let dtau = jf.axis.dot(&dir.cross(&w.force_n));
+                        col += jf.twist_column(p) * (k * dtau);
+                    }
+                    col
+                }
+                _ => zero,
+            },
+            Param::Drift { axis: a } => Vector3::ith(axis(a, 3)?, s.dt_s),
+            _ if !s.absolute => zero,
+            Param::JointOffset { joint } => twist(joint)?,
+            Param::JointFrame { joint, axis: a } => {
+                joint_frame_columns(s.frames, usize::from(joint), p)?[axis(a, 6)?]
+            }
+            Param::Base { axis: a } => base_columns(p)[axis(a, 6)?],
+            Param::Marker { marker, axis: a } => {
+                if marker == s.marker {
+                    marker_columns(s.frames)[axis(a, 3)?]
+                } else {
+                    zero
+                }
+            }
+            Param::GearCyclic { joint, cos } => {
+                let qj = s.q(joint)?;
+                twist(joint)? * if cos { qj.cos() } else { qj.sin() }
+            }
+        })
+    }
+}
+
+/// Joint-offset column of joint `j` at a point `p_m` [m, base frame]:
+/// `zⱼ × (p − oⱼ)` [m/rad] (revolute) or `zⱼ` [m/m] (prismatic).
+///
+/// # Errors
+/// [`Error::OutOfRange`] when `j ≥ dof`.
+pub fn joint_offset_column<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    j: usize,
+    p_m: &Vector3<T>,
+) -> Result<Vector3<T>, Error> {
+    Ok(frames.joint(j)?.twist_column(p_m))
+}
+
+/// Joint-offset columns of every joint, written to `out[..dof]`.
+///
+/// # Errors
+/// [`Error::Mismatch`] when `out` is shorter than the number of joints.
+pub fn joint_offset_columns<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    p_m: &Vector3<T>,
+    out: &mut [Vector3<T>],
+) -> Result<(), Error> {
+    if out.len() < frames.dof() {
+        return Err(Error::Mismatch {
+            what: "column slice shorter than the chain's dof",
+        });
+    }
+    for (o, jf) in out.iter_mut().zip(frames.joints()) {
+        *o = jf.twist_column(p_m);
+    }
+    Ok(())
+}
+
+/// The six joint-frame error columns of joint `j` (see the
+/// [module docs](self)): `[δx, δy, δz]` in m/m, then `[δrx, δry, δrz]` in
+/// m/rad, all along the axes of `Z_j`.
+///
+/// # Errors
+/// [`Error::OutOfRange`] when `j ≥ dof`.
+pub fn joint_frame_columns<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    j: usize,
+    p_m: &Vector3<T>,
+) -> Result<[Vector3<T>; 6], Error> {
+    let z = frames.joint(j)?.zero;
+    let r = z.rotation.to_rotation_matrix();
+    let arm = p_m - z.translation.vector;
+    let e = |k: usize| r.matrix().column(k).into_owned();
+    Ok([
+        e(0),
+        e(1),
+        e(2),
+        e(0).cross(&arm),
+        e(1).cross(&arm),
+        e(2).cross(&arm),
+    ])
+}
+
+/// The six base-frame columns at a point `p_m` [m, robot base frame]:
+/// `[eₓ, e_y, e_z]` (m/m), then `[eₓ × p, e_y × p, e_z × p]` (m/rad).
+pub fn base_columns<T: RealField + Copy>(p_m: &Vector3<T>) -> [Vector3<T>; 6] {
+    let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
+    [x, y, z, x.cross(p_m), y.cross(p_m), z.cross(p_m)]
+}
+
+/// The three marker-position columns (m/m): the tip frame's axes in the base
+/// frame, `R_tip eₖ`.
+pub fn marker_columns<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+) -> [Vector3<T>; 3] {
+    let r = frames.tip().rotation.to_rotation_matrix();
+    let e = |k: usize| r.matrix().column(k).into_owned();
+    [e(0), e(1), e(2)]
+}
+
+/// Compliance columns at a marker `p_m` \[m, base frame\] for joint torques
+/// `tau` (from [`crate::robot::joint_torques`], [`crate::robot::gravity_torques`]
+/// or their sum), written
+/// to `out[..dof]`: `τⱼ (zⱼ × (p − oⱼ))` [m per rad/(N·m)] (revolute) or
+/// `τⱼ zⱼ` \[m per m/N\] (prismatic).
+///
+/// # Errors
+/// [`Error::Mismatch`] when `tau` or `out` is shorter than the number of
+/// joints.
+pub fn compliance_columns<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    p_m: &Vector3<T>,
+    tau: &[T],
+    out: &mut [Vector3<T>],
+) -> Result<(), Error> {
+    check_len(frames, tau.len())?;
+    check_len(frames, out.len())?;
+    for ((o, jf), &t) in out.iter_mut().zip(frames.joints()).zip(tau) {
+        *o = jf.twist_column(p_m) * t;
+    }
+    Ok(())
+}
+
+/// First-order deflection `Δp = Σⱼ kⱼ τⱼ (zⱼ × (p − oⱼ))` \[m\] of a marker at
+/// `p_m` under joint torques `tau`, with compliances `k` \[rad/(N·m) or m/N\].
+///
+/// # Errors
+/// [`Error::Mismatch`] when `tau` or `k` is shorter than the number of
+/// joints.
+pub fn deflection_m<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    p_m: &Vector3<T>,
+    tau: &[T],
+    k: &[T],
+) -> Result<Vector3<T>, Error> {
+    check_len(frames, tau.len())?;
+    check_len(frames, k.len())?;
+    let mut dp = Vector3::zeros();
+    for ((jf, &t), &kj) in frames.joints().iter().zip(tau).zip(k) {
+        dp += jf.twist_column(p_m) * (t * kj);
+    }
+    Ok(dp)
+}

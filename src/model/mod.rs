@@ -1,0 +1,29 @@
+//! The identification model (`no_std`): what the parameters are and how a
+//! measured point depends on them — the columns of `Bᵢ = [Jᵢ Aᵢ]` (eq. 2,
+//! 3, 4) and of the effect library.
+//!
+//! ```text
+//!   robot::Frames + torques + load ──► Sample ──Param::column──► one column ∂p/∂x
+//!                                        │
+//!   Layout (firmware) / the host's model ┴──fill──► B (3 rows, one column per Param)
+//! ```
+//!
+//! | module | what |
+//! |---|---|
+//! | [`param`] | [`Param`]: the one vocabulary of parameters; [`Unit`]s and SI factors |
+//! | [`sample`] | [`Sample`]: what one measurement carries at the current model |
+//! | [`columns`] | `∂p/∂x` of every parameter: geometric (eq. 2), elastostatic (eq. 3), effects |
+//! | [`layout`] | [`Layout`]: a fixed-capacity list of parameters for the device, and [`fill`] |
+
+pub mod columns;
+pub mod layout;
+pub mod param;
+pub mod sample;
+
+pub use columns::{
+    base_columns, compliance_columns, deflection_m, joint_frame_columns, joint_offset_column,
+    joint_offset_columns, marker_columns,
+};
+pub use layout::{column_of, fill, in_bin, in_some_bin, Column, Layout, Marker};
+pub use param::{angle_urad, Param, Unit, BIN_TOLERANCE_RAD, POSE_COMPONENTS, XYZ};
+pub use sample::Sample;

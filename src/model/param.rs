@@ -1,0 +1,296 @@
+//! The one parameter vocabulary of robcal: every column of `B = [J  A]`
+//! (eq. 4) and of the effect library, its unit and the SI value of that
+//! unit. The firmware's [`super::Layout`] and the host calibration name
+//! their parameters with the same [`Param`].
+//!
+//! Parameters are estimated **in the reported unit**: column `i` of `B` is
+//! `∂p [m] / ∂xᵢ [unit]`, so an estimate is directly in `mm`, `mrad`,
+//! `urad/(N*m)`, … and its scale is moderate (a compliance of
+//! 0.3 µrad/(N·m) is 0.3, not 3e-7); `x_SI = si · x` ([`Unit::si`]).
+//!
+//! | parameter | unit (revolute / prismatic joint) | `si` | eq. |
+//! |---|---|---|---|
+//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`] | `mrad` / `mm` | 1e-3 | 2 |
+//! | [`Param::JointFrame`], [`Param::Base`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
+//! | [`Param::Marker`], [`Param::LoadCom`] | `mm` | 1e-3 | 2 |
+//! | [`Param::Compliance`], [`Param::ComplianceAt`] | `urad/(N*m)` / `um/N` | 1e-6 | 3 |
+//! | [`Param::LinkCompliance`] | `urad/(N*m)` | 1e-6 | |
+//! | [`Param::NonlinearStiffness`] | `urad/(kN*m)^2` / `um/kN^2` | 1e-12 | |
+//! | [`Param::Drift`] | `um/s` | 1e-6 | |
+//!
+//! Joint indices count the chain's movable joints from the base, from 0;
+//! marker indices count the markers of the job (or of the layout), from 0.
+
+use core::fmt;
+
+use crate::robot::JointKind;
+
+/// Half-width \[rad\] of an angle bin of [`Param::ComplianceAt`]: a sample
+/// is in the bin when its joint value is within this of the bin's angle
+/// (1e-3 rad ≈ 0.06°, far below the spacing of a compensator's angles and
+/// far above a controller's rounding of a commanded angle).
+pub const BIN_TOLERANCE_RAD: f64 = 1e-3;
+
+/// Names of the six components of a frame error: translation x, y, z,
+/// then small rotation about x, y, z.
+pub const POSE_COMPONENTS: [&str; 6] = ["tx", "ty", "tz", "rx", "ry", "rz"];
+/// Names of the three components of a vector.
+pub const XYZ: [&str; 3] = ["x", "y", "z"];
+
+/// What one parameter is. See the [module docs](self) for units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Param {
+    /// Zero offset `δqⱼ` added to joint `j`'s value (eq. 2).
+    JointOffset {
+        /// Joint index.
+        joint: u8,
+    },
+    /// One of the six components of a joint-frame error, in the joint's own
+    /// frame at zero joint value ([`super::columns`]).
+    JointFrame {
+        /// Joint index.
+        joint: u8,
+        /// 0..6: tx, ty, tz, rx, ry, rz.
+        axis: u8,
+    },
+    /// One of the six components of the base pose in the measurement frame.
+    Base {
+        /// 0..6: tx, ty, tz, rx, ry, rz.
+        axis: u8,
+    },
+    /// One coordinate of a marker's position in the tip frame.
+    Marker {
+        /// Marker index.
+        marker: u8,
+        /// 0..3: x, y, z.
+        axis: u8,
+    },
+    /// Compliance `kⱼ` of a joint (eq. 3): `δqⱼ = kⱼ τⱼ`.
+    Compliance {
+        /// Joint index.
+        joint: u8,
+    },
+    /// Compliance of a joint that holds only while that joint is at one
+    /// angle (the gravity compensator of the KR-270's A2: `k21…k25`,
+    /// section 5): non-zero only for samples within [`BIN_TOLERANCE_RAD`]
+    /// of the angle.
+    ComplianceAt {
+        /// Joint index.
+        joint: u8,
+        /// The bin's joint angle \[µrad\] ([`angle_urad`]).
+        angle_urad: i32,
+    },
+    /// A joint's deflection not linear in its torque: `δqⱼ += k2ⱼ τⱼ|τⱼ|`.
+    NonlinearStiffness {
+        /// Joint index.
+        joint: u8,
+    },
+    /// Free play: `δqⱼ += bⱼ sign(τⱼ)`, the joint resting on the side its
+    /// torque pushes it to.
+    Backlash {
+        /// Joint index.
+        joint: u8,
+    },
+    /// The link after joint `j` bends about the axes normal to the joint's
+    /// in proportion to the load's moment there.
+    LinkCompliance {
+        /// Joint index.
+        joint: u8,
+    },
+    /// Shift of the load's centre of mass along a tip-frame axis,
+    /// linearised about the current compliances.
+    LoadCom {
+        /// 0..3: x, y, z of the tip frame.
+        axis: u8,
+    },
+    /// Linear drift of the measurement along a measurement-frame axis.
+    Drift {
+        /// 0..3: x, y, z.
+        axis: u8,
+    },
+    /// First-harmonic cyclic error of a joint: `δqⱼ = s sin qⱼ + c cos qⱼ`.
+    GearCyclic {
+        /// Joint index.
+        joint: u8,
+        /// `false`: the sine's amplitude `s`; `true`: the cosine's `c`.
+        cos: bool,
+    },
+}
+
+/// The unit a parameter is estimated and reported in, and its SI value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Unit {
+    /// Its name (`"mm"`, `"mrad"`, `"urad/(N*m)"`, …).
+    pub name: &'static str,
+    /// SI value of one unit: `x_SI = si · x` (m, rad, rad/(N·m), m/N, …).
+    pub si: f64,
+}
+
+const MM: Unit = Unit {
+    name: "mm",
+    si: 1e-3,
+};
+const MRAD: Unit = Unit {
+    name: "mrad",
+    si: 1e-3,
+};
+
+impl Param {
+    /// The joint the parameter belongs to, if any.
+    pub fn joint(&self) -> Option<u8> {
+        match *self {
+            Param::JointOffset { joint }
+            | Param::JointFrame { joint, .. }
+            | Param::Compliance { joint }
+            | Param::ComplianceAt { joint, .. }
+            | Param::NonlinearStiffness { joint }
+            | Param::Backlash { joint }
+            | Param::LinkCompliance { joint }
+            | Param::GearCyclic { joint, .. } => Some(joint),
+            Param::Base { .. }
+            | Param::Marker { .. }
+            | Param::LoadCom { .. }
+            | Param::Drift { .. } => None,
+        }
+    }
+
+    /// Whether the parameter is geometric (eq. 2): it changes the model's
+    /// frames, and a fit applies it to the model (Gauss–Newton) rather than
+    /// keeping it as a column value.
+    pub fn is_geometric(&self) -> bool {
+        matches!(
+            self,
+            Param::JointOffset { .. }
+                | Param::JointFrame { .. }
+                | Param::Base { .. }
+                | Param::Marker { .. }
+        )
+    }
+
+    /// Whether the parameter is a compliance of the declared kind (`k_<joint>`
+    /// or `k_<joint>@<angle>`).
+    pub fn is_compliance(&self) -> bool {
+        matches!(self, Param::Compliance { .. } | Param::ComplianceAt { .. })
+    }
+
+    /// Its unit, given the kind of its joint (ignored for parameters
+    /// without a joint). See the [module docs](self).
+    pub fn unit(&self, joint_kind: JointKind) -> Unit {
+        let prismatic = joint_kind == JointKind::Prismatic && self.joint().is_some();
+        match *self {
+            Param::JointOffset { .. } | Param::Backlash { .. } | Param::GearCyclic { .. } => {
+                if prismatic {
+                    MM
+                } else {
+                    MRAD
+                }
+            }
+            Param::JointFrame { axis, .. } | Param::Base { axis } => {
+                if axis < 3 {
+                    MM
+                } else {
+                    MRAD
+                }
+            }
+            Param::Marker { .. } | Param::LoadCom { .. } => MM,
+            Param::Compliance { .. } | Param::ComplianceAt { .. } => Unit {
+                name: if prismatic { "um/N" } else { "urad/(N*m)" },
+                si: 1e-6,
+            },
+            Param::LinkCompliance { .. } => Unit {
+                name: "urad/(N*m)",
+                si: 1e-6,
+            },
+            Param::NonlinearStiffness { .. } => Unit {
+                name: if prismatic {
+                    "um/kN^2"
+                } else {
+                    "urad/(kN*m)^2"
+                },
+                si: 1e-12,
+            },
+            Param::Drift { .. } => Unit {
+                name: "um/s",
+                si: 1e-6,
+            },
+        }
+    }
+
+    /// The component's name, the part of a parameter's name after its
+    /// joint, marker or effect: `offset`, `tx`…`rz`, `x`…`z`, `sin`, `cos`;
+    /// empty for a one-parameter effect.
+    pub fn component(&self) -> &'static str {
+        let six = |a: u8| POSE_COMPONENTS.get(usize::from(a)).copied().unwrap_or("?");
+        let xyz = |a: u8| XYZ.get(usize::from(a)).copied().unwrap_or("?");
+        match *self {
+            Param::JointOffset { .. } => "offset",
+            Param::JointFrame { axis, .. } | Param::Base { axis } => six(axis),
+            Param::Marker { axis, .. } | Param::LoadCom { axis } | Param::Drift { axis } => {
+                xyz(axis)
+            }
+            Param::GearCyclic { cos, .. } => {
+                if cos {
+                    "cos"
+                } else {
+                    "sin"
+                }
+            }
+            Param::Compliance { .. }
+            | Param::ComplianceAt { .. }
+            | Param::NonlinearStiffness { .. }
+            | Param::Backlash { .. }
+            | Param::LinkCompliance { .. } => "",
+        }
+    }
+
+    /// The bin angle \[rad\] of a [`Param::ComplianceAt`].
+    pub fn bin_angle_rad(&self) -> Option<f64> {
+        match *self {
+            Param::ComplianceAt { angle_urad, .. } => Some(f64::from(angle_urad) * 1e-6),
+            _ => None,
+        }
+    }
+}
+
+/// Generic names with joint and marker indices (`j2.offset`, `k_j1`,
+/// `k_j1@-25.24deg`, `marker0.x`, `backlash_j4`); the host names them after
+/// the URDF's joints and the setup's markers instead.
+impl fmt::Display for Param {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let c = self.component();
+        match *self {
+            Param::JointOffset { joint } | Param::JointFrame { joint, .. } => {
+                write!(f, "j{joint}.{c}")
+            }
+            Param::Base { .. } => write!(f, "base.{c}"),
+            Param::Marker { marker, .. } => write!(f, "marker{marker}.{c}"),
+            Param::Compliance { joint } => write!(f, "k_j{joint}"),
+            Param::ComplianceAt { joint, angle_urad } => write!(
+                f,
+                "k_j{joint}@{:.2}deg",
+                f64::from(angle_urad) * 1e-6 * 180.0 / core::f64::consts::PI
+            ),
+            Param::NonlinearStiffness { joint } => write!(f, "nonlinear_stiffness_j{joint}"),
+            Param::Backlash { joint } => write!(f, "backlash_j{joint}"),
+            Param::LinkCompliance { joint } => write!(f, "link_compliance_j{joint}"),
+            Param::LoadCom { .. } => write!(f, "load_com_{c}"),
+            Param::Drift { .. } => write!(f, "drift_{c}"),
+            Param::GearCyclic { joint, .. } => write!(f, "gear_cyclic_j{joint}.{c}"),
+        }
+    }
+}
+
+/// Angle \[rad\] → the `angle_urad` of a [`Param::ComplianceAt`] (rounded to
+/// the nearest µrad; saturates outside ±2147 rad).
+pub fn angle_urad(angle_rad: f64) -> i32 {
+    let v = libm::round(angle_rad * 1e6);
+    if v >= f64::from(i32::MAX) {
+        i32::MAX
+    } else if v <= f64::from(i32::MIN) {
+        i32::MIN
+    } else {
+        v as i32
+    }
+}

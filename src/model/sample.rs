@@ -1,0 +1,97 @@
+//! What one measurement carries, evaluated at the current model: everything
+//! a column ([`super::columns`]) is computed from.
+
+use nalgebra::{RealField, Vector3};
+
+use crate::robot::{Frames, Wrench};
+use crate::Error;
+
+/// One measured point at the current model: the pose, where the marker is,
+/// the torques behind it, the load, the time.
+///
+/// Two kinds of measurement (data contract §3):
+/// - an **absolute** position (`absolute = true`, geometric calibration,
+///   eq. 2): the robot's own weight loads the joints (`tau` = gravity
+///   torques), every parameter acts;
+/// - a **deflection** (`absolute = false`, elastostatic calibration,
+///   eq. 3): loaded minus unloaded position at the same pose; only the
+///   load's torques enter (`tau` = the load's), geometric parameters do
+///   not act.
+#[derive(Debug, Clone, Copy)]
+pub struct Sample<'a, T: RealField + Copy, const J: usize> {
+    /// The chain's frames at the measured joint values
+    /// ([`crate::Chain::frames`]), in the frame the point is given in.
+    pub frames: &'a Frames<T, J>,
+    /// The marker's predicted position \[m\], in the same frame.
+    pub point_m: Vector3<T>,
+    /// Marker index (for [`super::Param::Marker`]).
+    pub marker: u8,
+    /// Joint torques behind the measurement \[N·m or N\], one per joint.
+    pub tau: &'a [T],
+    /// The load's wrench (deflections; `None` without a load).
+    pub load: Option<Wrench<T>>,
+    /// Absolute position (`true`) or deflection (`false`).
+    pub absolute: bool,
+    /// Time \[s\] for the drift, from any fixed origin.
+    pub dt_s: T,
+    /// Effective compliance \[rad/(N·m) or m/N\] of each joint at this
+    /// sample, about which the linearised `load_com` column is taken; may be
+    /// empty (then that column is zero).
+    pub compliance: &'a [T],
+}
+
+impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
+    /// A deflection sample under `load` with its torques `tau`: no time,
+    /// no compliance estimate.
+    pub fn deflection(
+        frames: &'a Frames<T, J>,
+        point_m: Vector3<T>,
+        marker: u8,
+        tau: &'a [T],
+        load: Option<Wrench<T>>,
+    ) -> Self {
+        Self {
+            frames,
+            point_m,
+            marker,
+            tau,
+            load,
+            absolute: false,
+            dt_s: T::zero(),
+            compliance: &[],
+        }
+    }
+
+    /// An absolute-position sample with the torques `tau` of the robot's
+    /// own weight: no load, no time, no compliance estimate.
+    pub fn absolute(
+        frames: &'a Frames<T, J>,
+        point_m: Vector3<T>,
+        marker: u8,
+        tau: &'a [T],
+    ) -> Self {
+        Self {
+            frames,
+            point_m,
+            marker,
+            tau,
+            load: None,
+            absolute: true,
+            dt_s: T::zero(),
+            compliance: &[],
+        }
+    }
+
+    /// Joint `j`'s value \[rad or m\].
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] when the frames have no joint `j`.
+    pub fn q(&self, j: u8) -> Result<T, Error> {
+        let q = self.frames.q();
+        q.get(usize::from(j)).copied().ok_or(Error::OutOfRange {
+            what: "joint",
+            index: usize::from(j),
+            len: q.len(),
+        })
+    }
+}

@@ -1,0 +1,19 @@
+//! The robot (`no_std`): a serial chain of revolute and prismatic joints
+//! (URDF convention), its forward kinematics, and the loads on it.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`chain`] | [`Chain`], [`Joint`] (with the one [`Joint::motion`]), [`LinkInertia`] |
+//! | [`kinematics`] | [`Frames`]: joint frames, axes and origins, marker positions |
+//! | [`load`] | [`Wrench`], [`PointLoad`], the joint torques of a load and of the robot's own weight |
+//!
+//! All lengths in metres, revolute joint values in radians, prismatic ones
+//! in metres, torques in N·m (N for a prismatic joint).
+
+pub mod chain;
+pub mod kinematics;
+pub mod load;
+
+pub use chain::{Chain, Joint, JointKind, LinkInertia};
+pub use kinematics::{Frames, JointFrame};
+pub use load::{gravity_torques, joint_torques, PointLoad, Wrench};
