@@ -24,37 +24,42 @@
 //!   largest deflection, 11.2 mm, in 2 bytes per coordinate, but moves
 //!   the estimate by 0.009 σ, which would eat most of the f32 tolerance.)
 //!
-//! The reference (`HOST_*`): the same pipeline in f64 on the CSV —
-//! rows at the unloaded pose (eq. 3) from the URDF chain, grouped
-//! statistics `GroupedStats<f64, 9, 15>` (one group per configuration),
-//! iterative WLS (section 5) with σ0 = 10 µm, λ = 1 (`setup.toml`),
-//! tolerance 1e-3 σ, sandwich covariance (eq. 11).
+//! The reference (`HOST_*`): the product, `robcal::calibrate` in f64 on
+//! the CSV with the declared model of `setup.toml` (k21…k25, k3…k6) and no
+//! diagnosis — rows at the unloaded pose (eq. 3), iterative WLS (section 5)
+//! with σ0 = 10 µm, λ = 1, tolerance 1e-3 σ, sandwich covariance (eq. 11).
+//! The firmware runs the same model with the core alone (`Layout::fill`,
+//! rows streamed into an `Accumulator`) and checks its f32 estimate against
+//! this reference.
 
 use std::error::Error as StdError;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use nalgebra::{SMatrix, SVector, Vector3};
-use robcal::elastostatic::PointLoad;
-use robcal::io::Job;
-use robcal::irls::{Fit, IrlsSettings, Iteration, Reweightable};
-use robcal::kr270;
-use robcal::layout::{Layout, Marker};
-use robcal::weights::RobustWeight;
-use robcal::GroupedStats;
+use nalgebra::Vector3;
+use robcal::calibrate::{self, Report, Settings};
+use robcal::io::{Job, Measurements};
+use robcal_paper::kr270;
 
 const N: usize = kr270::PARAMS;
 const G: usize = kr270::CONFIGS;
 /// Quantum of the stored deflections \[m\].
 const DP_QUANTUM_M: f64 = 1e-9;
 
-/// The fit of the firmware and of its reference: iterative WLS from OLS.
-fn irls(stats: &GroupedStats<f64, N, G>, sigma0_m: f64, lambda: f64) -> Fit<f64, N, G> {
-    let settings = IrlsSettings::new(RobustWeight::new(sigma0_m, lambda).expect("valid"));
-    let mut history: heapless::Vec<Iteration<f64, N>, 128> = heapless::Vec::new();
-    stats
-        .fit_irls(&settings, &[true; N], &mut history)
-        .expect("the paper's data are identifiable")
+/// The reference: the declared model of the job, iterative WLS, nothing
+/// added by the diagnosis.
+fn irls(job: &Job, data: &Measurements) -> Result<Report, Box<dyn StdError>> {
+    let settings = Settings {
+        diagnose: false,
+        heldout: false,
+        ..Settings::default()
+    };
+    let report = calibrate::calibrate(job, data, &settings, &mut |_| {})?;
+    let names: Vec<&str> = report.parameters.iter().map(|p| p.name.as_str()).collect();
+    if names != kr270::PARAM_NAMES {
+        return Err(format!("setup.toml declares {names:?}, not the paper's model").into());
+    }
+    Ok(report)
 }
 
 fn main() -> Result<(), Box<dyn StdError>> {
@@ -62,19 +67,14 @@ fn main() -> Result<(), Box<dyn StdError>> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let job = Job::load(root.join("data/kr270/setup.toml"))?;
     let data = job.read_measurements(root.join("data/kr270/measurements.csv"))?;
-    let chain = &job.robot.chain;
-    let load = job.setup.load.ok_or("setup.toml has no [load]")?;
     let noise = job.setup.noise;
     let sigma0_m = noise.sigma0_um * 1e-6;
-
-    let layout: Layout<N> = kr270::layout(chain)?;
 
     // Per configuration: angles (0.01°) and load (0.1 kg), exact.
     let mut q_cdeg = [[0i16; 6]; G];
     let mut load_dkg = [0u16; G];
     let mut seen = [false; G];
-    let mut exact = GroupedStats::<f64, N, G>::new();
-    let mut quantised = GroupedStats::<f64, N, G>::new();
+    let mut quantised = data.clone();
     let mut records = Vec::new();
     let (mut max_dp, mut max_err, mut sum_err2) = (0.0f64, 0.0f64, 0.0f64);
     for d in &data.deflections {
@@ -111,16 +111,6 @@ fn main() -> Result<(), Box<dyn StdError>> {
             .iter()
             .position(|m| m.id == d.marker)
             .ok_or("unknown marker")?;
-        let marker = Marker {
-            id: u8::try_from(job.setup.markers[m].id)?,
-            xyz_m: Vector3::from(job.setup.markers[m].xyz),
-        };
-        let pl = PointLoad {
-            mass_kg: d.load_kg,
-            com_m: Vector3::from(load.com),
-            gravity_mps2: Vector3::from(load.gravity),
-        };
-        let b: SMatrix<f64, 3, N> = layout.block(chain, &d.q, &marker, Some(&pl))?;
         let dp = Vector3::from(d.dp_m);
         let units = dp / DP_QUANTUM_M;
         let stored = units.map(f64::round);
@@ -133,25 +123,27 @@ fn main() -> Result<(), Box<dyn StdError>> {
             sum_err2 += err * err;
             max_dp = max_dp.max(dp[a].abs());
         }
-        exact.update(d.config as i32, &b, &dp)?;
-        quantised.update(d.config as i32, &b, &(stored * DP_QUANTUM_M))?;
         records.push((g, m, stored.map(|v| v as i32)));
+    }
+    for d in &mut quantised.deflections {
+        d.dp_m = d.dp_m.map(|v| (v / DP_QUANTUM_M).round() * DP_QUANTUM_M);
     }
     if seen.iter().any(|s| !s) {
         return Err("a configuration has no measurement".into());
     }
     records.sort_by_key(|r| r.0); // stable: file order within a configuration
 
-    let reference = irls(&exact, sigma0_m, noise.lambda);
-    let from_table = irls(&quantised, sigma0_m, noise.lambda);
-    let sd = reference.std();
+    let reference = irls(&job, &data)?;
+    let from_table = irls(&job, &quantised)?;
+    let x: Vec<f64> = reference.parameters.iter().map(|p| p.value).collect();
+    let sd: Vec<f64> = reference.parameters.iter().map(|p| p.std).collect();
     let quant_sigmas = (0..N)
-        .map(|i| (from_table.solution.x[i] - reference.solution.x[i]).abs() / sd[i])
+        .map(|i| (from_table.parameters[i].value - x[i]).abs() / sd[i])
         .fold(0.0, f64::max);
     let rms_err = (sum_err2 / (3 * records.len()) as f64).sqrt();
 
     let mut s = String::new();
-    let list = |v: &SVector<f64, N>| {
+    let list = |v: &[f64]| {
         v.iter()
             .map(|x| format!("{x:e}"))
             .collect::<Vec<_>>()
@@ -211,9 +203,9 @@ fn main() -> Result<(), Box<dyn StdError>> {
     writeln!(s, "];\n")?;
     writeln!(
         s,
-        "/// Host reference (f64, from the CSV, `GroupedStats<f64, 9, 15>`): iterative WLS\n\
+        "/// Host reference (f64, from the CSV, `robcal::calibrate`): iterative WLS\n\
          /// estimate \\[µrad/(N·m)\\].\npub const HOST_X: [f64; {N}] = [{}];",
-        list(&reference.solution.x)
+        list(&x)
     )?;
     writeln!(
         s,
@@ -251,7 +243,7 @@ fn main() -> Result<(), Box<dyn StdError>> {
         eprintln!(
             "  {:>4} {:10.6} ± {:.6} (3σ)",
             kr270::PAPER_SYMBOLS[i],
-            reference.solution.x[i],
+            x[i],
             3.0 * sd[i]
         );
     }

@@ -15,43 +15,19 @@
 //!   the deflection: the unloaded and the loaded position each get σ/√2;
 //! - 6 repetitions × 3 markers, each measured unloaded and loaded.
 //!
-//! The random numbers come from SplitMix64 and Box–Muller written out below,
-//! so the file is the same bit for bit with any version of any crate.
+//! The random numbers come from SplitMix64 and Box–Muller written out in
+//! `robcal_paper::rng`, so the file is the same bit for bit with any version
+//! of any crate.
 
 use std::path::Path;
 
 use nalgebra::Vector3;
 use robcal::io::{Job, Observation};
-use robcal::kr270;
+use robcal_paper::kr270;
+use robcal_paper::rng::SplitMix64;
 
 /// Seed of the data set.
 const SEED: u64 = 0x4b52_3237_3020_2013; // "KR270" + the paper's year
-
-/// SplitMix64 (Steele, Lea, Flood 2014): a tiny generator with a fixed
-/// definition.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in (0, 1): 53 random bits, never 0.
-    fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-
-    /// Standard normal by Box–Muller (one of the pair; the other is dropped
-    /// to keep the stream simple).
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
 
 /// True compliance [rad/(N·m)] of joints a1..a6 at configuration `c`.
 fn true_compliance(c: usize) -> [f64; 6] {
@@ -68,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let load = job.setup.load.ok_or("setup.toml has no [load]")?;
     let com = Vector3::from(load.com);
     let gravity = Vector3::from(load.gravity);
-    let mut rng = SplitMix64(SEED);
+    let mut rng = SplitMix64::new(SEED);
     let mut rows = Vec::new();
     for c in 0..kr270::CONFIGS {
         let q: Vec<f64> = kr270::CONFIGURATIONS_DEG[c]

@@ -1,33 +1,48 @@
-//! The paper's KR-270 experiment end to end (Klimchik et al., section 5):
-//! OLS, one-step WLS (λ = 0.5, 1, 2) and iterative WLS on the
-//! reconstructed data set `data/kr270/`, printed next to the paper's
-//! Tables 3 and 4 and Figure 3, plus the non-linearity check of the linear
-//! model (eq. 3) and its Gauss–Newton refinement.
+//! The paper's KR-270 experiment end to end (Klimchik et al., section 5),
+//! through the product: `robcal::calibrate` on the reconstructed data set
+//! `data/kr270/` with OLS, one-step WLS (λ = 0.5, 1, 2) and iterative WLS,
+//! printed next to the paper's Tables 3 and 4 and Figure 3; then the closed
+//! loop on the naive model.
 //!
 //! ```sh
 //! cargo run --release --example kr270 [-- --data DIR --out DIR]
 //! ```
 //!
-//! `--data` (default `data/kr270`) holds `setup.toml` and `measurements.csv`;
-//! `--out` (default `target/kr270`) receives `figure3.svg` and
-//! `ci_comparison.svg`.
+//! `--data` (default `data/kr270`) holds `setup.toml`, `setup-naive.toml`
+//! and `measurements.csv`; `--out` (default `target/kr270`) receives
+//! `figure3.svg` and `ci_comparison.svg`.
+//!
+//! Every estimate and standard deviation printed comes from
+//! `robcal::calibrate`. Two columns ask questions the product does not:
+//! the Cramér–Rao bound (the best σ any weighting could give, with Table 1's
+//! true σ) and the covariance formulas that could give the paper's σ ratios.
+//! They are computed with robcal's core on the same rows
+//! (`robcal_paper::kr270::layout`, `Layout::block`, `GroupedStats`), which
+//! this script checks against the product's OLS estimate first.
 //!
 //! Units: compliance in µrad/(N·m) (the paper prints "rad/N×µm"; its values
-//! only make sense as µrad/(N·m), see `robcal::kr270`); σ of the
+//! only make sense as µrad/(N·m), see `robcal_paper::kr270`); σ of the
 //! measurements in µm. "±" is ±3σ throughout, as in the paper.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use nalgebra::{SVector, Vector3};
+use nalgebra::{Const, SVector, Vector3};
 use plotters::prelude::*;
-use robcal::io::Job;
-use robcal::irls::{Fit, IrlsSettings};
-use robcal::kr270::{self, PAPER_SYMBOLS};
-use robcal::paper::{self, Experiment, Fits, G, N};
-use robcal::solve::std_devs;
-use robcal::Reweightable;
+use robcal::calibrate::{self, Method, Report, Settings};
+use robcal::estimate::std_devs;
+use robcal::io::{Job, Measurements};
+use robcal::model::Marker;
+use robcal::robot::PointLoad;
+use robcal::{GroupedStats, Reweightable};
+use robcal_paper::kr270::{self, PAPER_SYMBOLS};
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Parameters of the paper's model.
+const N: usize = kr270::PARAMS;
+/// Configurations.
+const G: usize = kr270::CONFIGS;
+type Stats = GroupedStats<f64, Const<N>, G>;
 
 struct Args {
     data: PathBuf,
@@ -56,6 +71,34 @@ fn args() -> Res<Args> {
     Ok(a)
 }
 
+/// The fits of Tables 3 and 4, all by `robcal::calibrate` on the declared
+/// model (no diagnosis).
+struct Fits {
+    ols: Report,
+    /// One-step WLS for λ = 0.5, 1, 2.
+    wls: [Report; 3],
+    irls: Report,
+}
+
+fn run(job: &Job, data: &Measurements, method: Method, lambda: Option<f64>) -> Res<Report> {
+    let settings = Settings {
+        method,
+        lambda,
+        diagnose: false,
+        heldout: false,
+        ..Settings::default()
+    };
+    Ok(calibrate::calibrate(job, data, &settings, &mut |_| {})?)
+}
+
+fn x(r: &Report) -> Vec<f64> {
+    r.parameters.iter().map(|p| p.value).collect()
+}
+
+fn sd(r: &Report) -> Vec<f64> {
+    r.parameters.iter().map(|p| p.std).collect()
+}
+
 fn main() -> Res<()> {
     let args = args()?;
     let job = Job::load(args.data.join("setup.toml"))?;
@@ -63,118 +106,136 @@ fn main() -> Res<()> {
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
-    let exp = Experiment::new(&job, &data)?;
-    let stats = exp.linear_stats()?;
-    let sigma0_m = job.setup.noise.sigma0_um * 1e-6;
-    let settings = IrlsSettings {
-        tolerance: 1e-6,
-        max_iterations: 100,
-        ..IrlsSettings::new(paper::weight(sigma0_m, job.setup.noise.lambda)?)
+    let names: Vec<&str> = kr270::PARAM_NAMES.to_vec();
+    let fits = Fits {
+        ols: run(&job, &data, Method::Ols, None)?,
+        wls: [
+            run(&job, &data, Method::Wls, Some(kr270::LAMBDAS[0]))?,
+            run(&job, &data, Method::Wls, Some(kr270::LAMBDAS[1]))?,
+            run(&job, &data, Method::Wls, Some(kr270::LAMBDAS[2]))?,
+        ],
+        irls: run(&job, &data, Method::Irls, None)?,
     };
-    let fits = paper::fits(&stats, &settings)?;
+    let got: Vec<&str> = fits.irls.parameters.iter().map(|p| p.name.as_str()).collect();
+    if got != names {
+        return Err(format!("setup.toml declares {got:?}, not the paper's model").into());
+    }
+    let stats = core_rows(&job, &data)?;
+    check_rows(&stats, &fits.ols)?;
 
     println!("robcal: the KR-270 experiment of Klimchik et al. (section 5), reproduced");
     println!(
         "data: {} ({} deflections, {} equations, {} configurations); 9 parameters",
         args.data.display(),
-        exp.obs.len(),
-        stats.equations(),
-        stats.groups().len()
+        data.deflections.len(),
+        3 * fits.irls.rows,
+        fits.irls.configurations
     );
     println!(
-        "σ0 = {} µm; iterative WLS: λ = {}, tolerance {} σ, {} iterations, converged: {}",
-        job.setup.noise.sigma0_um,
-        job.setup.noise.lambda,
-        settings.tolerance,
-        fits.irls.iterations,
-        fits.irls.converged
+        "robcal calibrate --setup {}/setup.toml --no-diagnose, --method ols | wls --lambda L | irls",
+        args.data.display()
+    );
+    println!(
+        "σ0 = {} µm; iterative WLS: λ = {}, tolerance 1e-3 σ, {} iterations, converged: {}",
+        job.setup.noise.sigma0_um, job.setup.noise.lambda, fits.irls.iterations, fits.irls.converged
     );
     println!(
         "compliance in µrad/(N·m); ± is 3σ; truth = Table 3's WLS column (the generator's input)\n"
     );
 
-    // Gauss–Newton on the exact deflection model, from the linear solutions.
-    let (ols_exact, ols_steps) =
-        exp.refine(&fits.ols.solution.x, 1e-6, 20, |s| s.fit_ols(&[true; N]))?;
-    let (irls_exact, irls_steps) = exp.refine(&fits.irls.solution.x, 1e-6, 20, |s| {
-        let mut h = heapless::Vec::<_, 1>::new();
-        s.fit_irls(&settings, &[true; N], &mut h)
-    })?;
-    let exact = Exact {
-        ols: ols_exact,
-        irls: irls_exact,
-        steps: (ols_steps, irls_steps),
-    };
-
-    table3(&fits, &exact);
+    table3(&fits, &stats)?;
     let crb = cramer_rao(&stats)?;
     table4(&fits, &crb);
-    formula_mix(&fits, &stats, sigma0_m, &crb)?;
-    figure3(&fits);
-    residual_sigma(&fits);
-    nonlinearity(&exp, &stats, &fits, &exact)?;
-
+    formula_mix(&fits, &stats, job.setup.noise.sigma0_um * 1e-6, &crb)?;
+    figure3(&fits.irls);
+    residual_sigma(&fits.irls);
     closed_loop(&args.data)?;
 
     std::fs::create_dir_all(&args.out)?;
     let f3 = args.out.join("figure3.svg");
-    plot_figure3(&fits, &f3)?;
+    plot_figure3(&fits.irls, &f3)?;
     let ci = args.out.join("ci_comparison.svg");
     plot_ci(&fits, &crb, &ci)?;
     println!("\nwrote {} and {}", f3.display(), ci.display());
     Ok(())
 }
 
-fn ci3(fit: &Fit<f64, N, G>) -> SVector<f64, N> {
-    fit.std() * 3.0
+/// The paper's rows with robcal's core: the 9-parameter layout
+/// ([`kr270::layout`]) at the unloaded pose of every deflection (eq. 3),
+/// grouped by configuration.
+fn core_rows(job: &Job, data: &Measurements) -> Res<Stats> {
+    let chain = &job.robot.chain;
+    let layout = kr270::layout(chain)?;
+    let load = job.setup.load.ok_or("the setup has no [load]")?;
+    let mut stats = Stats::new();
+    for d in &data.deflections {
+        let m = job
+            .setup
+            .markers
+            .iter()
+            .position(|m| m.id == d.marker)
+            .ok_or("unknown marker")?;
+        let marker = Marker {
+            index: u8::try_from(m)?,
+            xyz_m: Vector3::from(job.setup.markers[m].xyz),
+        };
+        let pl = PointLoad {
+            mass_kg: d.load_kg,
+            com_m: Vector3::from(load.com),
+            gravity_mps2: Vector3::from(load.gravity),
+        };
+        let b = layout.block::<f64, 16, Const<N>>(chain, &d.q, &marker, Some(&pl))?;
+        stats.update(i32::try_from(d.config)?, &b, &Vector3::from(d.dp_m))?;
+    }
+    Ok(stats)
+}
+
+/// The core's OLS on [`core_rows`] must be the product's OLS: the same
+/// rows.
+fn check_rows(stats: &Stats, ols: &Report) -> Res<()> {
+    let mut w = vec![Vector3::zeros(); stats.groups().len()];
+    let mut s = w.clone();
+    let fit = stats.fit_ols(&[true; N], &mut w, &mut s)?;
+    let dev = (0..N)
+        .map(|i| (fit.solution.x[i] - ols.parameters[i].value).abs() / ols.parameters[i].std)
+        .fold(0.0, f64::max);
+    if dev > 1e-9 {
+        return Err(format!("core rows and the product's differ: {dev:e} σ").into());
+    }
+    Ok(())
 }
 
 fn pm(v: f64, ci: f64) -> String {
     format!("{v:.4}±{ci:<6.4}")
 }
 
-/// The fits refined on the exact deflection model.
-struct Exact {
-    ols: Fit<f64, N, G>,
-    irls: Fit<f64, N, G>,
-    steps: (usize, usize),
-}
-
-fn table3(f: &Fits, e: &Exact) {
-    let ols = ci3(&f.ols);
-    let ols7 = std_devs(&f.ols_cov_iid) * 3.0;
-    let irls = ci3(&f.irls);
-    let t = paper::truth();
+fn table3(f: &Fits, stats: &Stats) -> Res<()> {
+    let (xo, so) = (x(&f.ols), sd(&f.ols));
+    let (xi, si) = (x(&f.irls), sd(&f.irls));
+    // Eq. 7 (i.i.d. noise of unknown σ) of the same OLS fit, for the
+    // question which formula the paper's OLS ±3σ used.
+    let ones = vec![Vector3::new(1.0, 1.0, 1.0); stats.groups().len()];
+    let ols7 = std_devs(&stats.weighted(&ones, None)?.solve()?.cov_iid()) * 3.0;
+    let t = kr270::WLS_VALUE;
     println!("Table 3. Identified compliances [µrad/(N·m)], value ± 3σ");
     println!(
-        "{:<4} {:>7} | {:<16} {:<16} {:>9} | {:<16} {:<16} | {:<16} {:<16}",
-        "k",
-        "truth",
-        "paper OLS",
-        "ours OLS (8)",
-        "(7) ±3σ",
-        "paper WLS",
-        "ours iter.WLS",
-        "OLS, exact",
-        "iter.WLS, exact"
+        "{:<4} {:>7} | {:<16} {:<16} {:>9} | {:<16} {:<16}",
+        "k", "truth", "paper OLS", "robcal OLS (8)", "(7) ±3σ", "paper WLS", "robcal iter.WLS"
     );
     for i in 0..N {
         println!(
-            "{:<4} {:>7.3} | {:<16} {:<16} {:>9.4} | {:<16} {:<16} | {:<16} {:<16}",
+            "{:<4} {:>7.3} | {:<16} {:<16} {:>9.4} | {:<16} {:<16}",
             PAPER_SYMBOLS[i],
             t[i],
             pm(kr270::OLS_VALUE[i], kr270::OLS_CI3[i]),
-            pm(f.ols.solution.x[i], ols[i]),
+            pm(xo[i], 3.0 * so[i]),
             ols7[i],
             pm(kr270::WLS_VALUE[i], kr270::WLS_CI3[i]),
-            pm(f.irls.solution.x[i], irls[i]),
-            pm(e.ols.solution.x[i], 3.0 * e.ols.std()[i]),
-            pm(e.irls.solution.x[i], 3.0 * e.irls.std()[i]),
+            pm(xi[i], 3.0 * si[i]),
         );
     }
     println!(
-        "(OLS (8): sandwich with σ per configuration and axis; (7): i.i.d. σ̂² Λ⁻¹; \
-         \"exact\": Gauss–Newton on p(q + δq(k)) − p(q), see below)"
+        "(OLS (8): sandwich with σ per configuration and axis; (7): i.i.d. σ̂² Λ⁻¹, robcal's core)"
     );
     println!("\nTable 3 (cont.). One-step WLS (eq. 10, weights eq. 14 from the OLS residuals), covariance (11)");
     println!(
@@ -185,7 +246,7 @@ fn table3(f: &Fits, e: &Exact) {
         let w: Vec<String> = f
             .wls
             .iter()
-            .map(|w| pm(w.solution.x[i], ci3(w)[i]))
+            .map(|r| pm(r.parameters[i].value, 3.0 * r.parameters[i].std))
             .collect();
         println!(
             "{:<4} {:>7.3} | {:<16} {:<16} {:<16} | {:<16}",
@@ -198,40 +259,41 @@ fn table3(f: &Fits, e: &Exact) {
         );
     }
     println!();
+    Ok(())
+}
+
+/// Table 1's true σ \[m\] of each group of `stats`.
+fn true_sigma(stats: &Stats) -> Vec<Vector3<f64>> {
+    stats
+        .groups()
+        .iter()
+        .map(|g| Vector3::from(kr270::SIGMA_UM[(g.id - 1) as usize]) * 1e-6)
+        .collect()
 }
 
 /// `√diag (Bᵀ Σ⁻² B)⁻¹` with Table 1's true σ: the Cramér–Rao bound.
-fn cramer_rao(stats: &paper::Stats) -> Res<SVector<f64, N>> {
-    let w: Vec<Vector3<f64>> = stats
-        .groups()
-        .iter()
-        .map(|g| {
-            let s = kr270::SIGMA_UM[(g.id - 1) as usize];
-            Vector3::new(1e6 / s[0], 1e6 / s[1], 1e6 / s[2])
-        })
-        .collect();
-    let acc = stats.weighted(&w, None)?;
-    let sol = acc.solve()?;
+fn cramer_rao(stats: &Stats) -> Res<SVector<f64, N>> {
+    let w: Vec<Vector3<f64>> = true_sigma(stats).iter().map(|s| s.map(|v| 1.0 / v)).collect();
+    let sol = stats.weighted(&w, None)?.solve()?;
     Ok(std_devs(&sol.cov_information()))
 }
 
 fn table4(f: &Fits, crb: &SVector<f64, N>) {
-    let so = f.ols.std();
-    let si = f.irls.std();
-    let s1 = f.wls[1].std();
+    let (xo, so) = (x(&f.ols), sd(&f.ols));
+    let (xi, si) = (x(&f.irls), sd(&f.irls));
+    let s1 = sd(&f.wls[1]);
     println!("Table 4. Benefits of WLS: CI = 3σ as % of the value; σ_OLS / σ_WLS");
     println!(
         "{:<4} | {:>7} {:>7} | {:>7} {:>7} | {:>7} {:>7} {:>9} | {:>7} {:>9}",
         "k", "CI_OLS", "paper", "CI_WLS", "paper", "ratio", "paper", "1-step λ1", "CRB", "σOLS/CRB"
     );
     for i in 0..N {
-        let x = f.irls.solution.x[i];
         println!(
             "{:<4} | {:>6.2}% {:>6.1}% | {:>6.2}% {:>6.2}% | {:>7.2} {:>7.1} {:>9.2} | {:>7.4} {:>9.2}",
             PAPER_SYMBOLS[i],
-            300.0 * so[i] / f.ols.solution.x[i],
+            300.0 * so[i] / xo[i],
             kr270::CI_OLS_PERCENT[i],
-            300.0 * si[i] / x,
+            300.0 * si[i] / xi[i],
             kr270::CI_WLS_PERCENT[i],
             so[i] / si[i],
             kr270::SIGMA_RATIO[i],
@@ -249,23 +311,30 @@ fn table4(f: &Fits, crb: &SVector<f64, N>) {
 }
 
 /// Which covariance formulas reproduce the paper's σ_OLS/σ_WLS = 27–42?
-fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64, crb: &SVector<f64, N>) -> Res<()> {
-    let so = f.ols.std();
-    // (13) read literally with the dimensionless weights of eq. 14 and Δp in
-    // µm: (Bᵀ W² B)⁻¹ with B in µm per µrad/(N·m) = 1e-12 × Λ⁻¹ (B in m).
-    let lit = |fit: &Fit<f64, N, G>| -> SVector<f64, N> {
-        std_devs(&fit.solution.cov_information()) * 1e-6
+/// Each alternative formula evaluated with robcal's core on the weights the
+/// product used.
+fn formula_mix(f: &Fits, stats: &Stats, sigma0_m: f64, crb: &SVector<f64, N>) -> Res<()> {
+    let so = sd(&f.ols);
+    let weights = |r: &Report| -> Vec<Vector3<f64>> {
+        r.noise.iter().map(|n| Vector3::from(n.weight)).collect()
+    };
+    // (13) read literally with the dimensionless weights of eq. 14 and Δp
+    // in µm: (Bᵀ W² B)⁻¹ with B in µm per µrad/(N·m) = 1e-12 × Λ⁻¹ (B in m).
+    let lit = |r: &Report| -> Res<SVector<f64, N>> {
+        let sol = stats.weighted(&weights(r), None)?.solve()?;
+        Ok(std_devs(&sol.cov_information()) * 1e-6)
     };
     // (12) + (13): w = a/σ̂ with a = σ0 (σ̂ of the final fit), (Bᵀ W² B)⁻¹, µm.
     let w12: Vec<Vector3<f64>> = f
         .irls
-        .sigma
+        .noise
         .iter()
-        .map(|s| s.map(|v| sigma0_m / v))
+        .map(|n| Vector3::from(n.sigma_um).map(|v| sigma0_m / (v * 1e-6)))
         .collect();
     let s12 = std_devs(&stats.weighted(&w12, None)?.solve()?.cov_information()) * 1e-6;
-    let it = lit(&f.irls);
-    let l: Vec<SVector<f64, N>> = f.wls.iter().map(lit).collect();
+    let it = lit(&f.irls)?;
+    let l = [lit(&f.wls[0])?, lit(&f.wls[1])?, lit(&f.wls[2])?];
+    let si = sd(&f.irls);
     println!("Table 4, what could give the paper's 27–42: σ_OLS (8) divided by σ_WLS from");
     println!(
         "{:<4} | {:>7} | {:>9} {:>9} {:>9} {:>9} | {:>9} | {:>13}",
@@ -276,7 +345,7 @@ fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64, crb: &SVector<f64,
             "{:<4} | {:>7.1} | {:>9.2} {:>9.2} {:>9.2} {:>9.2} | {:>9.2} | {:>13.2}",
             PAPER_SYMBOLS[i],
             kr270::SIGMA_RATIO[i],
-            so[i] / f.irls.std()[i],
+            so[i] / si[i],
             so[i] / l[0][i],
             so[i] / l[1][i],
             so[i] / l[2][i],
@@ -297,13 +366,13 @@ fn formula_mix(f: &Fits, stats: &paper::Stats, sigma0_m: f64, crb: &SVector<f64,
     Ok(())
 }
 
-fn figure3(f: &Fits) {
+fn figure3(irls: &Report) {
     println!("Figure 3. Iterative WLS: k21 and its CI per iteration (0 = OLS)");
     println!(
         "{:>4} | {:>9} {:>9} {:>7} | {:>12}",
         "iter", "k21", "±3σ", "CI %", "max |Δx|/σ"
     );
-    for (k, h) in f.history.iter().enumerate() {
+    for (k, h) in irls.history.iter().enumerate() {
         println!(
             "{:>4} | {:>9.5} {:>9.5} {:>6.3}% | {:>12.2e}",
             k,
@@ -313,140 +382,39 @@ fn figure3(f: &Fits) {
             h.change
         );
     }
+    let (first, last) = (&irls.history[0], &irls.history[irls.history.len() - 1]);
     println!(
         "(paper, Fig. 3: k21 moves 3.3 % from OLS, its CI shrinks by 40, stable after 10 iterations; \
          here it moves {:.1} % and the CI shrinks by {:.2})\n",
-        100.0 * (f.irls.solution.x[0] - f.ols.solution.x[0]) / f.ols.solution.x[0],
-        f.ols.std()[0] / f.irls.std()[0]
+        100.0 * (last.x[0] - first.x[0]) / first.x[0],
+        first.std[0] / last.std[0]
     );
 }
 
-fn residual_sigma(f: &Fits) {
+fn residual_sigma(irls: &Report) {
     println!(
         "Residual σ per configuration and axis [µm]: iterative WLS estimate vs Table 1 (truth)"
     );
     println!(
         "{:>5} | {:>17} | {:>17}",
-        "conf", "ours x  y  z", "Table 1 x  y  z"
+        "conf", "robcal x  y  z", "Table 1 x  y  z"
     );
-    for (c, s) in f.irls.sigma.iter().enumerate() {
-        let t = kr270::SIGMA_UM[c];
+    for n in &irls.noise {
+        let t = kr270::SIGMA_UM[(n.config - 1) as usize];
         println!(
             "{:>5} | {:>5.0} {:>5.0} {:>5.0} | {:>5.0} {:>5.0} {:>5.0}",
-            c + 1,
-            s.x * 1e6,
-            s.y * 1e6,
-            s.z * 1e6,
-            t[0],
-            t[1],
-            t[2]
+            n.config, n.sigma_um[0], n.sigma_um[1], n.sigma_um[2], t[0], t[1], t[2]
         );
     }
     println!();
 }
 
-/// Bias of the linear model (eq. 3) on exact deflections, and the
-/// Gauss–Newton refinement on the exact model.
-fn nonlinearity(exp: &Experiment, stats: &paper::Stats, f: &Fits, e: &Exact) -> Res<()> {
-    let truth = paper::truth();
-    let rows = exp.linear_rows()?;
-    let clean = exp.exact_deflections(&truth)?;
-    let clean_stats = paper::stats_of(&exp.obs, &rows, &clean)?;
-    // Noise-free data fitted with each estimator's weights: the estimate
-    // minus the truth is the bias of the linear model.
-    let b_ols = clean_stats.fit_ols::<G>(&[true; N])?.solution.x - truth;
-    let b_irls = clean_stats
-        .fit_weighted::<G>(&f.irls.weights, &[true; N])?
-        .solution
-        .x
-        - truth;
-    let so = f.ols.std();
-    let si = f.irls.std();
-    let max_dev = clean.iter().map(|d| d.norm()).fold(0.0, f64::max);
-    let lin: Vec<Vector3<f64>> = rows.iter().map(|b| b * truth).collect();
-    let max_err = clean
-        .iter()
-        .zip(&lin)
-        .map(|(c, l)| (c - l).norm())
-        .fold(0.0, f64::max);
-    println!(
-        "Non-linearity: deflections up to {:.2} mm; the linear model (eq. 3) misses up to {:.1} µm of them",
-        max_dev * 1e3,
-        max_err * 1e6
-    );
-    let (ols_x, irls_x) = (&e.ols, &e.irls);
-    let (ols_steps, irls_steps) = e.steps;
-    // Noise-free check of the refinement: it must return the truth.
-    let clean_obs: Vec<_> = exp
-        .obs
-        .iter()
-        .zip(&clean)
-        .map(|(o, c)| paper::Obs {
-            dp: *c,
-            ..o.clone()
-        })
-        .collect();
-    let clean_exp = Experiment {
-        obs: clean_obs,
-        ..exp.clone()
-    };
-    let (clean_ref, _) = clean_exp.refine(&f.irls.solution.x, 1e-9, 20, |s| {
-        s.fit_weighted(&f.irls.weights, &[true; N])
-    })?;
-    let _ = stats;
-    println!(
-        "bias = linear estimate on noise-free exact data − truth, in σ of the estimator; \
-         GN move = refined − linear estimate on the data, in σ"
-    );
-    println!(
-        "{:<4} | {:>10} {:>8} {:>8} | {:>10} {:>8} {:>8} | {:>15} {:>15} | {:>9}",
-        "k",
-        "bias OLS",
-        "/σ",
-        "GN move",
-        "bias iter",
-        "/σ",
-        "GN move",
-        "OLS→exact",
-        "iter→exact",
-        "clean GN"
-    );
-    for i in 0..N {
-        println!(
-            "{:<4} | {:>10.2e} {:>8.3} {:>8.3} | {:>10.2e} {:>8.3} {:>8.3} | {:<16} {:<16} | {:>9.1e}",
-            PAPER_SYMBOLS[i],
-            b_ols[i],
-            b_ols[i] / so[i],
-            (ols_x.solution.x[i] - f.ols.solution.x[i]) / so[i],
-            b_irls[i],
-            b_irls[i] / si[i],
-            (irls_x.solution.x[i] - f.irls.solution.x[i]) / si[i],
-            pm(ols_x.solution.x[i], 3.0 * ols_x.std()[i]),
-            pm(irls_x.solution.x[i], 3.0 * irls_x.std()[i]),
-            clean_ref.solution.x[i] - truth[i],
-        );
-    }
-    let worst = (0..N)
-        .map(|i| (b_irls[i] / si[i]).abs().max((b_ols[i] / so[i]).abs()))
-        .fold(0.0, f64::max);
-    println!(
-        "(largest |bias|/σ = {worst:.3}: {}; GN: {ols_steps} relinearisations for OLS, {irls_steps} for iterative WLS; \
-         clean GN = refined estimate on noise-free data − truth)",
-        if worst > 0.2 {
-            "above 0.2σ, use the refined (exact-model) estimates"
-        } else {
-            "below 0.2σ, the linear model is adequate"
-        }
-    );
-    Ok(())
-}
-
-fn plot_figure3(f: &Fits, path: &std::path::Path) -> Res<()> {
+fn plot_figure3(irls: &Report, path: &Path) -> Res<()> {
     let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
     root.fill(&WHITE)?;
     let (a, b) = root.split_horizontally(500);
-    let n = f.history.len();
-    let xs: Vec<(f64, f64, f64)> = f
+    let n = irls.history.len();
+    let xs: Vec<(f64, f64, f64)> = irls
         .history
         .iter()
         .enumerate()
@@ -510,13 +478,16 @@ fn plot_figure3(f: &Fits, path: &std::path::Path) -> Res<()> {
     Ok(())
 }
 
-fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &std::path::Path) -> Res<()> {
+fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &Path) -> Res<()> {
     let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
     root.fill(&WHITE)?;
-    let pct = |s: SVector<f64, N>, x: SVector<f64, N>| -> Vec<f64> {
-        (0..N).map(|i| 300.0 * s[i] / x[i]).collect()
+    let pct = |r: &Report| -> Vec<f64> {
+        r.parameters
+            .iter()
+            .map(|p| 300.0 * p.std / p.value)
+            .collect()
     };
-    let t = paper::truth();
+    let t = kr270::WLS_VALUE;
     let series: [(&str, Vec<f64>, RGBColor); 6] = [
         (
             "paper OLS",
@@ -528,18 +499,14 @@ fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &std::path::Path) -> Res<()> {
             kr270::CI_WLS_PERCENT.to_vec(),
             RGBColor(150, 150, 255),
         ),
-        ("ours OLS (8)", pct(f.ols.std(), f.ols.solution.x), RED),
+        ("robcal OLS (8)", pct(&f.ols), RED),
+        ("robcal WLS λ=1 (11)", pct(&f.wls[1]), GREEN),
+        ("robcal iterative WLS (11)", pct(&f.irls), BLUE),
         (
-            "ours WLS λ=1 (11)",
-            pct(f.wls[1].std(), f.wls[1].solution.x),
-            GREEN,
+            "Cramér–Rao (true Σ)",
+            (0..N).map(|i| 300.0 * crb[i] / t[i]).collect(),
+            BLACK,
         ),
-        (
-            "ours iterative WLS (11)",
-            pct(f.irls.std(), f.irls.solution.x),
-            BLUE,
-        ),
-        ("Cramér–Rao (true Σ)", pct(*crb, t), BLACK),
     ];
     let mut c = ChartBuilder::on(&root)
         .caption(
@@ -570,10 +537,9 @@ fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &std::path::Path) -> Res<()> {
             .map(|(i, y)| (i as f64 + dx, *y))
             .collect();
         let col = *color;
-        c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(1)))?
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))?
             .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col));
-        c.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))?;
+            .legend(move |(x, y)| Circle::new((x + 10, y), 4, col.filled()));
     }
     c.configure_series_labels()
         .position(SeriesLabelPosition::UpperLeft)
@@ -588,17 +554,12 @@ fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &std::path::Path) -> Res<()> {
 /// compliance for A2) and let the diagnosis find what the residuals follow.
 /// This is `robcal calibrate --setup data/kr270/setup-naive.toml --data
 /// data/kr270/measurements.csv`.
-fn closed_loop(data_dir: &std::path::Path) -> Res<()> {
+fn closed_loop(data_dir: &Path) -> Res<()> {
     println!("\n== Closed loop: the naive model (constant k2) and the diagnosis");
     println!("   (robcal calibrate --setup data/kr270/setup-naive.toml --data data/kr270/measurements.csv)\n");
     let job = Job::load(data_dir.join("setup-naive.toml"))?;
     let data = job.read_measurements(data_dir.join("measurements.csv"))?;
-    let report = robcal::calibrate::calibrate(
-        &job,
-        &data,
-        &robcal::calibrate::Settings::default(),
-        &mut |_| {},
-    )?;
+    let report = calibrate::calibrate(&job, &data, &Settings::default(), &mut |_| {})?;
     println!("{report}");
     Ok(())
 }

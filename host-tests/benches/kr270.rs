@@ -23,9 +23,9 @@ mod kr270;
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use kr270::{Kr270, G, N};
-use nalgebra::{DMatrix, DVector, SVector, Vector3};
-use robcal::irls::{robust_weights, IrlsSettings, Iteration, Reweightable};
+use kr270::{Dn, Kr270, G, N};
+use nalgebra::{DMatrix, DVector, Vector3};
+use robcal::estimate::{robust_weights, IrlsSettings, Reweightable};
 
 /// The data as a dense problem: 810 rows, their group, and `Δp`.
 struct Dense {
@@ -113,10 +113,10 @@ impl Dense {
 
     /// The iterative WLS of `robcal::irls` (same weights, same stop rule).
     fn irls(&self, settings: &IrlsSettings<f64>) -> (DVector<f64>, DVector<f64>, usize) {
-        let (mut x, mut sd, mut sigma) = self.fit(&[Vector3::repeat(1.0); G]);
+        let (mut x, mut sd, mut sigma) = self.fit(&[Vector3::new(1.0, 1.0, 1.0); G]);
         for k in 1..=settings.max_iterations {
-            let w: heapless::Vec<Vector3<f64>, G> =
-                robust_weights(&sigma, &settings.weight).unwrap();
+            let mut w = vec![Vector3::zeros(); G];
+            robust_weights(&sigma, &settings.weight, &mut w).unwrap();
             let (nx, nsd, ns) = self.fit(&w);
             let change = (0..N)
                 .map(|i| (nx[i] - x[i]).abs() / nsd[i])
@@ -130,9 +130,11 @@ impl Dense {
     }
 }
 
-fn stream_irls(src: &Kr270<f64>, settings: &IrlsSettings<f64>) -> robcal::Fit<f64, N, G> {
-    let mut h = heapless::Vec::<Iteration<f64, N>, 1>::new();
-    src.fit_irls(settings, &[true; N], &mut h).unwrap()
+/// The iterative WLS of a source, as the firmware runs it.
+fn irls_of<R: Reweightable<f64, Dn>>(src: &R, settings: &IrlsSettings<f64>) -> robcal::Fit<f64, Dn> {
+    let (mut w, mut s) = ([Vector3::zeros(); G], [Vector3::zeros(); G]);
+    src.fit_irls(settings, &[true; N], &mut w, &mut s, |_| {})
+        .unwrap()
 }
 
 fn benches(c: &mut Criterion) {
@@ -142,10 +144,10 @@ fn benches(c: &mut Criterion) {
     assert_eq!(dense.b.shape(), (810, N));
 
     // The three agree before anything is timed.
-    let fit = stream_irls(&src, &settings);
+    let fit = irls_of(&src, &settings);
     let (dx, dsd, dit) = dense.irls(&settings);
     assert_eq!(dit, fit.iterations);
-    let sd: SVector<f64, N> = fit.std();
+    let sd = fit.std();
     for i in 0..N {
         assert!((dx[i] - fit.solution.x[i]).abs() < 1e-6 * sd[i]);
         assert!((dsd[i] / sd[i] - 1.0).abs() < 1e-6);
@@ -153,23 +155,21 @@ fn benches(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("kr270/irls");
     group.bench_function("stream", |b| {
-        b.iter(|| stream_irls(black_box(&src), &settings))
+        b.iter(|| irls_of(black_box(&src), &settings))
     });
     group.bench_function("grouped", |b| {
         b.iter(|| {
             let stats = kr270::grouped(black_box(&src)).unwrap();
-            let mut h = heapless::Vec::<Iteration<f64, N>, 1>::new();
-            stats
-                .fit_irls::<G, 1>(&settings, &[true; N], &mut h)
-                .unwrap()
+            irls_of(&stats, &settings)
         })
     });
     group.bench_function("dense_qr", |b| b.iter(|| black_box(&dense).irls(&settings)));
     group.finish();
 
     // One weighted fit with the first WLS step's weights.
-    let ols: robcal::Fit<f64, N, G> = src.fit_ols(&[true; N]).unwrap();
-    let w: heapless::Vec<Vector3<f64>, G> = robust_weights(&ols.sigma, &settings.weight).unwrap();
+    let (mut w, mut sigma) = ([Vector3::zeros(); G], [Vector3::zeros(); G]);
+    src.fit_ols(&[true; N], &mut w, &mut sigma).unwrap();
+    robust_weights(&sigma, &settings.weight, &mut w).unwrap();
     let mut group = c.benchmark_group("kr270/wls");
     group.bench_function("stream_pass_solve", |b| {
         b.iter(|| black_box(&src).weighted(&w, None).unwrap().solve().unwrap())

@@ -4,12 +4,26 @@
 mod tiago_common;
 use tiago_common::*;
 
+use std::path::Path;
+
 use robcal::io::figaroh::{import_mocap, read_mocap};
 use robcal::io::{ErrorKind, Setup};
 
+/// Movable joints of FIGAROH's chain, base to hand.
+const JOINT_NAMES: [&str; 8] = [
+    "torso_lift_joint",
+    "arm_1_joint",
+    "arm_2_joint",
+    "arm_3_joint",
+    "arm_4_joint",
+    "arm_5_joint",
+    "arm_6_joint",
+    "arm_7_joint",
+];
+
 /// The FIGAROH file split by hand (an independent reader): header, rows.
-fn raw(name: &str) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(data_dir().join(name)).unwrap();
+fn raw(data: &Path, name: &str) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(data.join(name)).unwrap();
     let mut lines = text.lines();
     let header = lines
         .next()
@@ -26,13 +40,16 @@ fn raw(name: &str) -> (Vec<String>, Vec<Vec<f64>>) {
 
 #[test]
 fn round_trip_is_exact() {
-    let job = job();
+    let Some(data) = data_or_skip("round_trip_is_exact") else {
+        return;
+    };
+    let job = job(&data, "setup.toml");
     let dir = temp_dir("import");
     for (name, postures, shipped) in [(TRAIN, 37, true), (VALID, 62, false)] {
-        let (header, rows) = raw(name);
+        let (header, rows) = raw(&data, name);
         assert_eq!(header.contains(&"shipped_row".to_string()), shipped);
         let col = |n: &str| header.iter().position(|h| h == n).unwrap();
-        let obs = import(&job, name, &dir);
+        let obs = import(&job, &data, name).observations;
         assert_eq!(obs.len(), 4 * postures);
         assert_eq!(rows.len(), postures);
         for o in &obs {
@@ -54,7 +71,7 @@ fn round_trip_is_exact() {
         }
         // Without a robot: the same rows (FIGAROH's joint order is the chain's).
         let plain = dir.join("plain.csv");
-        let n = import_mocap(data_dir().join(name), &plain, None).unwrap();
+        let n = import_mocap(data.join(name), &plain, None).unwrap();
         assert_eq!(
             (n.postures, n.rows, n.has_time),
             (postures, 4 * postures, true)
@@ -67,7 +84,7 @@ fn round_trip_is_exact() {
         };
         assert_eq!(strip(&back), strip(&obs));
     }
-    let m = read_mocap(data_dir().join(TRAIN)).unwrap();
+    let m = read_mocap(data.join(TRAIN)).unwrap();
     assert_eq!(m.joint_names, JOINT_NAMES);
     assert_eq!(m.postures[35].shipped_row, Some(33.0));
     assert_eq!(m.postures[36].shipped_row, Some(-1.0));
@@ -76,8 +93,11 @@ fn round_trip_is_exact() {
 
 #[test]
 fn rejected_input_names_file_line_column_and_writes_nothing() {
+    let Some(data) = data_or_skip("rejected_input_names_file_line_column_and_writes_nothing") else {
+        return;
+    };
     let dir = temp_dir("import-bad");
-    let text = std::fs::read_to_string(data_dir().join(TRAIN)).unwrap();
+    let text = std::fs::read_to_string(data.join(TRAIN)).unwrap();
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
     // Line 5 (4th posture): arm_3_joint is column 16.
     let mut cells: Vec<&str> = lines[4].split(',').collect();
@@ -97,7 +117,7 @@ fn rejected_input_names_file_line_column_and_writes_nothing() {
     );
     assert!(!out.exists());
     // A chain whose joints are not the file's.
-    let job = job();
+    let job = job(&data, "setup.toml");
     let renamed = text.replacen("arm_7_joint", "wrist_joint", 1);
     std::fs::write(&bad, renamed).unwrap();
     let e = import_mocap(&bad, &out, Some(&job.robot)).unwrap_err();
@@ -109,7 +129,10 @@ fn rejected_input_names_file_line_column_and_writes_nothing() {
 
 #[test]
 fn setup_names_the_shared_urdf_and_figaroh_chain() {
-    let job = job();
+    let Some(data) = data_or_skip("setup_names_the_shared_urdf_and_figaroh_chain") else {
+        return;
+    };
+    let job = job(&data, "setup.toml");
     assert_eq!(
         job.setup.robot,
         std::path::Path::new("../../../shared/datasets/tiago-mocap/tiago_48_schunk.urdf")
@@ -122,7 +145,12 @@ fn setup_names_the_shared_urdf_and_figaroh_chain() {
         .join("shared/datasets/tiago-mocap")
         .exists()
     {
-        assert!(setup_robot_path_resolves(&job));
+        let p = job.setup.robot_path(&job.setup_path);
+        assert_eq!(
+            p.canonicalize().ok(),
+            data.join(URDF).canonicalize().ok(),
+            "the setup names the shared URDF"
+        );
         robcal::io::Job::load(&job.setup_path).unwrap();
     }
     assert_eq!(job.robot.joint_names, JOINT_NAMES);

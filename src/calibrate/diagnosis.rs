@@ -4,7 +4,7 @@
 
 use super::effects::{candidates, inadmissible, Candidate, Effect};
 use super::engine::{Engine, Fitted};
-use super::report::{EffectStep, PlotSeries, Report, Unexplained};
+use super::report::{ConfigNoise, EffectStep, PlotSeries, Report, Unexplained};
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
 use super::{fit, CalibrationError, Method, Settings};
 use crate::model::Param;
@@ -300,6 +300,23 @@ pub fn run(
         relinearisations: current.relinearisations,
         converged: current.fit.converged,
         parameters: e.parameters(&current),
+        covariance: nalgebra::DMatrix::from_iterator(
+            current.params.len(),
+            current.params.len(),
+            current.fit.covariance.iter().copied(),
+        ),
+        history: current.fit.history.clone(),
+        noise: e
+            .rows
+            .configs
+            .iter()
+            .zip(current.fit.sigma.iter().zip(&current.fit.weights))
+            .map(|(&config, (s, w))| ConfigNoise {
+                config,
+                sigma_um: [s.x * 1e6, s.y * 1e6, s.z * 1e6],
+                weight: [w.x, w.y, w.z],
+            })
+            .collect(),
         rms_um: current.rms_um,
         heldout_rms_um: current.heldout_rms_um,
         declared_rms_um: declared_rms.0,

@@ -65,6 +65,22 @@ pub struct FitOut {
     pub iterations: usize,
     /// Whether IRLS converged.
     pub converged: bool,
+    /// The OLS start and every reweighting step after it: estimate,
+    /// standard deviations, and the largest move in σ (the paper's
+    /// Figure 3).
+    pub history: Vec<Step>,
+}
+
+/// One step of a reweighted fit (an [`crate::estimate::Iteration`] at the
+/// host's size).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    /// Estimate, reported units.
+    pub x: Vec<f64>,
+    /// Its standard deviations.
+    pub std: Vec<f64>,
+    /// `max_i |Δx_i| / σ_i` from the step before (0 for the OLS start).
+    pub change: f64,
 }
 
 /// The rows of a [`Design`] on some of its columns, optionally without one
@@ -167,14 +183,31 @@ pub fn fit(
     let active = vec![true; cols.len()];
     let mut weights = vec![Vector3::zeros(); d.groups];
     let mut sigma = vec![Vector3::zeros(); d.groups];
+    let mut history = Vec::new();
+    let step = |f: &Fit<f64, Dyn>, change| Step {
+        x: f.solution.x.as_slice().to_vec(),
+        std: f.std().as_slice().to_vec(),
+        change,
+    };
     let fit: Fit<f64, Dyn> = match s.method {
-        Method::Ols => view.fit_ols(&active, &mut weights, &mut sigma)?,
+        Method::Ols => {
+            let f = view.fit_ols(&active, &mut weights, &mut sigma)?;
+            history.push(step(&f, 0.0));
+            f
+        }
         Method::Wls => {
-            view.fit_ols(&active, &mut weights, &mut sigma)?;
+            let ols = view.fit_ols(&active, &mut weights, &mut sigma)?;
+            history.push(step(&ols, 0.0));
             let ols_sigma = sigma.clone();
             robust_weights(&ols_sigma, &s.weight, &mut weights)?;
             let mut f = view.fit_weighted(&weights, &active, &mut sigma)?;
             f.iterations = 1;
+            let std = f.std();
+            let change = (0..cols.len())
+                .filter(|&i| std[i] > 0.0)
+                .map(|i| (f.solution.x[i] - ols.solution.x[i]).abs() / std[i])
+                .fold(0.0, f64::max);
+            history.push(step(&f, change));
             f
         }
         Method::Irls => {
@@ -183,7 +216,13 @@ pub fn fit(
                 tolerance: s.tolerance,
                 max_iterations: s.max_iterations.max(1),
             };
-            view.fit_irls(&settings, &active, &mut weights, &mut sigma, |_| {})?
+            view.fit_irls(&settings, &active, &mut weights, &mut sigma, |it| {
+                history.push(Step {
+                    x: it.x.as_slice().to_vec(),
+                    std: it.std.as_slice().to_vec(),
+                    change: it.change,
+                });
+            })?
         }
     };
     let std = fit.std();
@@ -196,6 +235,7 @@ pub fn fit(
         sigma,
         iterations: fit.iterations,
         converged: fit.converged,
+        history,
     })
 }
 

@@ -65,7 +65,8 @@ pub use effects::{Candidate, Effect};
 pub use fit::Method;
 pub use geometry::Geometry;
 pub use names::Names;
-pub use report::{EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
+pub use fit::Step;
+pub use report::{ConfigNoise, EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use validate::validate;
 

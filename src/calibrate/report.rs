@@ -65,6 +65,17 @@ pub struct Unexplained {
     pub p_value: f64,
 }
 
+/// The noise of one configuration as the final fit saw it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConfigNoise {
+    /// `config` as in the CSV.
+    pub config: i64,
+    /// Residual σ per axis x, y, z \[µm\] (eq. 14's σ).
+    pub sigma_um: [f64; 3],
+    /// The weight per axis the fit gave its rows (eq. 14; 1 for OLS).
+    pub weight: [f64; 3],
+}
+
 /// `--validate`: the final model on another file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Validation {
@@ -104,6 +115,15 @@ pub struct Report {
     pub relinearisations: usize,
     /// The final model.
     pub parameters: Vec<Parameter>,
+    /// Covariance of the final estimate (sandwich, eq. 8 / 11), in the
+    /// parameters' reported units, in the order of `parameters`.
+    pub covariance: nalgebra::DMatrix<f64>,
+    /// The final fit's steps: the OLS start and every reweighting after it
+    /// (the paper's Figure 3), estimates in the order of `parameters`
+    /// (geometric ones as steps from the final linearisation).
+    pub history: Vec<super::fit::Step>,
+    /// The residual σ and the weights of the final fit per configuration.
+    pub noise: Vec<ConfigNoise>,
     /// RMS of the final model's position residuals \[µm\].
     pub rms_um: f64,
     /// Leave-one-configuration-out RMS \[µm\].

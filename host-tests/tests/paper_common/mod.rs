@@ -1,39 +1,97 @@
-//! Shared helpers of the `paper_*` tests: the committed KR-270 data set and
-//! an independent dense batch reference (nalgebra `DMatrix`, SVD, explicit
-//! `W` and `Σ` matrices) for OLS, WLS and the sandwich covariances.
+//! Shared helpers of the `paper_*` tests: the committed KR-270 data set,
+//! the product's fits of it (`robcal::calibrate`), the paper's rows with
+//! robcal's core (for the analyses the product does not make), and an
+//! independent dense batch reference (nalgebra `DMatrix`, SVD, explicit `W`
+//! and `Σ` matrices, its own columns) for OLS, WLS and the sandwich
+//! covariances.
 #![allow(dead_code)]
 
 use std::path::PathBuf;
 
-use nalgebra::{DMatrix, DVector, Vector3};
-use robcal::elastostatic::{compliance_columns, joint_torques};
-use robcal::io::Job;
-use robcal::irls::IrlsSettings;
-use robcal::paper::{self, Experiment, N};
+use nalgebra::{Const, DMatrix, DVector, Vector3};
+use robcal::calibrate::{self, Method, Report, Settings};
+use robcal::io::{Job, Measurements};
+use robcal::model::{compliance_columns, Marker};
+use robcal::robot::{joint_torques, PointLoad};
+use robcal::GroupedStats;
+use robcal_paper::kr270;
 
-/// The job and the experiment of `data/kr270/`.
-pub fn experiment() -> (Job, Experiment) {
+/// Parameters of the paper's model.
+pub const N: usize = kr270::PARAMS;
+/// Configurations.
+pub const G: usize = kr270::CONFIGS;
+/// Grouped statistics of the paper's rows.
+pub type Stats = GroupedStats<f64, Const<N>, G>;
+
+/// The job and the measurements of `data/kr270/`.
+pub fn experiment() -> (Job, Measurements) {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/kr270");
     let job = Job::load(dir.join("setup.toml")).unwrap();
     let data = job.read_measurements(dir.join("measurements.csv")).unwrap();
-    let exp = Experiment::new(&job, &data).unwrap();
-    (job, exp)
+    (job, data)
 }
 
-/// The iteration settings of the main job: σ0 = 10 µm, λ = 1, tolerance
-/// 1e-6 σ.
-pub fn settings() -> IrlsSettings<f64> {
-    IrlsSettings {
-        tolerance: 1e-6,
-        max_iterations: 100,
-        ..IrlsSettings::new(paper::weight(10e-6, 1.0).unwrap())
+/// The product's fit of the declared model (no diagnosis, no held-out
+/// error): `method`, λ of the setup unless given.
+pub fn fit(job: &Job, data: &Measurements, method: Method, lambda: Option<f64>) -> Report {
+    let settings = Settings {
+        method,
+        lambda,
+        diagnose: false,
+        heldout: false,
+        ..Settings::default()
+    };
+    let r = calibrate::calibrate(job, data, &settings, &mut |_| {}).unwrap();
+    let names: Vec<&str> = r.parameters.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, kr270::PARAM_NAMES, "the paper's model, in order");
+    r
+}
+
+/// Estimate and standard deviations of a report, in parameter order.
+pub fn x_sd(r: &Report) -> (Vec<f64>, Vec<f64>) {
+    (
+        r.parameters.iter().map(|p| p.value).collect(),
+        r.parameters.iter().map(|p| p.std).collect(),
+    )
+}
+
+/// The truth of the data set: Table 3's WLS column.
+pub fn truth() -> [f64; N] {
+    kr270::WLS_VALUE
+}
+
+/// The paper's rows with robcal's core (`kr270::layout`, `Layout::block`),
+/// grouped by configuration.
+pub fn core_stats(job: &Job, data: &Measurements) -> Stats {
+    let chain = &job.robot.chain;
+    let layout = kr270::layout(chain).unwrap();
+    let load = job.setup.load.unwrap();
+    let mut stats = Stats::new();
+    for d in &data.deflections {
+        let m = job.setup.markers.iter().position(|m| m.id == d.marker).unwrap();
+        let marker = Marker {
+            index: m as u8,
+            xyz_m: Vector3::from(job.setup.markers[m].xyz),
+        };
+        let pl = PointLoad {
+            mass_kg: d.load_kg,
+            com_m: Vector3::from(load.com),
+            gravity_mps2: Vector3::from(load.gravity),
+        };
+        let b = layout
+            .block::<f64, 16, Const<N>>(chain, &d.q, &marker, Some(&pl))
+            .unwrap();
+        stats
+            .update(d.config as i32, &b, &Vector3::from(d.dp_m))
+            .unwrap();
     }
+    stats
 }
 
 /// The stacked system of the linear model (eq. 3): `B` (3m × 9, µrad/(N·m)
 /// columns), `Δp` (3m, metres) and the (group, axis) of every row. `B` is
-/// built here from the compliance columns directly, not with
-/// `Layout::block`.
+/// built here from the compliance columns directly: the q2 group of Table 2
+/// picks k21…k25, not the layout's angle bins.
 pub struct Batch {
     pub b: DMatrix<f64>,
     pub y: DVector<f64>,
@@ -43,28 +101,37 @@ pub struct Batch {
     pub axis: Vec<usize>,
 }
 
-pub fn batch(exp: &Experiment, dp: &[Vector3<f64>]) -> Batch {
-    let m = 3 * exp.obs.len();
+pub fn batch(job: &Job, data: &Measurements) -> Batch {
+    let chain = &job.robot.chain;
+    let load = job.setup.load.unwrap();
+    let m = 3 * data.deflections.len();
     let mut b = DMatrix::zeros(m, N);
     let mut y = DVector::zeros(m);
     let mut group = Vec::with_capacity(m);
     let mut axis = Vec::with_capacity(m);
-    for (i, (o, d)) in exp.obs.iter().zip(dp).enumerate() {
-        let frames = exp.chain.frames(&o.q).unwrap();
+    for (i, d) in data.deflections.iter().enumerate() {
+        let q2 = kr270::q2_group(d.q[1].to_degrees()).unwrap();
+        let frames = chain.frames(&d.q).unwrap();
         let dof = frames.dof();
+        let pl = PointLoad {
+            mass_kg: d.load_kg,
+            com_m: Vector3::from(load.com),
+            gravity_mps2: Vector3::from(load.gravity),
+        };
         let mut tau = vec![0.0; dof];
-        joint_torques(&frames, &o.load.wrench(&frames), &mut tau).unwrap();
-        let p = frames.point_m(&o.marker.xyz_m);
+        joint_torques(&frames, &pl.wrench(&frames), &mut tau).unwrap();
+        let marker = job.setup.markers.iter().find(|m| m.id == d.marker).unwrap();
+        let p = frames.point_m(&Vector3::from(marker.xyz));
         let mut cols = vec![Vector3::zeros(); dof];
         compliance_columns(&frames, &p, &tau, &mut cols).unwrap();
         for a in 0..3 {
             let r = 3 * i + a;
-            b[(r, o.q2_group)] = cols[1][a] * 1e-6;
+            b[(r, q2)] = cols[1][a] * 1e-6;
             for j in 2..6 {
                 b[(r, 3 + j)] = cols[j][a] * 1e-6;
             }
-            y[r] = d[a];
-            group.push(o.config as usize - 1);
+            y[r] = d.dp_m[a];
+            group.push(d.config as usize - 1);
             axis.push(a);
         }
     }
@@ -98,8 +165,8 @@ pub fn batch_fit(s: &Batch, w: &[f64]) -> BatchFit {
     let dinv = DMatrix::from_diagonal(&sv.map(|s| 1.0 / (s * s)));
     let lambda_inv = &v * dinv * v.transpose();
     let r = &s.y - &s.b * &x;
-    let mut rss = vec![[0.0; 3]; 15];
-    let mut n = vec![[0usize; 3]; 15];
+    let mut rss = vec![[0.0; 3]; G];
+    let mut n = vec![[0usize; 3]; G];
     for i in 0..m {
         rss[s.group[i]][s.axis[i]] += r[i] * r[i];
         n[s.group[i]][s.axis[i]] += 1;
