@@ -11,12 +11,11 @@
 //! deflected pose (`p(q + δq) − p(q)`), geometric errors by perturbing the
 //! chain itself, the load's torques from its true centre of mass.
 
-use std::f64::consts::PI;
 use std::path::PathBuf;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robcal::calibrate::{self, Report, Settings};
-use robcal::elastostatic::{self, PointLoad};
+use robcal::robot::{self, PointLoad};
 use robcal::io::{parse_measurements, GeometryModel, Job, MarkerModel};
 use robcal::Chain;
 
@@ -24,29 +23,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// SplitMix64 + Box–Muller: reproducible without depending on `rand`'s
-/// stream.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.uniform()
-    }
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
-    }
-}
+/// The project's one generator (SplitMix64 + Box–Muller, reproducible
+/// without depending on `rand`'s stream).
+use robcal_paper::rng::SplitMix64 as Rng;
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Arm {
@@ -175,7 +154,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
         .base
         .map(|e| small_transform(&e))
         .unwrap_or_else(Isometry3::identity);
-    let mut rng = Rng(spec.seed);
+    let mut rng = Rng::new(spec.seed);
     let mut csv = String::from("config,rep,marker,load_kg,");
     csv += &names.join(",");
     csv += ",x,y,z,t\n";
@@ -228,7 +207,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
             d
         };
         let mut tau_g = [0.0; 16];
-        elastostatic::gravity_torques(&chain, &frames, &gravity, &mut tau_g[..6]).unwrap();
+        robot::gravity_torques(&chain, &frames, &gravity, &mut tau_g[..6]).unwrap();
         let pl = PointLoad {
             mass_kg: load_kg,
             com_m: true_com,
@@ -236,7 +215,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
         };
         let wrench = pl.wrench(&frames);
         let mut tau_l = [0.0; 16];
-        elastostatic::joint_torques(&frames, &wrench, &mut tau_l[..6]).unwrap();
+        robot::joint_torques(&frames, &wrench, &mut tau_l[..6]).unwrap();
         // Own weight: only in geometric data sets (linear joints).
         let sag: Vec<f64> = (0..6)
             .map(|j| {
@@ -344,7 +323,7 @@ fn expect_first(spec: &Spec, effect: &str, joint: Option<&str>) {
         .effects
         .first()
         .unwrap_or_else(|| panic!("nothing added: {what}"));
-    assert_eq!(first.effect, effect, "{what}");
+    assert_eq!(first.effect.name(), effect, "{what}");
     assert_eq!(first.joint.as_deref(), joint, "{what}");
     assert!(first.rms_um_after < first.rms_um_before, "{what}");
     let (hb, ha) = (
@@ -540,7 +519,7 @@ fn marker_is_found() {
             .effects
             .first()
             .unwrap_or_else(|| panic!("nothing added: {what}"));
-        assert_eq!(first.effect, "marker", "{what}");
+        assert_eq!(first.effect.name(), "marker", "{what}");
         assert_eq!(first.marker, Some(2), "{what}");
         assert!(first.rms_um_after < first.rms_um_before, "{what}");
         assert!(
@@ -574,7 +553,7 @@ fn two_effects_are_both_found() {
         let found: Vec<(&str, Option<&str>)> = r
             .effects
             .iter()
-            .map(|e| (e.effect.as_str(), e.joint.as_deref()))
+            .map(|e| (e.effect.name(), e.joint.as_deref()))
             .collect();
         assert!(
             found.contains(&("compensator", Some(jname(a, 1)))),
@@ -637,11 +616,10 @@ fn geometric_model_on_clean_data_adds_nothing() {
 }
 
 /// A large declared model (full joint-frame geometry, base, markers,
-/// compliances: 56 columns declared) runs on the 64/128-column capacities
-/// (big fixed-size matrices on the worker's stack), drops what the data
-/// cannot identify, and adds nothing to clean data.
+/// compliances: 56 columns declared) is fitted at its exact size, drops what
+/// the data cannot identify, and adds nothing to clean data.
 #[test]
-fn full_geometry_model_uses_the_large_capacities() {
+fn full_geometry_model_on_clean_data() {
     let (mut job, data) = simulate(&spec(Arm::UrLike, true, 98, Truth::default()));
     job.setup.model.geometry = GeometryModel::Full;
     job.setup.model.markers = MarkerModel::Identify;
@@ -711,6 +689,6 @@ fn large_geometric_errors_converge_to_the_noise() {
     }
     // Other configurations of the same robot, nothing re-estimated.
     let (_, other) = simulate(&spec(Arm::UrLike, true, 96, truth()));
-    let v = calibrate::validate(&r, &job, &other).unwrap();
+    let v = calibrate::validate(&r.model, &job, &other).unwrap();
     assert!(v.rms_mm < 0.04, "{}", v.rms_mm);
 }

@@ -7,7 +7,6 @@ mod paper_common;
 use nalgebra::{Const, OMatrix, Vector3};
 use paper_common::*;
 use robcal::calibrate::{Method, Report};
-use robcal::Reweightable;
 use robcal_paper::kr270::{self, PAPER_SYMBOLS};
 
 fn within_3_sigma(name: &str, r: &Report) {

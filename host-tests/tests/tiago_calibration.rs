@@ -114,5 +114,6 @@ fn registration_matches_the_oracle() {
     let oracle_um = (ss / a.len() as f64).sqrt() * 1e6;
     println!("registration RMS: product {:.6} um, oracle {oracle_um:.6} um", r.rms_um);
     assert!((r.rms_um - oracle_um).abs() < 1e-3, "{} vs {oracle_um}", r.rms_um);
-    near("registration, four points, training", r.rms_um * 1e-3, 4.086, TOL_MM);
+    // With the points as declared (rounded to the millimetre): 4.122 mm.
+    near("registration, nominal points, training", r.rms_um * 1e-3, 4.122, TOL_MM);
 }
