@@ -12,7 +12,7 @@ use robcal::{Accumulator, Block, Error, JointKind, LinkInertia, Reweightable};
 use semihosting::process::exit;
 
 use crate::kr270::{self, Kr270, G, HISTORY};
-use crate::problem::{self, check, rejects_bad_block, stream, Dn, Lcg, N};
+use crate::problem::{self, check, rejects_bad_block, stream, Dn, Gen, N};
 use crate::SelfTest;
 
 /// Exit status of a failed check (a panic exits 101, a HardFault 3).
@@ -377,7 +377,7 @@ fn bench_precision<T: nalgebra::RealField + Copy>(
     precision: &str,
     convert: impl Fn(&Block<f64, Dn>) -> Block<T, Dn>,
 ) -> bool {
-    let mut gen = Lcg::new(problem::SEED ^ 0xBEEF);
+    let mut gen = Gen::new(problem::SEED ^ 0xBEEF);
     let mut acc = Accumulator::<T, Dn>::new();
     for _ in 0..8 {
         let _ = acc.update(&convert(&gen.block()));

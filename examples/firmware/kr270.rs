@@ -269,6 +269,7 @@ impl<T: RealField + Copy> Reweightable<T, Dn> for Kr270<T> {
 
 /// History kept by the firmware's fit (OLS start + iterations; the fit goes
 /// on when it is full).
+#[cfg_attr(not(target_os = "none"), allow(dead_code))]
 pub const HISTORY: usize = 10;
 
 /// The firmware's settings: eq. 14 with σ0 and λ of `setup.toml`, stop at a
