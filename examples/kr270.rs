@@ -116,7 +116,12 @@ fn main() -> Res<()> {
         ],
         irls: run(&job, &data, Method::Irls, None)?,
     };
-    let got: Vec<&str> = fits.irls.parameters.iter().map(|p| p.name.as_str()).collect();
+    let got: Vec<&str> = fits
+        .irls
+        .parameters
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
     if got != names {
         return Err(format!("setup.toml declares {got:?}, not the paper's model").into());
     }
@@ -137,7 +142,10 @@ fn main() -> Res<()> {
     );
     println!(
         "σ0 = {} µm; iterative WLS: λ = {}, tolerance 1e-3 σ, {} iterations, converged: {}",
-        job.setup.noise.sigma0_um, job.setup.noise.lambda, fits.irls.iterations, fits.irls.converged
+        job.setup.noise.sigma0_um,
+        job.setup.noise.lambda,
+        fits.irls.iterations,
+        fits.irls.converged
     );
     println!(
         "compliance in µrad/(N·m); ± is 3σ; truth = Table 3's WLS column (the generator's input)\n"
@@ -273,7 +281,10 @@ fn true_sigma(stats: &Stats) -> Vec<Vector3<f64>> {
 
 /// `√diag (Bᵀ Σ⁻² B)⁻¹` with Table 1's true σ: the Cramér–Rao bound.
 fn cramer_rao(stats: &Stats) -> Res<SVector<f64, N>> {
-    let w: Vec<Vector3<f64>> = true_sigma(stats).iter().map(|s| s.map(|v| 1.0 / v)).collect();
+    let w: Vec<Vector3<f64>> = true_sigma(stats)
+        .iter()
+        .map(|s| s.map(|v| 1.0 / v))
+        .collect();
     let sol = stats.weighted(&w, None)?.solve()?;
     Ok(std_devs(&sol.cov_information()))
 }

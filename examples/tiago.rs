@@ -37,18 +37,31 @@ fn main() {
     println!("| model | points fitted | params | BL train | BL valid | all points train | all points valid | FIGAROH (BL train / valid, params) |");
     println!("|---|---|---|---|---|---|---|---|");
     for points in [&[1][..], &[1, 2, 3, 4][..]] {
-        for (k, model) in [Model::Registration, Model::Offsets, Model::Full].into_iter().enumerate() {
+        for (k, model) in [Model::Registration, Model::Offsets, Model::Full]
+            .into_iter()
+            .enumerate()
+        {
             let j = variant(&job, model, points);
             let (tr, va) = (only(&train, points), only(&valid, points));
             let r = fit_ols(&j, &tr);
             let (ptr, atr) = rmse_mm(&r, &j, &tr);
             let (pva, ava) = rmse_mm(&r, &j, &va);
-            let all = |v: f64| if points.len() > 1 { format!("{v:.2}") } else { "—".into() };
+            let all = |v: f64| {
+                if points.len() > 1 {
+                    format!("{v:.2}")
+                } else {
+                    "—".into()
+                }
+            };
             let (ft, fv, fp) = FIGAROH[k];
             println!(
                 "| {} | {} | {} | {:.2} | {:.2} | {} | {} | {ft} / {fv} ({fp}) |",
                 model.name(),
-                if points.len() > 1 { "BL+BR+TR+TL" } else { "BL" },
+                if points.len() > 1 {
+                    "BL+BR+TR+TL"
+                } else {
+                    "BL"
+                },
                 r.parameters.len(),
                 ptr[&bl],
                 pva[&bl],

@@ -131,7 +131,10 @@ impl Dense {
 }
 
 /// The iterative WLS of a source, as the firmware runs it.
-fn irls_of<R: Reweightable<f64, Dn>>(src: &R, settings: &IrlsSettings<f64>) -> robcal::Fit<f64, Dn> {
+fn irls_of<R: Reweightable<f64, Dn>>(
+    src: &R,
+    settings: &IrlsSettings<f64>,
+) -> robcal::Fit<f64, Dn> {
     let (mut w, mut s) = ([Vector3::zeros(); G], [Vector3::zeros(); G]);
     src.fit_irls(settings, &[true; N], &mut w, &mut s, |_| {})
         .unwrap()
@@ -154,9 +157,7 @@ fn benches(c: &mut Criterion) {
     }
 
     let mut group = c.benchmark_group("kr270/irls");
-    group.bench_function("stream", |b| {
-        b.iter(|| irls_of(black_box(&src), &settings))
-    });
+    group.bench_function("stream", |b| b.iter(|| irls_of(black_box(&src), &settings)));
     group.bench_function("grouped", |b| {
         b.iter(|| {
             let stats = kr270::grouped(black_box(&src)).unwrap();

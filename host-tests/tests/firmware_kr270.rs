@@ -29,7 +29,13 @@ fn irls<T: RealField + Copy, R: Reweightable<T, Dn>>(src: &R) -> (Fit<T, Dn>, Ve
     let mut w = vec![Vector3::zeros(); G];
     let mut s = vec![Vector3::zeros(); G];
     let fit = src
-        .fit_irls(&kr270::settings().unwrap(), &[true; N], &mut w, &mut s, |_| {})
+        .fit_irls(
+            &kr270::settings().unwrap(),
+            &[true; N],
+            &mut w,
+            &mut s,
+            |_| {},
+        )
         .unwrap();
     (fit, s)
 }

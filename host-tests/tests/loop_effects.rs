@@ -15,8 +15,8 @@ use std::path::PathBuf;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use robcal::calibrate::{self, Report, Settings};
-use robcal::robot::{self, PointLoad};
 use robcal::io::{parse_measurements, GeometryModel, Job, MarkerModel};
+use robcal::robot::{self, PointLoad};
 use robcal::Chain;
 
 fn root() -> PathBuf {

@@ -54,7 +54,11 @@ fn assert_report(r: &Report, b: &BatchFit, what: &str) {
     for (n, s) in r.noise.iter().zip(&b.sigma) {
         for a in 0..3 {
             let e = (n.sigma_um[a] * 1e-6 - s[a]).abs() / s[a];
-            assert!(e <= RTOL, "{what}: σ of configuration {} rel {e:e}", n.config);
+            assert!(
+                e <= RTOL,
+                "{what}: σ of configuration {} rel {e:e}",
+                n.config
+            );
         }
     }
 }
@@ -75,7 +79,12 @@ fn the_products_fits_equal_the_dense_batch_solution() {
     // Eq. 7 of the same rows, with the core.
     let stats = core_stats(&job, &data);
     let ones = vec![Vector3::new(1.0, 1.0, 1.0); G];
-    let iid = stats.weighted(&ones, None).unwrap().solve().unwrap().cov_iid();
+    let iid = stats
+        .weighted(&ones, None)
+        .unwrap()
+        .solve()
+        .unwrap()
+        .cov_iid();
     let iid = DMatrix::from_iterator(N, N, iid.iter().copied());
     assert_cov(&iid, &ols.cov_iid, "OLS (7), core");
 

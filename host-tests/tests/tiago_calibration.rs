@@ -35,11 +35,35 @@ fn near(what: &str, got: f64, want: f64, tol: f64) {
 
 /// (model, points, parameters, BL train, BL valid, all train, all valid) [mm].
 const TABLE: [(Model, &[u32], usize, f64, f64, f64, f64); 6] = [
-    (Model::Registration, &[1], 9, 3.368, 4.875, f64::NAN, f64::NAN),
+    (
+        Model::Registration,
+        &[1],
+        9,
+        3.368,
+        4.875,
+        f64::NAN,
+        f64::NAN,
+    ),
     (Model::Offsets, &[1], 14, 2.876, 4.229, f64::NAN, f64::NAN),
     (Model::Full, &[1], 33, 1.591, 4.172, f64::NAN, f64::NAN),
-    (Model::Registration, &[1, 2, 3, 4], 18, 3.528, 4.971, 4.086, 6.388),
-    (Model::Offsets, &[1, 2, 3, 4], 23, 2.916, 4.116, 3.234, 4.845),
+    (
+        Model::Registration,
+        &[1, 2, 3, 4],
+        18,
+        3.528,
+        4.971,
+        4.086,
+        6.388,
+    ),
+    (
+        Model::Offsets,
+        &[1, 2, 3, 4],
+        23,
+        2.916,
+        4.116,
+        3.234,
+        4.845,
+    ),
     (Model::Full, &[1, 2, 3, 4], 42, 1.842, 3.610, 2.187, 4.201),
 ];
 
@@ -61,7 +85,11 @@ fn figaroh_table_through_the_product() {
         let j = variant(&job, model, points);
         let (t, v) = (only(&train, points), only(&valid, points));
         let r = fit_ols(&j, &t);
-        println!("{what}: {} parameters, dropped {:?}", r.parameters.len(), r.dropped);
+        println!(
+            "{what}: {} parameters, dropped {:?}",
+            r.parameters.len(),
+            r.dropped
+        );
         assert_eq!(r.parameters.len(), params, "{what}");
         let (ptr, atr) = rmse_mm(&r, &j, &t);
         let (pva, ava) = rmse_mm(&r, &j, &v);
@@ -110,10 +138,26 @@ fn registration_matches_the_oracle() {
         b.push(Vector3::from(o.p_m));
     }
     let (rot, t) = kabsch(&a, &b);
-    let ss: f64 = a.iter().zip(&b).map(|(x, y)| (rot * x + t - y).norm_squared()).sum();
+    let ss: f64 = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (rot * x + t - y).norm_squared())
+        .sum();
     let oracle_um = (ss / a.len() as f64).sqrt() * 1e6;
-    println!("registration RMS: product {:.6} um, oracle {oracle_um:.6} um", r.rms_um);
-    assert!((r.rms_um - oracle_um).abs() < 1e-3, "{} vs {oracle_um}", r.rms_um);
+    println!(
+        "registration RMS: product {:.6} um, oracle {oracle_um:.6} um",
+        r.rms_um
+    );
+    assert!(
+        (r.rms_um - oracle_um).abs() < 1e-3,
+        "{} vs {oracle_um}",
+        r.rms_um
+    );
     // With the points as declared (rounded to the millimetre): 4.122 mm.
-    near("registration, nominal points, training", r.rms_um * 1e-3, 4.122, TOL_MM);
+    near(
+        "registration, nominal points, training",
+        r.rms_um * 1e-3,
+        4.122,
+        TOL_MM,
+    );
 }

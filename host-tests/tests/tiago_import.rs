@@ -93,7 +93,8 @@ fn round_trip_is_exact() {
 
 #[test]
 fn rejected_input_names_file_line_column_and_writes_nothing() {
-    let Some(data) = data_or_skip("rejected_input_names_file_line_column_and_writes_nothing") else {
+    let Some(data) = data_or_skip("rejected_input_names_file_line_column_and_writes_nothing")
+    else {
         return;
     };
     let dir = temp_dir("import-bad");

@@ -4,7 +4,7 @@
 use super::geometry::Geometry;
 use super::names::Names;
 use super::rows::{Compliances, DataKinds};
-use super::Policy;
+use super::settings::Policy;
 use crate::model::Param;
 
 /// The final model of a calibration: the geometry it converged to, the

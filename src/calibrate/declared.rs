@@ -5,7 +5,7 @@ use std::path::Path;
 
 use super::names::Names;
 use super::rows::Rows;
-use super::CalibrationError;
+use super::settings::CalibrationError;
 use crate::io::{GeometryModel, Job, MarkerModel};
 use crate::model::Param;
 

@@ -1,10 +1,10 @@
 //! The design: the columns of a list of parameters at every row (`B` of
 //! eq. 4, stacked), and which of them the data can tell apart.
 
-use nalgebra::{DMatrix, Dyn, Vector3};
+use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::rows::{Compliances, Row};
-use crate::estimate::{identifiability, Accumulator, Block, IdentifiabilitySettings};
+use crate::estimate::{Accumulator, Block};
 use crate::model::Param;
 use crate::Error;
 
@@ -98,10 +98,7 @@ impl Design {
             return Vec::new();
         }
         let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(n));
-        let mut block = Block::new(
-            DMatrix::zeros(3, n).fixed_rows::<3>(0).into_owned(),
-            Vector3::zeros(),
-        );
+        let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
         for i in 0..self.rows() {
             for (k, &c) in cols.iter().enumerate() {
                 for a in 0..3 {
@@ -111,12 +108,7 @@ impl Design {
             // Finite by construction (the columns were checked when built).
             let _ = acc.update(&block);
         }
-        let all = vec![true; n];
-        let Ok(rank) = identifiability(
-            &acc.information(),
-            &all,
-            &IdentifiabilitySettings::default(),
-        ) else {
+        let Ok(rank) = acc.identifiable() else {
             return Vec::new();
         };
         extra

@@ -2,30 +2,14 @@
 //! against the residuals, add the first that passes, refit, repeat; report
 //! the errors before and after each step.
 
-use super::effects::{candidates, inadmissible, Candidate, Effect};
+use super::effects::{candidates, inadmissible, Candidate};
 use super::engine::{Engine, Fitted};
-use super::report::{ConfigNoise, EffectStep, PlotSeries, Report, Unexplained};
+use super::fit::{self, Method};
+use super::report::{ConfigNoise, EffectStep, PlotSeries, Report, Tested, Unexplained};
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
-use super::{fit, CalibrationError, Method, Settings};
+use super::settings::{CalibrationError, Settings};
 use crate::model::Param;
 use crate::Error;
-
-/// One candidate's test in a diagnosis round.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Tested {
-    /// The effect.
-    pub effect: Effect,
-    /// Joint or marker it is about.
-    pub about: Option<String>,
-    /// Columns tested.
-    pub q: usize,
-    /// F statistic.
-    pub f: f64,
-    /// p-value.
-    pub p_value: f64,
-    /// Drop of the weighted RSS.
-    pub delta_rss: f64,
-}
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -157,8 +141,15 @@ pub fn run(
     let first = e.fit(&declared)?;
     let mut current = e.with_heldout(first)?;
     let declared_rms = (current.rms_um, current.heldout_rms_um);
-    let declared_structure = lack_of_fit(&e.rows, &current).map(|l| {
-        let (variable, _) = most_followed(&e.rows, &e.names, &current);
+    let declared_structure = lack_of_fit(
+        &e.rows,
+        &current.fit,
+        current.params.len(),
+        &current.residuals,
+    )
+    .map(|l| {
+        let (variable, _) =
+            most_followed(&e.rows, &e.names, &current.fit.weights, &current.residuals);
         Unexplained {
             variable,
             statistic: l.f,
@@ -171,7 +162,12 @@ pub fn run(
     let mut plots: Vec<PlotSeries> = Vec::new();
     let mut rejected: Vec<String> = Vec::new();
     while settings.diagnose {
-        let lof = lack_of_fit(&e.rows, &current);
+        let lof = lack_of_fit(
+            &e.rows,
+            &current.fit,
+            current.params.len(),
+            &current.residuals,
+        );
         let (cands, tested) = test_round(&mut e, &current)?;
         last_round = tested.iter().map(|t| t.1.clone()).collect();
         let tried = tested.len().max(1) as f64;
@@ -236,7 +232,8 @@ pub fn run(
         }
         let Some((ci, t, next)) = accepted else {
             if let Some(l) = lof.filter(|_| lof_significant) {
-                let (variable, _) = most_followed(&e.rows, &e.names, &current);
+                let (variable, _) =
+                    most_followed(&e.rows, &e.names, &current.fit.weights, &current.residuals);
                 unexplained = Some(Unexplained {
                     variable,
                     statistic: l.f,
@@ -283,7 +280,12 @@ pub fn run(
         });
         current = next;
     }
-    let final_lof: Option<LackOfFit> = lack_of_fit(&e.rows, &current);
+    let final_lof: Option<LackOfFit> = lack_of_fit(
+        &e.rows,
+        &current.fit,
+        current.params.len(),
+        &current.residuals,
+    );
     if let Some(u) = &unexplained {
         plots.push(PlotSeries {
             title: format!("unexplained: {}", u.variable),

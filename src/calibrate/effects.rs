@@ -10,7 +10,7 @@
 
 use super::names::Names;
 use super::rows::{revolute, DataKinds};
-use super::Policy;
+use super::settings::Policy;
 use crate::model::Param;
 
 /// An effect of the library (data contract §6).

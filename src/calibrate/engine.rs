@@ -12,7 +12,7 @@ use super::names::Names;
 use super::report::Parameter;
 use super::residuals::rms_um;
 use super::rows::{Compliances, RowKind, Rows};
-use super::{CalibrationError, Policy, Progress};
+use super::settings::{CalibrationError, Policy, Progress};
 use crate::model::Param;
 use crate::Error;
 

@@ -5,33 +5,12 @@
 use nalgebra::{Dyn, OMatrix, OVector, Vector3, U3};
 
 use super::design::Design;
+pub use super::settings::Method;
 use crate::estimate::{
     nested_test, robust_weights, Accumulator, Block, Fit, IrlsSettings, NestedTest, Reweightable,
     RobustWeight,
 };
 use crate::Error;
-
-/// Estimation method (data contract §4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
-    /// Iteratively reweighted least squares (eq. 14, section 5).
-    Irls,
-    /// One reweighting step from OLS (eq. 10, 14).
-    Wls,
-    /// Ordinary least squares (eq. 6).
-    Ols,
-}
-
-impl Method {
-    /// Its name in the contract.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Irls => "irls",
-            Method::Wls => "wls",
-            Method::Ols => "ols",
-        }
-    }
-}
 
 /// How one fit is made.
 #[derive(Debug, Clone, Copy, PartialEq)]

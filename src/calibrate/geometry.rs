@@ -31,9 +31,11 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
-use super::rows::J;
 use crate::model::Param;
 use crate::robot::Chain;
+
+/// Joint capacity of the host chain ([`crate::io::MAX_JOINTS`]).
+pub(crate) const J: usize = crate::io::MAX_JOINTS;
 
 /// The current model: chain, base pose, markers, and what has been applied.
 #[derive(Debug, Clone)]

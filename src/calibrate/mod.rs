@@ -23,6 +23,7 @@
 //!
 //! | module | what |
 //! |---|---|
+//! | [`settings`] | [`Settings`] (what the user sets), [`Policy`] (every decision constant), [`CalibrationError`] |
 //! | [`names`] | contract names of parameters, joints, markers, angle bins |
 //! | [`rows`] | [`Row`]s from the measurements, recomputed at the current geometry |
 //! | [`declared`] | the setup's `[model]` as parameters |
@@ -56,156 +57,23 @@ pub mod names;
 pub mod report;
 pub mod residuals;
 pub mod rows;
+pub mod settings;
 pub mod validate;
 
 use nalgebra::Vector3;
 
 pub use calibrated::CalibratedModel;
 pub use effects::{Candidate, Effect};
-pub use fit::Method;
+pub use fit::Step;
 pub use geometry::Geometry;
 pub use names::Names;
-pub use fit::Step;
 pub use report::{ConfigNoise, EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
 pub use rows::{DataKinds, Row, RowKind, Rows};
+pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
 pub use validate::validate;
 
 use crate::estimate::RobustWeight;
 use crate::model::Param;
-use crate::Error;
-
-/// What the user sets (the CLI's flags).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Settings {
-    /// OLS, WLS or IRLS.
-    pub method: Method,
-    /// λ of eq. 14; `None`: the setup's.
-    pub lambda: Option<f64>,
-    /// IRLS iterations at most.
-    pub max_iterations: usize,
-    /// Run the diagnosis loop.
-    pub diagnose: bool,
-    /// Compute the leave-one-configuration-out RMS, and add an effect only
-    /// when it lowers it.
-    pub heldout: bool,
-    /// The decision constants.
-    pub policy: Policy,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Self {
-            method: Method::Irls,
-            lambda: None,
-            max_iterations: 100,
-            diagnose: true,
-            heldout: true,
-            policy: Policy::default(),
-        }
-    }
-}
-
-/// Every decision constant of the engine, in one place. The defaults are
-/// robcal's; each is documented with its reason.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Policy {
-    /// Significance level of the effect tests (Bonferroni over the
-    /// candidates tried: `p · tried < α`) and of the lack-of-fit test.
-    /// 0.01.
-    pub alpha: f64,
-    /// Share of the excess lack-of-fit sum of squares an effect must explain
-    /// to be named when the lack of fit is significant. 0.1.
-    pub min_share: f64,
-    /// At most this many effects are added. 8.
-    pub max_effects: usize,
-    /// Fewest rows per configuration for IRLS/WLS: each configuration's σ
-    /// per axis is estimated from its own rows' residuals, so a
-    /// configuration with a single row (one marker, no repetition) has no
-    /// scatter to weight by; with fewer, the fit falls back to OLS. 2.
-    pub min_rows_per_group: usize,
-    /// IRLS stops when no parameter moves by more than this many of its σ.
-    /// 1e-3.
-    pub irls_tolerance: f64,
-    /// Gauss–Newton stops when no geometric step exceeds this (reported
-    /// units: 1 nm, 1 µrad). 1e-6.
-    pub step_tolerance: f64,
-    /// Gauss–Newton relinearisations at most. 50.
-    pub max_steps: usize,
-    /// Refits of a model with linearised effects (`load_com`) about the
-    /// new compliances, at most. 5.
-    pub linearised_passes: u32,
-    /// A joint with more distinct angles than this gets no angle bins (no
-    /// compensator candidate, no `compliance_by_angle`). 32.
-    pub max_bins: usize,
-    /// A compensator candidate needs this many distinct angles of its joint
-    /// (from, to). 2 to 8.
-    pub compensator_bins: (usize, usize),
-    /// … each seen in at least this many configurations. 2.
-    pub compensator_min_configs: usize,
-    /// Largest admissible first-harmonic gear cyclic error amplitude
-    /// \[mrad\]: a gear's transmission error is a fraction of a milliradian
-    /// to a few; 10 mrad (0.6°) would be a broken gear.
-    pub max_cyclic_mrad: f64,
-    /// Largest admissible measurement drift \[mm/h\] (norm over x, y, z): a
-    /// thermal drift of a tracker or of the robot's base is a fraction of a
-    /// millimetre per hour; 5 mm/h is not a drift but a moving base.
-    pub max_drift_mm_per_h: f64,
-}
-
-impl Default for Policy {
-    fn default() -> Self {
-        Self {
-            alpha: 0.01,
-            min_share: 0.1,
-            max_effects: 8,
-            min_rows_per_group: 2,
-            irls_tolerance: 1e-3,
-            step_tolerance: 1e-6,
-            max_steps: 50,
-            linearised_passes: 5,
-            max_bins: 32,
-            compensator_bins: (2, 8),
-            compensator_min_configs: 2,
-            max_cyclic_mrad: 10.0,
-            max_drift_mm_per_h: 5.0,
-        }
-    }
-}
-
-impl Policy {
-    /// Whether a joint's angle bins, seen in `bin_configs` configurations
-    /// each, make a compensator candidate.
-    pub fn compensator_eligible(&self, bin_configs: &[usize]) -> bool {
-        let (lo, hi) = self.compensator_bins;
-        (lo..=hi).contains(&bin_configs.len())
-            && bin_configs
-                .iter()
-                .all(|&n| n >= self.compensator_min_configs)
-    }
-}
-
-/// Why a calibration failed.
-#[derive(Debug, Clone, PartialEq)]
-pub enum CalibrationError {
-    /// The data cannot support the model (one line for the user).
-    Data(String),
-    /// A numerical error of the core, with what was being done.
-    Core(&'static str, Error),
-}
-
-impl core::fmt::Display for CalibrationError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            CalibrationError::Data(s) => write!(f, "{s}"),
-            CalibrationError::Core(what, e) => write!(f, "{what}: {e}"),
-        }
-    }
-}
-
-impl std::error::Error for CalibrationError {}
-
-/// Progress messages (stderr in the CLI).
-pub type Progress<'a> = &'a mut dyn FnMut(&str);
 
 /// Runs the calibration of `job` on `data`: the declared model, then
 /// (unless `settings.diagnose` is off) the diagnosis loop

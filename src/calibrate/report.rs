@@ -8,9 +8,25 @@ use std::fmt;
 use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
-use super::diagnosis::Tested;
 use super::effects::Effect;
 use super::residuals::LackOfFit;
+
+/// One candidate's test in a diagnosis round.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tested {
+    /// The effect.
+    pub effect: Effect,
+    /// Joint or marker it is about.
+    pub about: Option<String>,
+    /// Columns tested.
+    pub q: usize,
+    /// F statistic.
+    pub f: f64,
+    /// p-value.
+    pub p_value: f64,
+    /// Drop of the weighted RSS.
+    pub delta_rss: f64,
+}
 
 /// One estimated parameter.
 #[derive(Debug, Clone, PartialEq)]

@@ -6,11 +6,11 @@ use std::collections::BTreeMap;
 use nalgebra::{Dyn, OMatrix, Vector3, U3};
 
 use super::effects::Candidate;
-use super::engine::Fitted;
+use super::fit::FitOut;
 use super::names::Names;
 use super::rows::{revolute, RowKind, Rows};
 use crate::estimate::distributions;
-use crate::estimate::{identifiability, nested_test, Accumulator, Block, IdentifiabilitySettings};
+use crate::estimate::{nested_test, Accumulator, Block};
 
 /// RMS of the norm of 3-D position residuals \[m\], in µm (0 for none).
 pub fn rms_um(res: &[Vector3<f64>]) -> f64 {
@@ -63,12 +63,18 @@ fn cells(rows: &Rows) -> (Vec<usize>, usize) {
     (cell, cell_of.len())
 }
 
-/// The lack-of-fit test of a fit (`None` without repetitions).
-pub fn lack_of_fit(rows: &Rows, fitted: &Fitted) -> Option<LackOfFit> {
+/// The lack-of-fit test of a fit of `params` parameters with `residuals`
+/// (`None` without repetitions).
+pub fn lack_of_fit(
+    rows: &Rows,
+    fit: &FitOut,
+    params: usize,
+    residuals: &[Vector3<f64>],
+) -> Option<LackOfFit> {
     let (cell, n_cells) = cells(rows);
     let mut groups: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); n_cells];
-    for ((row, r), &c) in rows.rows.iter().zip(&fitted.residuals).zip(&cell) {
-        groups[c].push(r.component_mul(&fitted.fit.weights[row.group]));
+    for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
+        groups[c].push(r.component_mul(&fit.weights[row.group]));
     }
     let (mut ss_lof, mut ss_pe, mut df_pe) = (0.0, 0.0, 0usize);
     for v in &groups {
@@ -78,7 +84,7 @@ pub fn lack_of_fit(rows: &Rows, fitted: &Fitted) -> Option<LackOfFit> {
         ss_pe += v.iter().map(|r| (r - mean).norm_squared()).sum::<f64>();
         df_pe += 3 * (v.len() - 1);
     }
-    let df_lof = (3 * n_cells).checked_sub(fitted.params.len())?;
+    let df_lof = (3 * n_cells).checked_sub(params)?;
     if df_lof == 0 || df_pe == 0 || ss_pe <= 0.0 {
         return None;
     }
@@ -180,12 +186,7 @@ fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
         b1.b.row_mut(0).copy_from_slice(&features(x)[..f]);
         let _ = one.update(&b1);
     }
-    let all = vec![true; f];
-    let Ok(rank) = identifiability(
-        &one.information(),
-        &all,
-        &IdentifiabilitySettings::default(),
-    ) else {
+    let Ok(rank) = one.identifiable() else {
         return 1.0;
     };
     let kept: Vec<usize> = (1..f).filter(|&k| rank.kept[k]).collect();
@@ -225,12 +226,17 @@ fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
 /// repeat one another (same configuration, marker, kind) are averaged
 /// first: they share their regressors, so counting them as independent
 /// would let a many-harmonic fit look significant.
-pub fn most_followed(rows: &Rows, names: &Names, fitted: &Fitted) -> (String, f64) {
+pub fn most_followed(
+    rows: &Rows,
+    names: &Names,
+    weights: &[Vector3<f64>],
+    residuals: &[Vector3<f64>],
+) -> (String, f64) {
     let (cell, cells) = cells(rows);
     let mut count = vec![0.0; cells];
     let mut res = vec![Vector3::<f64>::zeros(); cells];
-    for ((row, r), &c) in rows.rows.iter().zip(&fitted.residuals).zip(&cell) {
-        res[c] += r.component_mul(&fitted.fit.weights[row.group]);
+    for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
+        res[c] += r.component_mul(&weights[row.group]);
         count[c] += 1.0;
     }
     for (r, n) in res.iter_mut().zip(&count) {

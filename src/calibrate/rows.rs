@@ -14,16 +14,13 @@ use std::collections::BTreeMap;
 
 use nalgebra::Vector3;
 
-use super::geometry::Geometry;
+use super::geometry::{Geometry, J};
 use super::names::Names;
-use super::{CalibrationError, Policy};
+use super::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
 use crate::model::{angle_urad, Param, Sample, BIN_TOLERANCE_RAD};
 use crate::robot::{gravity_torques, joint_torques, Frames, JointKind, PointLoad, Wrench};
 use crate::Error;
-
-/// Joint capacity of the host chain ([`crate::io::MAX_JOINTS`]).
-pub(crate) const J: usize = crate::io::MAX_JOINTS;
 
 /// What one row of the problem is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

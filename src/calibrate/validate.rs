@@ -11,7 +11,7 @@ use super::design::Design;
 use super::report::Validation;
 use super::residuals::rms_um;
 use super::rows::{RowKind, Rows};
-use super::CalibrationError;
+use super::settings::CalibrationError;
 use crate::io::{Job, Measurements};
 use crate::model::{in_some_bin, Param};
 

@@ -125,27 +125,10 @@ fn beta_fraction(x: f64, a: f64, b: f64) -> f64 {
     for m in 1..MAX_TERMS {
         let m = m as f64;
         let m2 = 2.0 * m;
-        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        if libm::fabs(d) < TINY {
-            d = TINY;
-        }
-        c = 1.0 + aa / c;
-        if libm::fabs(c) < TINY {
-            c = TINY;
-        }
-        d = 1.0 / d;
+        // The even step, then the odd step (Numerical Recipes, 6.4.5).
+        (c, d) = lentz(m * (b - m) * x / ((qam + m2) * (a + m2)), c, d);
         h *= d * c;
-        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        if libm::fabs(d) < TINY {
-            d = TINY;
-        }
-        c = 1.0 + aa / c;
-        if libm::fabs(c) < TINY {
-            c = TINY;
-        }
-        d = 1.0 / d;
+        (c, d) = lentz(-(a + m) * (qab + m) * x / ((a + m2) * (qap + m2)), c, d);
         let del = d * c;
         h *= del;
         if libm::fabs(del - 1.0) < EPS {
@@ -153,4 +136,12 @@ fn beta_fraction(x: f64, a: f64, b: f64) -> f64 {
         }
     }
     h
+}
+
+/// One step of the modified Lentz algorithm for a continued fraction whose
+/// partial denominators are 1 and partial numerator is `aa`: the new `C`
+/// and `D`, each kept away from zero.
+fn lentz(aa: f64, c: f64, d: f64) -> (f64, f64) {
+    let away = |v: f64| if libm::fabs(v) < TINY { TINY } else { v };
+    (away(1.0 + aa / c), 1.0 / away(1.0 + aa * d))
 }

@@ -24,7 +24,8 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`accumulator`] | [`Accumulator`], [`Block`]: the streaming sufficient statistics (eq. 9, 10) |
+//! | [`block`] | [`Block`]: one measurement, rows of `Δp = B X` with weights (eq. 4, 9) |
+//! | [`accumulator`] | [`Accumulator`]: the streaming sufficient statistics (eq. 9, 10) |
 //! | [`factor`] | [`Factor`], [`Solution`]: the scaled Cholesky and the covariances (eq. 6–8, 10–13) |
 //! | [`grouped`] | [`GroupedStats`]: moments per configuration and axis |
 //! | [`weights`] | [`RobustWeight`]: eq. 12 and 14 |
@@ -49,6 +50,7 @@ impl<D: Dim> Alloc<D> for DefaultAllocator where
 }
 
 pub mod accumulator;
+pub mod block;
 pub mod distributions;
 pub mod factor;
 pub mod grouped;
@@ -57,7 +59,8 @@ pub mod nested;
 pub mod rank;
 pub mod weights;
 
-pub use accumulator::{Accumulator, Block};
+pub use accumulator::Accumulator;
+pub use block::Block;
 pub use factor::{pivot_tolerance, std_devs, Factor, Solution};
 pub use grouped::{AxisMoments, GroupMoments, GroupedStats};
 pub use irls::{robust_weights, Fit, IrlsSettings, Iteration, Reweightable};

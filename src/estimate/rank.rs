@@ -23,6 +23,7 @@
 use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
+use super::accumulator::Accumulator;
 use super::factor::{cholesky_in_place, solve_lower_in_place, solve_upper_t_in_place};
 use crate::Error;
 
@@ -332,4 +333,25 @@ where
             T::zero()
         },
     })
+}
+
+impl<T: RealField + Copy, D: Dim> Accumulator<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// Which of all the parameters the accumulated rows can identify, in
+    /// layout order, with the one tolerance ([`identifiability`] with the
+    /// default settings).
+    ///
+    /// # Errors
+    /// [`Error::NonFinite`] when `Λ` holds NaN or ±∞.
+    pub fn identifiable(&self) -> Result<Identifiability<T, D>, Error> {
+        let dim = self.dim();
+        let all = OVector::<bool, D>::from_element_generic(dim, Const::<1>, true);
+        identifiability(
+            &self.information(),
+            all.as_slice(),
+            &IdentifiabilitySettings::default(),
+        )
+    }
 }

@@ -33,9 +33,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::measurements::{write_measurements, Observation};
+use super::measurements::Observation;
 use super::setup::Units;
 use super::urdf::Robot;
+use super::writer::write_measurements;
 use super::{ErrorKind, InputError};
 
 /// Number of tracked points per posture (BL, BR, TR, TL).

@@ -3,9 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::measurements::{read_measurements, write_measurements, Measurements, Observation};
+use super::measurements::{read_measurements, Measurements, Observation};
 use super::setup::Setup;
 use super::urdf::Robot;
+use super::writer::write_measurements;
 use super::InputError;
 
 /// A calibration job: the setup, and the robot it names.

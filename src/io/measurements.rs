@@ -8,13 +8,8 @@
 //! setup's `[units]` (prismatic joints in the length unit); `load_kg` in kg,
 //! `t` in s.
 //!
-//! Conversion to SI: degrees with `f64::to_radians`; millimetres by moving
-//! the decimal point (the cell `12.5` in mm is read as the decimal `12.5e-3`
-//! m), so the conversion is correctly rounded and a written file reads back
-//! bit for bit. The writer prints the shortest text that reads back to the
-//! same `f64` (Rust's `{}`), in the file's units; it is bit-exact for rad, m
-//! and mm, and for deg whenever some decimal degree value maps back exactly
-//! under `to_radians` (else within 1 ulp).
+//! Conversion to SI, exact to the decimal: [`super::cells`]; the writer:
+//! [`super::writer`].
 //!
 //! Rejected, with file, line and column: an unreadable file, a missing,
 //! unknown or duplicate column, a row of the wrong length, a cell that is
@@ -36,9 +31,10 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use super::setup::{AngleUnit, LengthUnit, Setup, Units};
+use super::cells::{parse_int, parse_real, raw, Scale};
+use super::setup::{AngleUnit, LengthUnit, Setup};
 use super::urdf::{Robot, UrdfJointKind};
-use super::{ErrorKind, InputError, InputWarning};
+use super::{ErrorKind, InputError, InputWarning, WarningKind};
 
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
@@ -465,17 +461,19 @@ pub fn parse_measurements<R: std::io::Read>(
 
     // Warnings.
     let mut warnings = Vec::new();
-    let mut warn = |line: Option<usize>, column: Option<&str>, message: String| {
+    let mut warn = |kind, line: Option<usize>, column: Option<&str>, message: String| {
         warnings.push(InputWarning {
             file: file.clone(),
             line,
             column: column.map(str::to_owned),
+            kind,
             message,
         });
     };
     for (j, outside) in stats.outside.iter().enumerate() {
         if let (Some((count, first)), Some(l)) = (outside, robot.limits[j]) {
             warn(
+                WarningKind::Limits,
                 Some(*first),
                 Some(&robot.joint_names[j]),
                 format!(
@@ -493,6 +491,7 @@ pub fn parse_measurements<R: std::io::Read>(
         && stats.max_angle_written <= std::f64::consts::PI
     {
         warn(
+            WarningKind::Units,
             None,
             None,
             "every revolute joint value is within ±π although [units] angle = \"deg\": \
@@ -503,6 +502,7 @@ pub fn parse_measurements<R: std::io::Read>(
     if units.length == LengthUnit::Mm && stats.max_pos_written > 0.0 && stats.max_pos_written < 10.0
     {
         warn(
+            WarningKind::Units,
             None,
             None,
             "every x, y, z is within ±10 although [units] length = \"mm\": \
@@ -512,6 +512,7 @@ pub fn parse_measurements<R: std::io::Read>(
     }
     if let Some((count, [a, b])) = moved {
         warn(
+            WarningKind::Moved,
             Some(a),
             None,
             format!(
@@ -544,221 +545,5 @@ impl Stats {
             max_angle_written: 0.0,
             max_pos_written: 0.0,
         }
-    }
-}
-
-#[derive(Debug, Clone, Copy)]
-enum Scale {
-    One,
-    Angle(AngleUnit),
-    Length(LengthUnit),
-}
-
-fn parse_int(cell: &str) -> Result<i64, String> {
-    cell.parse()
-        .map_err(|_| format!("'{cell}' is not an integer"))
-}
-
-/// The cell as written (already checked to parse).
-fn raw(cell: &str) -> f64 {
-    cell.parse().unwrap_or(0.0)
-}
-
-/// A finite real in SI; see the module doc for the unit conversion.
-fn parse_real(cell: &str, scale: Scale) -> Result<f64, (ErrorKind, String)> {
-    let v: f64 = cell
-        .parse()
-        .map_err(|_| (ErrorKind::Syntax, format!("'{cell}' is not a number")))?;
-    if !v.is_finite() {
-        return Err((ErrorKind::NonFinite, format!("non-finite value '{cell}'")));
-    }
-    Ok(match scale {
-        Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => v,
-        Scale::Angle(AngleUnit::Deg) => v.to_radians(),
-        Scale::Length(LengthUnit::Mm) => milli(cell).unwrap_or(v / 1000.0),
-    })
-}
-
-/// The decimal `cell · 10⁻³`, correctly rounded.
-fn milli(cell: &str) -> Option<f64> {
-    let text = match cell.find(['e', 'E']) {
-        Some(i) => {
-            let exp: i32 = cell[i + 1..].parse().ok()?;
-            format!("{}e{}", &cell[..i], exp.checked_sub(3)?)
-        }
-        None => format!("{cell}e-3"),
-    };
-    text.parse().ok()
-}
-
-/// `s` (Rust `{}` of a finite f64: no exponent) times 1000, as decimal text.
-fn times_1000(s: &str) -> String {
-    let (sign, digits) = s.strip_prefix('-').map_or(("", s), |d| ("-", d));
-    let (int, frac) = digits.split_once('.').unwrap_or((digits, ""));
-    let frac = format!("{frac:0<3}");
-    let int = format!("{int}{}", &frac[..3]);
-    let int = match int.trim_start_matches('0') {
-        "" => "0",
-        t => t,
-    };
-    match frac[3..].trim_end_matches('0') {
-        "" => format!("{sign}{int}"),
-        f => format!("{sign}{int}.{f}"),
-    }
-}
-
-/// The next `f64` after `w` toward +∞ (`up`) or −∞.
-fn next_after(w: f64, up: bool) -> f64 {
-    if w == 0.0 {
-        let tiny = f64::from_bits(1);
-        return if up { tiny } else { -tiny };
-    }
-    let bits = w.to_bits();
-    if (w > 0.0) == up {
-        f64::from_bits(bits + 1)
-    } else {
-        f64::from_bits(bits - 1)
-    }
-}
-
-/// Text of a value in `scale` that [`parse_real`] reads back as `v` (SI).
-fn format_real(v: f64, scale: Scale) -> String {
-    match scale {
-        Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => format!("{v}"),
-        Scale::Length(LengthUnit::Mm) => times_1000(&format!("{v}")),
-        Scale::Angle(AngleUnit::Deg) => {
-            let w0 = v.to_degrees();
-            let (u1, d1) = (next_after(w0, true), next_after(w0, false));
-            let candidates = [w0, u1, d1, next_after(u1, true), next_after(d1, false)];
-            let w = candidates
-                .into_iter()
-                .find(|w| w.is_finite() && w.to_radians().to_bits() == v.to_bits())
-                .unwrap_or(w0);
-            format!("{w}")
-        }
-    }
-}
-
-/// Writes `rows` (SI) as a measurement file for `robot` in `units`:
-/// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t]`
-/// (`t` when the rows have times). [`read_measurements`] reads it back to
-/// the same values (see the module doc for deg).
-///
-/// The file is written to a temporary file next to `path` and renamed over
-/// it, so `path` is either untouched or complete.
-///
-/// # Errors
-/// A row with the wrong number of joint values, a non-finite number, a
-/// negative load, some rows with a time and some without (naming the line
-/// the row would have); or the file cannot be written. Nothing is written
-/// on error.
-pub fn write_measurements(
-    path: impl AsRef<Path>,
-    robot: &Robot,
-    units: Units,
-    rows: &[Observation],
-) -> Result<(), InputError> {
-    let path = path.as_ref();
-    let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
-    let dof = robot.dof();
-    let scales: Vec<Scale> = robot
-        .joint_kinds
-        .iter()
-        .map(|k| {
-            if k.is_angular() {
-                Scale::Angle(units.angle)
-            } else {
-                Scale::Length(units.length)
-            }
-        })
-        .collect();
-
-    let mut out = csv::Writer::from_writer(Vec::new());
-    let mut header: Vec<&str> = vec!["config", "rep", "marker", "load_kg"];
-    header.extend(robot.joint_names.iter().map(String::as_str));
-    header.extend(["x", "y", "z"]);
-    if has_time {
-        header.push("t");
-    }
-    let io_err = |e: &dyn std::fmt::Display| {
-        InputError::new(
-            path,
-            ErrorKind::Io,
-            format!("cannot write the measurements: {e}"),
-        )
-    };
-    out.write_record(&header).map_err(|e| io_err(&e))?;
-    for (i, r) in rows.iter().enumerate() {
-        let line = i + 2;
-        let err = |kind, message: String| {
-            Err(InputError::new(path, kind, format!("row {i}: {message}")).at_line(line))
-        };
-        if r.q.len() != dof {
-            return err(
-                ErrorKind::InvalidValue,
-                format!("{} joint values for {dof} joints", r.q.len()),
-            );
-        }
-        if r.t_s.is_some() != has_time {
-            return err(
-                ErrorKind::InvalidValue,
-                "some rows have a time and some do not".into(),
-            );
-        }
-        let numbers = r.q.iter().chain(&r.p_m).chain(&r.t_s).chain([&r.load_kg]);
-        if numbers.clone().any(|v| !v.is_finite()) {
-            return err(ErrorKind::NonFinite, "non-finite value".into());
-        }
-        if r.load_kg < 0.0 {
-            return err(
-                ErrorKind::InvalidValue,
-                format!("negative load {}", r.load_kg),
-            );
-        }
-        let mut fields = vec![
-            r.config.to_string(),
-            r.rep.to_string(),
-            r.marker.to_string(),
-            format_real(r.load_kg, Scale::One),
-        ];
-        fields.extend(r.q.iter().zip(&scales).map(|(&v, &s)| format_real(v, s)));
-        fields.extend(
-            r.p_m
-                .iter()
-                .map(|&v| format_real(v, Scale::Length(units.length))),
-        );
-        fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
-        out.write_record(&fields).map_err(|e| io_err(&e))?;
-    }
-    let bytes = out.into_inner().map_err(|e| io_err(&e))?;
-
-    super::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn times_1000_moves_the_point() {
-        for (s, t) in [
-            ("0", "0"),
-            ("-0", "-0"),
-            ("1", "1000"),
-            ("0.0123", "12.3"),
-            ("-1.5", "-1500"),
-            ("0.0000001", "0.0001"),
-            ("123.456789", "123456.789"),
-        ] {
-            assert_eq!(times_1000(s), t);
-        }
-    }
-
-    #[test]
-    fn milli_is_correctly_rounded() {
-        assert_eq!(milli("12.5"), Some(0.0125));
-        assert_eq!(milli("1.5E+3"), Some(1.5));
-        assert_eq!(milli("-7e-1"), Some(-0.0007));
-        assert_eq!(milli("1e-2147483648"), None);
     }
 }

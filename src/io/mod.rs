@@ -53,25 +53,27 @@
 //! ```
 
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 pub mod atomic;
+mod cells;
 pub mod figaroh;
 pub mod job;
 pub mod measurements;
 pub mod setup;
 pub mod urdf;
+pub mod writer;
 
 pub use atomic::write_atomic;
 pub use job::Job;
 pub use measurements::{
-    parse_measurements, read_measurements, write_measurements, Deflection, Measurements,
-    Observation,
+    parse_measurements, read_measurements, Deflection, Measurements, Observation,
 };
 pub use setup::{
     AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,
 };
 pub use urdf::{JointLimits, OffChainBranch, Robot, UrdfJointKind, MAX_JOINTS};
+pub use writer::write_measurements;
 
 /// What kind of input problem an [`InputError`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,27 +111,47 @@ pub enum ErrorKind {
     Robot,
 }
 
-/// A rejected input: which file, where, and why.
+/// A message about an input file: which file, where, what kind, and what.
 ///
 /// `Display`: `file:line: column 'x': message`, leaving out the parts that
 /// are not known (e.g. `robot.urdf: joint 'j2': zero axis`).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct InputError {
-    /// The file at fault.
+pub struct Located<K> {
+    /// The file.
     pub file: PathBuf,
-    /// 1-based line, if known (the CSV header is line 1).
+    /// 1-based line, if known (the CSV header is line 1); for a warning
+    /// about rows, the first occurrence.
     pub line: Option<usize>,
-    /// CSV column name, if the error is in one column.
+    /// CSV column name, if the message is about one column.
     pub column: Option<String>,
     /// What kind of problem.
-    pub kind: ErrorKind,
+    pub kind: K,
     /// What is wrong, for a human.
     pub message: String,
 }
 
-impl InputError {
-    /// An error about `file` as a whole.
-    pub fn new(file: impl Into<PathBuf>, kind: ErrorKind, message: impl Into<String>) -> Self {
+/// A rejected input ([`ErrorKind`]).
+pub type InputError = Located<ErrorKind>;
+
+/// Suspicious but usable input, reported next to the data it was found in
+/// ([`WarningKind`]).
+pub type InputWarning = Located<WarningKind>;
+
+/// What kind of suspicious input an [`InputWarning`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum WarningKind {
+    /// Joint values far outside the URDF's limits.
+    Limits,
+    /// Numbers that look like another unit than `[units]` says.
+    Units,
+    /// The robot moved between a loaded row and its unloaded row.
+    Moved,
+}
+
+impl<K> Located<K> {
+    /// A message about `file` as a whole.
+    pub fn new(file: impl Into<PathBuf>, kind: K, message: impl Into<String>) -> Self {
         Self {
             file: file.into(),
             line: None,
@@ -139,14 +161,14 @@ impl InputError {
         }
     }
 
-    /// The same error, located at a 1-based `line`.
+    /// The same message, located at a 1-based `line`.
     #[must_use]
     pub fn at_line(mut self, line: usize) -> Self {
         self.line = Some(line);
         self
     }
 
-    /// The same error, located in CSV column `column`.
+    /// The same message, located in CSV column `column`.
     #[must_use]
     pub fn in_column(mut self, column: impl Into<String>) -> Self {
         self.column = Some(column.into());
@@ -154,62 +176,20 @@ impl InputError {
     }
 }
 
-fn fmt_location(
-    f: &mut fmt::Formatter<'_>,
-    file: &Path,
-    line: Option<usize>,
-    column: Option<&str>,
-    message: &str,
-) -> fmt::Result {
-    write!(f, "{}", file.display())?;
-    if let Some(line) = line {
-        write!(f, ":{line}")?;
-    }
-    if let Some(column) = column {
-        write!(f, ": column '{column}'")?;
-    }
-    write!(f, ": {message}")
-}
-
-impl fmt::Display for InputError {
+impl<K> fmt::Display for Located<K> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt_location(
-            f,
-            &self.file,
-            self.line,
-            self.column.as_deref(),
-            &self.message,
-        )
+        write!(f, "{}", self.file.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        if let Some(column) = &self.column {
+            write!(f, ": column '{column}'")?;
+        }
+        write!(f, ": {}", self.message)
     }
 }
 
-impl std::error::Error for InputError {}
-
-/// Suspicious but usable input, reported next to the data it was found in.
-/// Same `Display` as [`InputError`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct InputWarning {
-    /// The file.
-    pub file: PathBuf,
-    /// 1-based line of the first occurrence, if the warning is about rows.
-    pub line: Option<usize>,
-    /// CSV column, if the warning is about one column.
-    pub column: Option<String>,
-    /// What looks wrong.
-    pub message: String,
-}
-
-impl fmt::Display for InputWarning {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt_location(
-            f,
-            &self.file,
-            self.line,
-            self.column.as_deref(),
-            &self.message,
-        )
-    }
-}
+impl<K: fmt::Debug> std::error::Error for Located<K> {}
 
 /// 1-based line of byte offset `offset` in `text`.
 pub(crate) fn line_of_offset(text: &str, offset: usize) -> usize {

@@ -128,11 +128,16 @@ impl<const N: usize> Layout<N> {
         self.columns.iter().position(|c| c.param == *param)
     }
 
-    /// Writes the three rows (x, y, z) of `B` (eq. 4) for one sample into
-    /// `b` ([`fill`]).
+    /// Writes the three rows (x, y, z) of `B` (eq. 4) for one sample into `b`,
+    /// one column per parameter of the layout, in its unit; columns of `b` past
+    /// them are set to zero. `b` is left unchanged on error.
     ///
     /// # Errors
-    /// As [`fill`].
+    /// [`Error::Mismatch`] when `b` has fewer columns than the layout, when a
+    /// joint with angle bins ([`Param::ComplianceAt`]) is at an angle that
+    /// matches none of them, or when the sample's torques are shorter than the
+    /// chain; [`Error::OutOfRange`] when a column names a joint the sample does
+    /// not have; [`Error::NonFinite`] when a column is not finite.
     pub fn fill<T, D, S, const J: usize>(
         &self,
         sample: &Sample<'_, T, J>,
@@ -144,7 +149,37 @@ impl<const N: usize> Layout<N> {
         S: StorageMut<T, U3, D>,
         DefaultAllocator: Allocator<U3, D>,
     {
-        fill(&self.columns, sample, b)
+        let columns = self.columns();
+        if columns.len() > b.ncols() {
+            return Err(Error::Mismatch {
+                what: "layout has more parameters than B has columns",
+            });
+        }
+        // Every column into a copy first: `b` changes only when all succeed.
+        let mut out = OMatrix::<T, U3, D>::zeros_generic(U3, b.shape_generic().1);
+        for (i, c) in columns.iter().enumerate() {
+            let col = match c.param {
+                // Not this bin: the sample must be in another one.
+                Param::ComplianceAt { joint, angle_urad }
+                    if !in_bin(angle_urad, sample.q(joint)?) =>
+                {
+                    if !in_some_bin(columns.iter().map(|c| &c.param), joint, sample.q(joint)?) {
+                        return Err(Error::Mismatch {
+                            what: "joint angle matches no compliance bin",
+                        });
+                    }
+                    continue;
+                }
+                p => p.column_si(sample)?,
+            };
+            let si: T = nalgebra::convert(c.unit.si);
+            out.set_column(i, &(col * si));
+        }
+        if !out.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite { what: "row" });
+        }
+        b.copy_from(&out);
+        Ok(())
     }
 
     /// `B` (eq. 4) for one marker at joint values `q` under an optional
@@ -154,7 +189,7 @@ impl<const N: usize> Layout<N> {
     /// the layout (columns past it are zero).
     ///
     /// # Errors
-    /// As [`crate::Chain::frames`] and [`fill`].
+    /// As [`crate::Chain::frames`] and [`Layout::fill`].
     pub fn block<T: RealField + Copy, const J: usize, D: DimName>(
         &self,
         chain: &Chain<T, J>,
@@ -213,57 +248,6 @@ pub fn column_of(
         param,
         unit: param.unit(joint_kind),
     })
-}
-
-/// Writes the three rows (x, y, z) of `B` (eq. 4) for one sample into `b`,
-/// one column per entry of `columns`, in their units; columns of `b` past
-/// them are set to zero. `b` is left unchanged on error.
-///
-/// # Errors
-/// [`Error::Mismatch`] when `b` has fewer columns than `columns`, when a
-/// joint with angle bins ([`Param::ComplianceAt`]) is at an angle that
-/// matches none of them, or when the sample's torques are shorter than the
-/// chain; [`Error::OutOfRange`] when a column names a joint the sample does
-/// not have; [`Error::NonFinite`] when a column is not finite.
-pub fn fill<T, D, S, const J: usize>(
-    columns: &[Column],
-    sample: &Sample<'_, T, J>,
-    b: &mut Matrix<T, U3, D, S>,
-) -> Result<(), Error>
-where
-    T: RealField + Copy,
-    D: Dim,
-    S: StorageMut<T, U3, D>,
-    DefaultAllocator: Allocator<U3, D>,
-{
-    if columns.len() > b.ncols() {
-        return Err(Error::Mismatch {
-            what: "layout has more parameters than B has columns",
-        });
-    }
-    // Every column into a copy first: `b` changes only when all succeed.
-    let mut out = OMatrix::<T, U3, D>::zeros_generic(U3, b.shape_generic().1);
-    for (i, c) in columns.iter().enumerate() {
-        let col = match c.param {
-            // Not this bin: the sample must be in another one.
-            Param::ComplianceAt { joint, angle_urad } if !in_bin(angle_urad, sample.q(joint)?) => {
-                if !in_some_bin(columns.iter().map(|c| &c.param), joint, sample.q(joint)?) {
-                    return Err(Error::Mismatch {
-                        what: "joint angle matches no compliance bin",
-                    });
-                }
-                continue;
-            }
-            p => p.column_si(sample)?,
-        };
-        let si: T = nalgebra::convert(c.unit.si);
-        out.set_column(i, &(col * si));
-    }
-    if !out.iter().all(|v| v.is_finite()) {
-        return Err(Error::NonFinite { what: "row" });
-    }
-    b.copy_from(&out);
-    Ok(())
 }
 
 /// Whether joint `joint` at value `qj` \[rad\] is in one of the angle bins

@@ -5,7 +5,7 @@
 //! ```text
 //!   robot::Frames + torques + load ──► Sample ──Param::column──► one column ∂p/∂x
 //!                                        │
-//!   Layout (firmware) / the host's model ┴──fill──► B (3 rows, one column per Param)
+//!   Layout::fill (firmware) / the host's design ┴──► B (3 rows, one column per Param)
 //! ```
 //!
 //! | module | what |
@@ -13,7 +13,7 @@
 //! | [`param`] | [`Param`]: the one vocabulary of parameters; [`Unit`]s and SI factors |
 //! | [`sample`] | [`Sample`]: what one measurement carries at the current model |
 //! | [`columns`] | `∂p/∂x` of every parameter: geometric (eq. 2), elastostatic (eq. 3), effects |
-//! | [`layout`] | [`Layout`]: a fixed-capacity list of parameters for the device, and [`fill`] |
+//! | [`layout`] | [`Layout`]: a fixed-capacity list of parameters for the device and the rows it fills |
 
 pub mod columns;
 pub mod layout;
@@ -24,6 +24,6 @@ pub use columns::{
     base_columns, compliance_columns, deflection_m, joint_frame_columns, joint_offset_column,
     joint_offset_columns, marker_columns,
 };
-pub use layout::{column_of, fill, in_bin, in_some_bin, Column, Layout, Marker};
+pub use layout::{column_of, in_bin, in_some_bin, Column, Layout, Marker};
 pub use param::{angle_urad, Param, Unit, BIN_TOLERANCE_RAD, POSE_COMPONENTS, XYZ};
 pub use sample::Sample;

@@ -71,14 +71,8 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
         tau: &'a [T],
     ) -> Self {
         Self {
-            frames,
-            point_m,
-            marker,
-            tau,
-            load: None,
             absolute: true,
-            dt_s: T::zero(),
-            compliance: &[],
+            ..Self::deflection(frames, point_m, marker, tau, None)
         }
     }
 

@@ -68,7 +68,12 @@ pub fn core_stats(job: &Job, data: &Measurements) -> Stats {
     let load = job.setup.load.unwrap();
     let mut stats = Stats::new();
     for d in &data.deflections {
-        let m = job.setup.markers.iter().position(|m| m.id == d.marker).unwrap();
+        let m = job
+            .setup
+            .markers
+            .iter()
+            .position(|m| m.id == d.marker)
+            .unwrap();
         let marker = Marker {
             index: m as u8,
             xyz_m: Vector3::from(job.setup.markers[m].xyz),

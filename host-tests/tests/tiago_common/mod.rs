@@ -29,7 +29,9 @@ pub fn repo_root() -> PathBuf {
     if here.join("data/tiago/setup.toml").exists() {
         here.to_path_buf()
     } else {
-        here.parent().expect("host-tests has a parent").to_path_buf()
+        here.parent()
+            .expect("host-tests has a parent")
+            .to_path_buf()
     }
 }
 
@@ -70,7 +72,9 @@ pub fn job(data: &Path, setup: &str) -> Job {
         setup.tip_link.as_deref(),
     )
     .expect("robot");
-    setup.check_robot(&robot, &setup_path).expect("setup fits robot");
+    setup
+        .check_robot(&robot, &setup_path)
+        .expect("setup fits robot");
     Job {
         setup_path,
         setup,
@@ -167,7 +171,8 @@ fn transform(xyz: [f64; 3], rpy: [f64; 3]) -> Matrix4<f64> {
     let r = Rotation3::from_euler_angles(rpy[0], rpy[1], rpy[2]);
     let mut m = Matrix4::identity();
     m.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
-    m.fixed_view_mut::<3, 1>(0, 3).copy_from(&Vector3::from(xyz));
+    m.fixed_view_mut::<3, 1>(0, 3)
+        .copy_from(&Vector3::from(xyz));
     m
 }
 
@@ -229,7 +234,11 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (Matrix3<f64>, Vector3<
     let n = a.len() as f64;
     let ca = a.iter().sum::<Vector3<f64>>() / n;
     let cb = b.iter().sum::<Vector3<f64>>() / n;
-    let h: Matrix3<f64> = a.iter().zip(b).map(|(x, y)| (x - ca) * (y - cb).transpose()).sum();
+    let h: Matrix3<f64> = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - ca) * (y - cb).transpose())
+        .sum();
     let svd = h.svd(true, true);
     let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
     let mut d = Matrix3::identity();

@@ -1,0 +1,235 @@
+//! URDF → [`Chain`]: the serial chain from `base_link` to `tip_link`, with
+//! joint names, kinds and limits, and the mass properties of each moving body.
+//!
+//! - Revolute, continuous and prismatic joints move. Fixed joints on the path
+//!   are folded into the origin of the next movable joint
+//!   (`origin_j = F_1 · F_2 ⋯ F_k · O_j`); the fixed joints after the last
+//!   movable joint form the chain's `tip`.
+//! - Link inertia of movable joint `j`: the mass and mass-weighted centre of
+//!   mass (in joint `j`'s frame) of its child link and of every link fixed to
+//!   it, side branches included, i.e. every link reached from the child
+//!   through fixed joints only. This includes links fixed beyond `tip_link`
+//!   (a tool flange, a gripper body): they load the last joint whatever frame
+//!   the markers are given in.
+//! - Movable joints that are not on the chain (a head on the torso, mimic
+//!   gripper fingers, the joints after `tip_link` when the tip is mid-arm)
+//!   carry bodies whose pose the measurements do not give: their subtrees are
+//!   left out of every link inertia and listed in [`Robot::off_chain`] with
+//!   their mass, so a caller can see what gravity load is missing. Links
+//!   fixed to the base (before the first movable joint) are not part of any
+//!   moving body and are ignored.
+//! - A link without `<inertial>` has mass 0; a moving body of total mass 0
+//!   gets `link: None` (unknown).
+//!
+//! Rejected (one [`InputError`] naming the URDF file, and the joint's line
+//! where it can be found): XML that does not parse, a link that is the child
+//! of two joints, a joint naming a link that does not exist, an unknown
+//! `base_link`/`tip_link`, no path from base to tip, a planar, floating or
+//! spherical joint on the path, a mimic joint on the path, a zero axis, more
+//! than [`MAX_JOINTS`] movable joints, no movable joint at all, a non-finite
+//! number (origin, axis, limit, mass, centre of mass) or a negative mass.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+use super::{ErrorKind, InputError};
+use crate::robot::{Chain, JointKind};
+
+/// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
+pub const MAX_JOINTS: usize = 16;
+
+/// How a chain joint moves, as the URDF says (the core's [`JointKind`] does
+/// not tell revolute from continuous).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UrdfJointKind {
+    /// `revolute`: rotation with limits; value in rad.
+    Revolute,
+    /// `continuous`: rotation without limits; value in rad.
+    Continuous,
+    /// `prismatic`: translation; value in m.
+    Prismatic,
+}
+
+impl UrdfJointKind {
+    /// The core's kind (continuous joints are revolute).
+    pub fn chain_kind(self) -> JointKind {
+        match self {
+            UrdfJointKind::Revolute | UrdfJointKind::Continuous => JointKind::Revolute,
+            UrdfJointKind::Prismatic => JointKind::Prismatic,
+        }
+    }
+
+    /// Whether the joint value is an angle (revolute or continuous).
+    pub fn is_angular(self) -> bool {
+        !matches!(self, UrdfJointKind::Prismatic)
+    }
+}
+
+/// Position limits of a joint, in rad or m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointLimits {
+    /// Lower limit.
+    pub lower: f64,
+    /// Upper limit (`> lower`).
+    pub upper: f64,
+}
+
+/// A movable joint off the chain whose subtree hangs from a moving body but
+/// is left out of its [`LinkInertia`] (see the module doc).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OffChainBranch {
+    /// The off-chain joint.
+    pub joint: String,
+    /// The link it hangs from (part of the moving body of chain joint `chain_joint`).
+    pub parent_link: String,
+    /// Index of the chain joint whose moving body carries `parent_link`.
+    pub chain_joint: usize,
+    /// Total mass of the subtree below `joint` \[kg\].
+    pub mass_kg: f64,
+}
+
+/// A robot read from a URDF: the chain from `base_link` to `tip_link` and
+/// what the chain type does not hold.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Robot {
+    /// `<robot name>`.
+    pub name: String,
+    /// The URDF file (as given; used in error messages).
+    pub file: PathBuf,
+    /// Base frame of the chain.
+    pub base_link: String,
+    /// Tip frame of the chain (markers and the load are given in it).
+    pub tip_link: String,
+    /// Geometry and link inertia; joint values in rad (revolute) or m (prismatic).
+    pub chain: Chain<f64, MAX_JOINTS>,
+    /// URDF name of each movable joint, base to tip (chain order).
+    pub joint_names: Vec<String>,
+    /// URDF kind of each movable joint, chain order.
+    pub joint_kinds: Vec<UrdfJointKind>,
+    /// URDF position limits of each movable joint, chain order; `None` for
+    /// continuous joints and for joints whose `<limit>` gives no range.
+    pub limits: Vec<Option<JointLimits>>,
+    /// Movable joints off the chain hanging from moving bodies, in document order.
+    pub off_chain: Vec<OffChainBranch>,
+}
+
+impl Robot {
+    /// Reads `path` and extracts the chain from `base_link` to `tip_link`.
+    ///
+    /// `base_link = None` means the URDF's root link (the one link that is
+    /// no joint's child); `tip_link = None` means the one leaf link below the
+    /// base. Either is an error when it is not unique.
+    ///
+    /// # Errors
+    /// See the module doc; the error names `path`.
+    pub fn load(
+        path: impl AsRef<Path>,
+        base_link: Option<&str>,
+        tip_link: Option<&str>,
+    ) -> Result<Self, InputError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            InputError::new(path, ErrorKind::Io, format!("cannot read the URDF: {e}"))
+        })?;
+        Self::parse(&text, path, base_link, tip_link)
+    }
+
+    /// As [`Robot::load`], from the URDF text; `file` names it in errors.
+    ///
+    /// # Errors
+    /// See the module doc.
+    pub fn parse(
+        text: &str,
+        file: impl Into<PathBuf>,
+        base_link: Option<&str>,
+        tip_link: Option<&str>,
+    ) -> Result<Self, InputError> {
+        let ctx = Ctx {
+            file: file.into(),
+            text,
+        };
+        let urdf = urdf_rs::read_from_string(text)
+            .map_err(|e| ctx.err(ErrorKind::Syntax, format!("not a valid URDF: {e}")))?;
+        Tree::new(&urdf, &ctx)?.robot(&urdf, &ctx, base_link, tip_link)
+    }
+
+    /// Number of movable joints.
+    pub fn dof(&self) -> usize {
+        self.joint_names.len()
+    }
+
+    /// Chain index of the movable joint named `name`.
+    pub fn joint_index(&self, name: &str) -> Option<usize> {
+        self.joint_names.iter().position(|n| n == name)
+    }
+}
+
+pub(super) struct Ctx<'a> {
+    pub(super) file: PathBuf,
+    pub(super) text: &'a str,
+}
+
+impl Ctx<'_> {
+    pub(super) fn err(&self, kind: ErrorKind, message: impl Into<String>) -> InputError {
+        InputError::new(self.file.clone(), kind, message)
+    }
+
+    /// An error about element `<tag name="name">`, at its line if found.
+    pub(super) fn err_at(
+        &self,
+        tag: &str,
+        name: &str,
+        kind: ErrorKind,
+        message: String,
+    ) -> InputError {
+        let e = self.err(kind, format!("{tag} '{name}': {message}"));
+        match element_line(self.text, tag, name) {
+            Some(line) => e.at_line(line),
+            None => e,
+        }
+    }
+}
+
+/// Line of the first `<tag ... name="name"` in `text`.
+fn element_line(text: &str, tag: &str, name: &str) -> Option<usize> {
+    nth_element_line(text, tag, name, 0)
+}
+
+/// Line of the `n`-th (0-based) `<tag ... name="name"` in `text`.
+pub(super) fn nth_element_line(text: &str, tag: &str, name: &str, n: usize) -> Option<usize> {
+    let mut seen = 0;
+    for quote in ['"', '\''] {
+        let pattern = format!("name={quote}{name}{quote}");
+        for (at, _) in text.match_indices(&pattern) {
+            let Some(lt) = text[..at].rfind('<') else {
+                continue;
+            };
+            let element = &text[lt + 1..at];
+            if element.starts_with(tag)
+                && element[tag.len()..].starts_with(char::is_whitespace)
+                && !element.contains('>')
+            {
+                if seen == n {
+                    return Some(super::line_of_offset(text, lt));
+                }
+                seen += 1;
+            }
+        }
+    }
+    None
+}
+
+pub(super) fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(p.xyz[0], p.xyz[1], p.xyz[2]),
+        UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]),
+    )
+}
+
+pub(super) fn finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+mod tree;
+use tree::Tree;

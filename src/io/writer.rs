@@ -1,0 +1,105 @@
+//! Writing a measurement file (data contract §3), the reader's inverse.
+
+use std::path::Path;
+
+use super::cells::{format_real, Scale};
+use super::measurements::Observation;
+use super::setup::Units;
+use super::urdf::Robot;
+use super::{ErrorKind, InputError};
+
+/// Writes `rows` (SI) as a measurement file for `robot` in `units`:
+/// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t]`
+/// (`t` when the rows have times). [`read_measurements`] reads it back to
+/// the same values (see the module doc for deg).
+///
+/// The file is written to a temporary file next to `path` and renamed over
+/// it, so `path` is either untouched or complete.
+///
+/// # Errors
+/// A row with the wrong number of joint values, a non-finite number, a
+/// negative load, some rows with a time and some without (naming the line
+/// the row would have); or the file cannot be written. Nothing is written
+/// on error.
+pub fn write_measurements(
+    path: impl AsRef<Path>,
+    robot: &Robot,
+    units: Units,
+    rows: &[Observation],
+) -> Result<(), InputError> {
+    let path = path.as_ref();
+    let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
+    let dof = robot.dof();
+    let scales: Vec<Scale> = robot
+        .joint_kinds
+        .iter()
+        .map(|k| {
+            if k.is_angular() {
+                Scale::Angle(units.angle)
+            } else {
+                Scale::Length(units.length)
+            }
+        })
+        .collect();
+
+    let mut out = csv::Writer::from_writer(Vec::new());
+    let mut header: Vec<&str> = vec!["config", "rep", "marker", "load_kg"];
+    header.extend(robot.joint_names.iter().map(String::as_str));
+    header.extend(["x", "y", "z"]);
+    if has_time {
+        header.push("t");
+    }
+    let io_err = |e: &dyn std::fmt::Display| {
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot write the measurements: {e}"),
+        )
+    };
+    out.write_record(&header).map_err(|e| io_err(&e))?;
+    for (i, r) in rows.iter().enumerate() {
+        let line = i + 2;
+        let err = |kind, message: String| {
+            Err(InputError::new(path, kind, format!("row {i}: {message}")).at_line(line))
+        };
+        if r.q.len() != dof {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("{} joint values for {dof} joints", r.q.len()),
+            );
+        }
+        if r.t_s.is_some() != has_time {
+            return err(
+                ErrorKind::InvalidValue,
+                "some rows have a time and some do not".into(),
+            );
+        }
+        let numbers = r.q.iter().chain(&r.p_m).chain(&r.t_s).chain([&r.load_kg]);
+        if numbers.clone().any(|v| !v.is_finite()) {
+            return err(ErrorKind::NonFinite, "non-finite value".into());
+        }
+        if r.load_kg < 0.0 {
+            return err(
+                ErrorKind::InvalidValue,
+                format!("negative load {}", r.load_kg),
+            );
+        }
+        let mut fields = vec![
+            r.config.to_string(),
+            r.rep.to_string(),
+            r.marker.to_string(),
+            format_real(r.load_kg, Scale::One),
+        ];
+        fields.extend(r.q.iter().zip(&scales).map(|(&v, &s)| format_real(v, s)));
+        fields.extend(
+            r.p_m
+                .iter()
+                .map(|&v| format_real(v, Scale::Length(units.length))),
+        );
+        fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
+        out.write_record(&fields).map_err(|e| io_err(&e))?;
+    }
+    let bytes = out.into_inner().map_err(|e| io_err(&e))?;
+
+    super::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
+}
