@@ -172,15 +172,31 @@ where
     pub fn inverse(&self) -> OMatrix<T, D, D> {
         let n = self.parameters();
         let dim = self.l.shape_generic().0;
-        // Λs⁻¹ = L⁻ᵀ L⁻¹, column by column of L⁻¹.
+        // L⁻¹ column by column (lower triangular: column k starts at row k),
+        // then Λs⁻¹ = L⁻ᵀ L⁻¹ on the upper triangle, every sum in index
+        // order in robcal's own loops: the same arithmetic at every size
+        // (`Const<N>` on a device, `Dyn` on the host), bit for bit.
         let mut linv = OMatrix::<T, D, D>::zeros_generic(dim, dim);
         for k in 0..n {
-            let mut e = OVector::<T, D>::zeros_generic(dim, Const::<1>);
-            e[k] = T::one();
-            solve_lower_in_place(&self.l, &mut e);
-            linv.set_column(k, &e);
+            linv[(k, k)] = T::one() / self.l[(k, k)];
+            for i in (k + 1)..n {
+                let mut v = T::zero();
+                for m in k..i {
+                    v -= self.l[(i, m)] * linv[(m, k)];
+                }
+                linv[(i, k)] = v / self.l[(i, i)];
+            }
         }
-        let mut inv = linv.transpose() * &linv;
+        let mut inv = OMatrix::<T, D, D>::zeros_generic(dim, dim);
+        for j in 0..n {
+            for i in 0..=j {
+                let mut v = T::zero();
+                for k in j..n {
+                    v += linv[(k, i)] * linv[(k, j)];
+                }
+                inv[(i, j)] = v;
+            }
+        }
         // Scale the upper triangle and mirror it: `(v·sᵢ)·sⱼ` and `(v·sⱼ)·sᵢ`
         // round differently, and Λ⁻¹ (the eq. 13 covariance) must be exactly
         // symmetric. (Not `v·(sᵢ·sⱼ)`: that product can overflow where the
@@ -286,7 +302,10 @@ where
         if !(x.iter().all(|v| v.is_finite()) && inv.iter().all(|v| v.is_finite())) {
             return Err(Error::NonFinite { what: "estimate" });
         }
-        let wrss = (yy - x.dot(eta)).max(T::zero());
+        // X̂ᵀη summed in index order (not nalgebra's `dot`, which sums small
+        // static vectors in another order than dynamic ones).
+        let xe = x.iter().zip(eta.iter()).fold(T::zero(), |s, (a, b)| s + *a * *b);
+        let wrss = (yy - xe).max(T::zero());
         Ok(Self {
             x,
             lambda_inv: inv,
