@@ -20,13 +20,16 @@
 //!    `rcond ∈ [0, 1]`; every error's `Display` works.
 
 use arbitrary::{Arbitrary, Unstructured};
-use nalgebra::{SMatrix, Vector3};
+use nalgebra::{Const, SMatrix, Vector3};
 use robcal::{Accumulator, Block, Error};
 
 use crate::{snapshot, ToF64};
 
 /// Parameters in the fuzzed accumulators.
 pub const FN: usize = 4;
+
+/// The fuzzed accumulators' dimension.
+pub type FD = Const<FN>;
 
 /// Accumulators a script works on (merges go between them).
 pub const SLOTS: usize = 3;
@@ -101,7 +104,7 @@ pub struct FBlock {
 
 impl FBlock {
     /// The block in scalar type `T` (values rounded; beyond range → ±∞).
-    pub fn to_block<T: ToF64>(&self) -> Block<T, FN> {
+    pub fn to_block<T: ToF64>(&self) -> Block<T, FD> {
         let v = |x: Val| T::of_f64(x.0);
         Block {
             b: SMatrix::<T, 3, FN>::from_fn(|i, j| v(self.b[i][j])),
@@ -147,7 +150,7 @@ pub enum Op {
     Solve {
         /// Slot.
         slot: u8,
-        /// Active parameters.
+        /// Active parameters (one flag per parameter; passed as a slice).
         active: [bool; FN],
     },
     /// `acc[slot].reset()`.
@@ -192,18 +195,18 @@ pub fn decode(data: &[u8]) -> Vec<Op> {
     ops
 }
 
-fn all_finite<T: ToF64, const N: usize>(acc: &Accumulator<T, N>) -> bool {
+fn all_finite<T: ToF64>(acc: &Accumulator<T, FD>) -> bool {
     acc.information().iter().all(|v| v.is_finite())
         && acc.middle().iter().all(|v| v.is_finite())
         && acc.eta().iter().all(|v| v.is_finite())
         && acc.weighted_yy().is_finite()
 }
 
-fn check_symmetric<T: ToF64, const N: usize>(acc: &Accumulator<T, N>) {
+fn check_symmetric<T: ToF64>(acc: &Accumulator<T, FD>) {
     let l = acc.information();
     let m = acc.middle();
-    for i in 0..N {
-        for j in 0..N {
+    for i in 0..FN {
+        for j in 0..FN {
             assert!(
                 l[(i, j)].bits() == l[(j, i)].bits() && m[(i, j)].bits() == m[(j, i)].bits(),
                 "Λ or M not exactly symmetric at ({i}, {j})"
@@ -226,9 +229,9 @@ fn check_error(e: &Error) {
 
 /// Checks a successful solve (invariant 5).
 fn check_solution<T: ToF64>(
-    acc: &Accumulator<T, FN>,
-    sol: &robcal::Solution<T, FN>,
-    active: &[bool; FN],
+    acc: &Accumulator<T, FD>,
+    sol: &robcal::Solution<T, FD>,
+    active: &[bool],
 ) {
     assert!(
         sol.x.iter().all(|v| v.is_finite()),
@@ -250,6 +253,7 @@ fn check_solution<T: ToF64>(
         sol.rcond
     );
     assert_eq!(sol.equations, acc.equations());
+    assert_eq!(sol.active.as_slice(), active, "the solution's mask");
     for (j, a) in active.iter().enumerate() {
         if !a {
             assert!(sol.x[j] == T::zero(), "inactive parameter {j} not zero");
@@ -301,7 +305,7 @@ fn check_solution<T: ToF64>(
 /// Runs a script on `SLOTS` accumulators of scalar `T`, asserting the
 /// invariants in the [module docs](self) (panics on a violation).
 pub fn run<T: ToF64>(ops: &[Op]) -> Stats {
-    let mut accs: [Accumulator<T, FN>; SLOTS] = core::array::from_fn(|_| Accumulator::new());
+    let mut accs: [Accumulator<T, FD>; SLOTS] = core::array::from_fn(|_| Accumulator::new());
     let mut st = Stats::default();
     for op in ops {
         match op {
@@ -348,7 +352,7 @@ pub fn run<T: ToF64>(ops: &[Op]) -> Stats {
                         // extreme inputs is documented, not asserted).
                         let _ = sol.cov_iid();
                         let _ = sol.cov_sandwich(&acc.middle());
-                        let _ = robcal::solve::std_devs(&sol.cov_information());
+                        let _ = robcal::estimate::std_devs(&sol.cov_information());
                     }
                     Err(e) => {
                         st.solves_rejected += 1;
@@ -366,7 +370,7 @@ pub fn run<T: ToF64>(ops: &[Op]) -> Stats {
     st
 }
 
-fn update<T: ToF64>(acc: &mut Accumulator<T, FN>, block: &FBlock, repeat: usize, st: &mut Stats) {
+fn update<T: ToF64>(acc: &mut Accumulator<T, FD>, block: &FBlock, repeat: usize, st: &mut Stats) {
     let blk = block.to_block::<T>();
     for _ in 0..repeat {
         let before = snapshot(acc);

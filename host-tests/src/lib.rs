@@ -4,7 +4,7 @@
 //! else. [`Batch`] stacks every row of every block into a dense `f64`
 //! system (`nalgebra::DMatrix`), applies the weights as explicit diagonal
 //! matrices and solves by Householder QR, so the reference shares no code path with
-//! `robcal::solve` (no normal equations, no Cholesky, no column scaling):
+//! `robcal::estimate::factor` (no normal equations, no Cholesky, no column scaling):
 //!
 //! - estimate (eq. 6 / 10): `X̂ = (W B)⁺ W Δp`, the pseudo-inverse by QR of
 //!   the column-equilibrated `W B D = Q R`;
@@ -17,9 +17,21 @@
 //! Also: a small deterministic generator of random problems ([`Rng`],
 //! [`random_blocks`]), comparison helpers and the fuzz-script interpreter
 //! shared by the fuzz targets and the stable property tests ([`fuzz_ops`]).
+//!
+//! The helpers take the number of parameters as a const generic `N` and
+//! the estimator's types at `Const<N>`; [`to_dyn`] and [`accumulate_in`]
+//! run the same data through `Dyn`.
 
-use nalgebra::{DMatrix, DVector, RealField, SMatrix, SVector, Vector3};
+use nalgebra::{
+    Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, RealField, SMatrix, SVector, Vector3,
+};
+use robcal::estimate::Alloc;
 use robcal::{Accumulator, Block};
+
+/// The project's one seeded generator (`robcal_paper::rng::SplitMix64`),
+/// so problems are reproducible from a `u64` that proptest can shrink and
+/// report.
+pub use robcal_paper::rng::SplitMix64 as Rng;
 
 pub mod fuzz_io;
 pub mod fuzz_ops;
@@ -100,7 +112,7 @@ impl Batch {
     /// Stacks the rows of `blocks` that the accumulator would use (the first
     /// `rows` rows with a positive weight), widened exactly to `f64`.
     /// `sigma` is kept only if every used row carries one.
-    pub fn from_blocks<T: ToF64, const N: usize>(blocks: &[Block<T, N>]) -> Self {
+    pub fn from_blocks<T: ToF64, const N: usize>(blocks: &[Block<T, Const<N>>]) -> Self {
         let mut rows: Vec<[f64; N]> = Vec::new();
         let (mut dp, mut w, mut sg) = (Vec::new(), Vec::new(), Vec::new());
         let mut all_sigma = true;
@@ -294,7 +306,10 @@ pub fn cov_rel_err<T: ToF64, const N: usize>(a: &SMatrix<T, N, N>, b: &DMatrix<f
 /// raw fields through `Debug` are compared elsewhere; this adds a
 /// NaN-payload- and sign-of-zero-exact view of `Λ`, `M`, `η`, `Σ Δpᵀ W² Δp`
 /// and the counts.
-pub fn state_bits<T: ToF64, const N: usize>(acc: &Accumulator<T, N>) -> Vec<u64> {
+pub fn state_bits<T: ToF64, D: Dim>(acc: &Accumulator<T, D>) -> Vec<u64>
+where
+    DefaultAllocator: Alloc<D>,
+{
     let mut v: Vec<u64> = acc.information().iter().map(|x| x.bits()).collect();
     v.extend(acc.middle().iter().map(|x| x.bits()));
     v.extend(acc.eta().iter().map(|x| x.bits()));
@@ -308,46 +323,11 @@ pub fn state_bits<T: ToF64, const N: usize>(acc: &Accumulator<T, N>) -> Vec<u64>
 /// the `Debug` text (every raw field, including the unused lower
 /// triangles; `{:?}` of a float is its shortest round-trip form, so equal
 /// text means equal bits except NaN payloads) and [`state_bits`].
-pub fn snapshot<T: ToF64, const N: usize>(acc: &Accumulator<T, N>) -> (String, Vec<u64>) {
+pub fn snapshot<T: ToF64, D: Dim>(acc: &Accumulator<T, D>) -> (String, Vec<u64>)
+where
+    DefaultAllocator: Alloc<D>,
+{
     (format!("{acc:?}"), state_bits(acc))
-}
-
-/// SplitMix64: a tiny, seedable, dependency-free generator, so problems
-/// are reproducible from a `u64` that proptest can shrink and report.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[0, 1)`.
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.uniform()
-    }
-    /// Standard normal (Box–Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (2.0 * core::f64::consts::PI * u2).cos()
-    }
-    /// `10^U(lo, hi)`: log-uniform in `[10^lo, 10^hi)`.
-    pub fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        10f64.powf(self.range(lo, hi))
-    }
 }
 
 /// How [`random_blocks`] draws a problem.
@@ -385,7 +365,7 @@ pub fn random_blocks<const N: usize>(
     rng: &mut Rng,
     spec: &Spec,
     col_scale: &[f64; N],
-) -> (Vec<Block<f64, N>>, SVector<f64, N>) {
+) -> (Vec<Block<f64, Const<N>>>, SVector<f64, N>) {
     let x_true = SVector::<f64, N>::from_fn(|j, _| rng.normal() / col_scale[j]);
     let mut out = Vec::with_capacity(spec.blocks);
     for _ in 0..spec.blocks {
@@ -412,7 +392,7 @@ pub fn random_blocks<const N: usize>(
 
 /// A block rounded to another scalar type (`f64 → f32` rounds; values
 /// beyond `f32::MAX` become ±∞).
-pub fn convert_block<T: ToF64, const N: usize>(b: &Block<f64, N>) -> Block<T, N> {
+pub fn convert_block<T: ToF64, const N: usize>(b: &Block<f64, Const<N>>) -> Block<T, Const<N>> {
     Block {
         b: b.b.map(T::of_f64),
         dp: b.dp.map(T::of_f64),
@@ -422,12 +402,42 @@ pub fn convert_block<T: ToF64, const N: usize>(b: &Block<f64, N>) -> Block<T, N>
     }
 }
 
+/// The same block at `Dyn` (the host's dimension): the same values, the
+/// same column-major layout.
+pub fn to_dyn<T: ToF64, const N: usize>(b: &Block<T, Const<N>>) -> Block<T, Dyn> {
+    Block {
+        b: nalgebra::OMatrix::<T, nalgebra::U3, Dyn>::from_column_slice_generic(
+            nalgebra::U3,
+            Dyn(N),
+            b.b.as_slice(),
+        ),
+        dp: b.dp,
+        w: b.w,
+        sigma: b.sigma,
+        rows: b.rows,
+    }
+}
+
 /// Feeds `blocks` to a fresh accumulator in order.
 ///
 /// # Panics
 /// If an update is rejected (the helpers only feed valid blocks).
-pub fn accumulate<T: ToF64, const N: usize>(blocks: &[Block<T, N>]) -> Accumulator<T, N> {
-    let mut acc = Accumulator::new();
+pub fn accumulate<T: ToF64, const N: usize>(
+    blocks: &[Block<T, Const<N>>],
+) -> Accumulator<T, Const<N>> {
+    accumulate_in(Const::<N>, blocks)
+}
+
+/// [`accumulate`] at any dimension (e.g. `Dyn(n)` for blocks from
+/// [`to_dyn`]).
+///
+/// # Panics
+/// If an update is rejected.
+pub fn accumulate_in<T: ToF64, D: Dim>(dim: D, blocks: &[Block<T, D>]) -> Accumulator<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let mut acc = Accumulator::zeros(dim);
     for b in blocks {
         acc.update(b).expect("valid block");
     }
