@@ -35,7 +35,7 @@ use host_tests::{
 };
 use nalgebra::{Const, DMatrix, DefaultAllocator, Dim, Dyn, SMatrix};
 use proptest::prelude::*;
-use robcal::estimate::Alloc;
+use robcal::estimate::{identifiability, Alloc, IdentifiabilitySettings};
 use robcal::{Accumulator, Block, Solution};
 
 /// Largest condition number of the column-equilibrated `W B` accepted as
@@ -258,7 +258,8 @@ fn check_inverse_symmetric<const N: usize>(seed: u64, blocks: usize) -> Result<(
 }
 
 /// What a solve estimates, as bit patterns (`Err` as its text): `X̂`, the
-/// mask, the residual sum, `rcond` and the equations.
+/// mask, `rcond` and the equations. (The residual sum and `Λ⁻¹`: see
+/// [`same_rest`].)
 fn estimate_bits<T: ToF64, D: Dim>(
     r: &Result<Solution<T, D>, robcal::Error>,
 ) -> Result<Vec<u64>, String>
@@ -269,34 +270,49 @@ where
         Ok(s) => {
             let mut v: Vec<u64> = s.x.iter().map(|x| x.bits()).collect();
             v.extend(s.active.iter().map(|a| u64::from(*a)));
-            v.extend([s.wrss.bits(), s.rcond.bits(), s.equations as u64]);
+            v.extend([s.rcond.bits(), s.equations as u64]);
             Ok(v)
         }
         Err(e) => Err(format!("{e:?}")),
     }
 }
 
-/// `Λ⁻¹` of two solves of the same data at `Const<N>` and `Dyn`: bit for
-/// bit up to N = 5; beyond, within the rounding of a sum of `N` products.
+/// The residual sum and `Λ⁻¹` of two solves of the same data at `Const<N>`
+/// and `Dyn`: bit for bit when `strict`, otherwise bit for bit except
+/// where robcal hands the arithmetic to nalgebra routines that are not the
+/// same code at both sizes (found by this test, reported, not in the
+/// library's power to fix here):
 ///
-/// `Factor::inverse` forms `Λs⁻¹ = L⁻ᵀ L⁻¹` with nalgebra's matrix
-/// product, which for `Dyn` matrices with every dimension above 5 hands the
-/// product to the `matrixmultiply` crate (blocked kernels, FMA where the
-/// CPU has it) and otherwise sums in its own order: `Λ⁻¹` (the eq. 13
-/// covariance, and the sandwich through it) can differ in the last bits
-/// between the device and the host for N ≥ 6. The estimate does not go
-/// through a matrix product and is bit-identical at every N. Each order
-/// is within `N·ε` of the exact value, elementwise against `√(Λ⁻¹ᵢᵢ Λ⁻¹ⱼⱼ)`
-/// (Cauchy–Schwarz on the rows of `L⁻¹`), so the two within `2N·ε`; the
-/// bound below allows `4N·ε`.
-fn same_inverse<T: ToF64, const N: usize>(
+/// - `wrss = yy − X̂ᵀη` uses nalgebra's `dot`, which special-cases static
+///   vectors of 2, 3 and 4 elements; for 4 it sums `(x₀η₀ + x₂η₂) + (x₁η₁
+///   + x₃η₃)` where the `Dyn` loop sums in order: at N = 4 the residual
+///   sum can differ in the last bits. Each order is within `N·ε·Σ|xᵢηᵢ|`
+///   of the exact dot product.
+/// - `Λ⁻¹ = S L⁻ᵀ L⁻¹ S` uses nalgebra's matrix product, which hands `Dyn`
+///   products with every dimension above 5 to the `matrixmultiply` crate
+///   (blocked kernels, FMA where the CPU has it): for N ≥ 6, `Λ⁻¹` (the
+///   eq. 13 covariance, and the sandwich through it) can differ in the
+///   last bits. Each order is within `N·ε` of the exact value elementwise
+///   against `√(Λ⁻¹ᵢᵢ Λ⁻¹ⱼⱼ)` (Cauchy–Schwarz on the rows of `L⁻¹`); the
+///   bound below allows `4N·ε`.
+fn same_rest<T: ToF64, const N: usize>(
     a: &Result<Solution<T, Const<N>>, robcal::Error>,
     d: &Result<Solution<T, Dyn>, robcal::Error>,
+    eta: &nalgebra::SVector<T, N>,
+    strict: bool,
 ) -> Result<(), TestCaseError> {
     let (Ok(a), Ok(d)) = (a, d) else {
         return Ok(());
     };
-    if N <= 5 {
+    if strict || N != 4 {
+        prop_assert_eq!(a.wrss.bits(), d.wrss.bits(), "wrss differs bitwise");
+    } else {
+        let scale: f64 = (0..N).map(|i| (a.x[i] * eta[i]).f64().abs()).sum();
+        let tol = 4.0 * N as f64 * T::default_epsilon().f64() * scale;
+        let e = (a.wrss.f64() - d.wrss.f64()).abs();
+        prop_assert!(e <= tol, "wrss at Const and Dyn: {e:e} > {tol:e}");
+    }
+    if strict || N <= 5 {
         let ab: Vec<u64> = a.lambda_inv.iter().map(|x| x.bits()).collect();
         let db: Vec<u64> = d.lambda_inv.iter().map(|x| x.bits()).collect();
         prop_assert_eq!(ab, db, "Λ⁻¹ differs bitwise at N = {}", N);
@@ -311,16 +327,18 @@ fn same_inverse<T: ToF64, const N: usize>(
 
 /// The promise of the Dim-generic core: the same blocks through
 /// `Accumulator<T, Const<N>>` (the firmware) and `Accumulator<T, Dyn>` (the
-/// host) are the same arithmetic in the same order, so the statistics and
-/// the estimate (`X̂`, residual sum, `rcond`) are bit-identical — also after
-/// a merge and for a random mask. No well-posedness is assumed: a refusal
-/// must be the same refusal. (`Λ⁻¹`: see [`same_inverse`].)
+/// host) are the same arithmetic in the same order, so the statistics, the
+/// estimate `X̂`, `rcond` and the identifiable set are bit-identical — also
+/// after a merge and for a random mask. No well-posedness is assumed: a
+/// refusal must be the same refusal. The residual sum and `Λ⁻¹` are
+/// bit-identical with `strict`, otherwise see [`same_rest`].
 fn check_const_equals_dyn<T: ToF64, const N: usize>(
     seed: u64,
     blocks: usize,
     wdec: f64,
     split: f64,
     mask: u64,
+    strict: bool,
 ) -> Result<(), TestCaseError> {
     let mut rng = Rng::new(seed);
     let scale: [f64; N] = core::array::from_fn(|j| 10f64.powi(j as i32 % 5 - 2));
@@ -333,7 +351,7 @@ fn check_const_equals_dyn<T: ToF64, const N: usize>(
     prop_assert_eq!(state_bits(&a), state_bits(&d), "statistics differ");
     let (sa, sd) = (a.solve(), d.solve());
     prop_assert_eq!(estimate_bits(&sa), estimate_bits(&sd), "solve differs");
-    same_inverse(&sa, &sd)?;
+    same_rest(&sa, &sd, a.eta(), strict)?;
     let active: Vec<bool> = (0..N).map(|j| mask >> (j % 64) & 1 == 1).collect();
     let (sa, sd) = (a.solve_active(&active), d.solve_active(&active));
     prop_assert_eq!(
@@ -342,7 +360,18 @@ fn check_const_equals_dyn<T: ToF64, const N: usize>(
         "solve_active({:?}) differs",
         active
     );
-    same_inverse(&sa, &sd)?;
+    same_rest(&sa, &sd, a.eta(), strict)?;
+    // The identifiable set and its conditioning, from the same Λ.
+    let settings = IdentifiabilitySettings::default();
+    let ia = identifiability(&a.information(), &[true; N], &settings);
+    let id = identifiability(&d.information(), &[true; N], &settings);
+    match (ia, id) {
+        (Ok(ia), Ok(id)) => {
+            prop_assert_eq!(ia.kept.as_slice(), id.kept.as_slice());
+            prop_assert_eq!(ia.rcond.bits(), id.rcond.bits());
+        }
+        (ia, id) => prop_assert_eq!(ia.err(), id.err()),
+    }
     // Split, accumulate both halves, merge: the same merge at both sizes.
     let k = ((blocks as f64) * split) as usize;
     let mut am = accumulate(&fixed[..k]);
@@ -350,11 +379,13 @@ fn check_const_equals_dyn<T: ToF64, const N: usize>(
     let mut dm = accumulate_in(Dyn(N), &dynamic[..k]);
     dm.merge(&accumulate_in(Dyn(N), &dynamic[k..])).unwrap();
     prop_assert_eq!(state_bits(&am), state_bits(&dm), "merged statistics differ");
+    let (sa, sd) = (am.solve(), dm.solve());
     prop_assert_eq!(
-        estimate_bits(&am.solve()),
-        estimate_bits(&dm.solve()),
+        estimate_bits(&sa),
+        estimate_bits(&sd),
         "merged solve differs"
     );
+    same_rest(&sa, &sd, am.eta(), strict)?;
     Ok(())
 }
 
@@ -425,23 +456,42 @@ proptest! {
 
     #[test]
     fn const_equals_dyn_bitwise_f64_n1(seed: u64, blocks in 1usize..8, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
-        check_const_equals_dyn::<f64, 1>(seed, blocks, wdec, split, mask)?;
+        check_const_equals_dyn::<f64, 1>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n4(seed: u64, blocks in 2usize..16, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 4>(seed, blocks, wdec, split, mask, false)?;
     }
     #[test]
     fn const_equals_dyn_bitwise_f64_n5(seed: u64, blocks in 2usize..20, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
-        check_const_equals_dyn::<f64, 5>(seed, blocks, wdec, split, mask)?;
+        check_const_equals_dyn::<f64, 5>(seed, blocks, wdec, split, mask, false)?;
     }
     #[test]
     fn const_equals_dyn_bitwise_f64_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
-        check_const_equals_dyn::<f64, 9>(seed, blocks, wdec, split, mask)?;
+        check_const_equals_dyn::<f64, 9>(seed, blocks, wdec, split, mask, false)?;
     }
     #[test]
     fn const_equals_dyn_bitwise_f64_n12(seed: u64, blocks in 4usize..48, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
-        check_const_equals_dyn::<f64, 12>(seed, blocks, wdec, split, mask)?;
+        check_const_equals_dyn::<f64, 12>(seed, blocks, wdec, split, mask, false)?;
     }
     #[test]
     fn const_equals_dyn_bitwise_f32_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
-        check_const_equals_dyn::<f32, 9>(seed, blocks, wdec, split, mask)?;
+        check_const_equals_dyn::<f32, 9>(seed, blocks, wdec, split, mask, false)?;
+    }
+
+    // Every output bit for bit, the residual sum and Λ⁻¹ included: fails
+    // on this commit at N = 4 (nalgebra's `dot` of static 4-vectors) and
+    // N ≥ 6 (nalgebra's `Dyn` matrix product), see `same_rest`. Reported;
+    // remove the `ignore` when the core does these sums in its own loops.
+    #[test]
+    #[ignore = "robcal: residual sum at N = 4 and Λ⁻¹ at N >= 6 differ in the last bits between Const and Dyn (see same_rest)"]
+    fn const_equals_dyn_every_output_bitwise_f64_n4(seed: u64, blocks in 2usize..16, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 4>(seed, blocks, wdec, split, mask, true)?;
+    }
+    #[test]
+    #[ignore = "robcal: residual sum at N = 4 and Λ⁻¹ at N >= 6 differ in the last bits between Const and Dyn (see same_rest)"]
+    fn const_equals_dyn_every_output_bitwise_f64_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 9>(seed, blocks, wdec, split, mask, true)?;
     }
 }
 
