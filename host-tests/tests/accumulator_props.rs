@@ -280,13 +280,13 @@ where
 /// The residual sum and `Λ⁻¹` of two solves of the same data at `Const<N>`
 /// and `Dyn`: bit for bit when `strict`, otherwise bit for bit except
 /// where robcal hands the arithmetic to nalgebra routines that are not the
-/// same code at both sizes (found by this test, reported, not in the
-/// library's power to fix here):
+/// same code at both sizes (found by this test and reported; the fix
+/// belongs in the library):
 ///
 /// - `wrss = yy − X̂ᵀη` uses nalgebra's `dot`, which special-cases static
-///   vectors of 2, 3 and 4 elements; for 4 it sums `(x₀η₀ + x₂η₂) + (x₁η₁
-///   + x₃η₃)` where the `Dyn` loop sums in order: at N = 4 the residual
-///   sum can differ in the last bits. Each order is within `N·ε·Σ|xᵢηᵢ|`
+///   vectors of 2, 3 and 4 elements; for 4 it sums
+///   `(x₀η₀ + x₂η₂) + (x₁η₁ + x₃η₃)` where the `Dyn` loop sums in order:
+///   at N = 4 the residual sum can differ in the last bits. Each order is within `N·ε·Σ|xᵢηᵢ|`
 ///   of the exact dot product.
 /// - `Λ⁻¹ = S L⁻ᵀ L⁻¹ S` uses nalgebra's matrix product, which hands `Dyn`
 ///   products with every dimension above 5 to the `matrixmultiply` crate

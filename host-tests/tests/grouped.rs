@@ -139,7 +139,7 @@ fn irls_recovers_sigma_and_beats_ols() {
     let mut history = Vec::<Iteration<f64, D>>::new();
     let fit: Fit<f64, D> = stats
         .fit_irls(&settings, &all, &mut weights, &mut sigma, |it| {
-            history.push(it.clone())
+            history.push(*it)
         })
         .unwrap();
     assert!(fit.converged, "iterations {}", fit.iterations);
@@ -169,11 +169,13 @@ fn irls_recovers_sigma_and_beats_ols() {
     assert!((0..N).all(|i| sw[i] < so[i]), "{so} vs {sw}");
 }
 
+/// One IRLS iteration: X̂, its standard deviations, the change.
+type Step = (Vec<f64>, Vec<f64>, f64);
+
 /// IRLS on the same grouped statistics at `Const<N>` (the device) and at
 /// `Dyn` (the host), every iteration recorded.
 struct Both {
-    /// Per iteration: X̂, its standard deviations, the change.
-    history: [Vec<(Vec<f64>, Vec<f64>, f64)>; 2],
+    history: [Vec<Step>; 2],
     fits: (Fit<f64, D>, Fit<f64, nalgebra::Dyn>),
     weights: [Vec<Vector3<f64>>; 2],
     sigma: [Vec<Vector3<f64>>; 2],
@@ -283,7 +285,7 @@ fn irls_at_dyn_equals_const() {
 fn irls_at_dyn_equals_const_bitwise() {
     let b = irls_at_both_sizes(4);
     let [hf, hd] = &b.history;
-    let all_bits = |h: &[(Vec<f64>, Vec<f64>, f64)]| {
+    let all_bits = |h: &[Step]| {
         h.iter()
             .map(|(x, s, c)| (bits(x), bits(s), c.to_bits()))
             .collect::<Vec<_>>()
