@@ -1,4 +1,4 @@
-//! Sequences of updates, merges, resets and solves of `Accumulator<f32, 4>`
+//! Sequences of updates, merges, resets and solves of `Accumulator<f32, Const<4>>`
 //! with hostile floats; the invariants are asserted inside
 //! `host_tests::fuzz_ops::run` (see its module docs).
 #![no_main]

@@ -9,36 +9,28 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use nalgebra::{RealField, SMatrix, Vector3};
+use host_tests::Rng;
+use nalgebra::{Const, RealField, SMatrix, Vector3};
 use robcal::{Accumulator, Block};
 
 /// Blocks in the ring the update benchmark cycles through.
 const RING: usize = 64;
 
-/// Deterministic rows: Numerical Recipes' LCG, uniform in [-1, 1).
-struct Lcg(u32);
-
-impl Lcg {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        f64::from(self.0 >> 8) / f64::from(1u32 << 23) - 1.0
-    }
-
-    /// `Δp = B x` with x = 1e-3 per parameter, plus 10 µm of noise.
-    fn block<T: RealField + Copy, const N: usize>(&mut self) -> Block<T, N> {
-        let b = SMatrix::<f64, 3, N>::from_fn(|_, _| self.uniform());
-        let dp =
-            b * SMatrix::<f64, N, 1>::repeat(1e-3) + Vector3::from_fn(|_, _| 1e-5 * self.uniform());
-        Block::new(b.map(nalgebra::convert), dp.map(nalgebra::convert))
-    }
+/// Deterministic rows from the project's one generator, uniform in
+/// (-1, 1): `Δp = B x` with x = 1e-3 per parameter, plus 10 µm of noise.
+fn block<T: RealField + Copy, const N: usize>(rng: &mut Rng) -> Block<T, Const<N>> {
+    let b = SMatrix::<f64, 3, N>::from_fn(|_, _| rng.range(-1.0, 1.0));
+    let dp = b * SMatrix::<f64, N, 1>::repeat(1e-3)
+        + Vector3::from_fn(|_, _| 1e-5 * rng.range(-1.0, 1.0));
+    Block::new(b.map(nalgebra::convert), dp.map(nalgebra::convert))
 }
 
 fn bench_n<T: RealField + Copy, const N: usize>(c: &mut Criterion, ty: &str) {
-    let mut gen = Lcg(0x5EED_0000 + N as u32);
-    let ring: Vec<Block<T, N>> = (0..RING).map(|_| gen.block()).collect();
+    let mut gen = Rng::new(0x5EED_0000 + N as u64);
+    let ring: Vec<Block<T, Const<N>>> = (0..RING).map(|_| block(&mut gen)).collect();
 
     let mut group = c.benchmark_group(format!("update/{ty}"));
-    let mut acc = Accumulator::<T, N>::new();
+    let mut acc = Accumulator::<T, Const<N>>::new();
     let mut k = 0;
     group.bench_function(BenchmarkId::from_parameter(N), |bch| {
         bch.iter(|| {
@@ -48,9 +40,9 @@ fn bench_n<T: RealField + Copy, const N: usize>(c: &mut Criterion, ty: &str) {
     });
     group.finish();
 
-    let mut full = Accumulator::<T, N>::new();
+    let mut full = Accumulator::<T, Const<N>>::new();
     for _ in 0..2 * N {
-        full.update(&gen.block()).unwrap();
+        full.update(&block(&mut gen)).unwrap();
     }
     let mut group = c.benchmark_group(format!("solve/{ty}"));
     group.bench_function(BenchmarkId::from_parameter(N), |bch| {

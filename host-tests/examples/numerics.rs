@@ -22,7 +22,7 @@
 //! system, `host_tests::Batch`, or compensated sums), never by robcal.
 
 use host_tests::{convert_block, Batch, Rng, ToF64};
-use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
+use nalgebra::{Const, DMatrix, DVector, SMatrix, SVector, Vector3};
 use robcal::{Accumulator, Block, Error};
 
 fn scaled_err<T: ToF64, const N: usize>(
@@ -52,8 +52,8 @@ fn equilibrated_cond(batch: &Batch) -> f64 {
     sv.max() / sv.min()
 }
 
-fn outcome<T: ToF64, const N: usize>(blocks: &[Block<T, N>]) -> String {
-    let mut acc = Accumulator::<T, N>::new();
+fn outcome<T: ToF64, const N: usize>(blocks: &[Block<T, Const<N>>]) -> String {
+    let mut acc = Accumulator::<T, Const<N>>::new();
     for b in blocks {
         if let Err(e) = acc.update(b) {
             return format!("update: {e}");
@@ -88,7 +88,7 @@ fn collinear() {
         let delta = 10f64.powf(-(k as f64) / 2.0);
         let mut rng = Rng::new(42);
         let x_true = SVector::<f64, 4>::new(0.3, -0.7, 1.1, 0.5);
-        let blocks: Vec<Block<f64, 4>> = (0..40)
+        let blocks: Vec<Block<f64, Const<4>>> = (0..40)
             .map(|_| {
                 let mut b = SMatrix::<f64, 3, 4>::from_fn(|_, _| rng.normal());
                 for r in 0..3 {
@@ -98,7 +98,7 @@ fn collinear() {
                 Block::new(b, b * x_true + noise)
             })
             .collect();
-        let b32: Vec<Block<f32, 4>> = blocks.iter().map(convert_block).collect();
+        let b32: Vec<Block<f32, Const<4>>> = blocks.iter().map(convert_block).collect();
         let cond = equilibrated_cond(&Batch::from_blocks(&blocks));
         println!(
             "| {delta:.0e} | {cond:.1e} | {} | {} |",
@@ -120,13 +120,13 @@ fn scaling() {
         let scale = [1e3, 1.0, small, small];
         let mut rng = Rng::new(7);
         let x_true = SVector::<f64, 4>::from_fn(|j, _| rng.normal() / scale[j]);
-        let blocks: Vec<Block<f64, 4>> = (0..40)
+        let blocks: Vec<Block<f64, Const<4>>> = (0..40)
             .map(|_| {
                 let b = SMatrix::<f64, 3, 4>::from_fn(|_, j| rng.normal() * scale[j]);
                 Block::new(b, b * x_true + Vector3::from_fn(|_, _| 1e-6 * rng.normal()))
             })
             .collect();
-        let b32: Vec<Block<f32, 4>> = blocks.iter().map(convert_block).collect();
+        let b32: Vec<Block<f32, Const<4>>> = blocks.iter().map(convert_block).collect();
         println!("| 1e-{e} | {} | {} |", outcome(&blocks), outcome(&b32));
     }
 }
@@ -220,10 +220,10 @@ fn streaming(m: usize) {
     println!("\n## 4. {m} measurements streamed (N = 6, 3 rows each, weights in [0.5, 2])\n");
     let mut rng = Rng::new(2026);
     let x_true = SVector::<f64, NS>::from_fn(|j, _| 1e-3 * (j as f64 + 1.0));
-    let mut a64 = Accumulator::<f64, NS>::new();
-    let mut a32 = Accumulator::<f32, NS>::new();
-    let mut chunk32 = Accumulator::<f32, NS>::new();
-    let mut total32 = Accumulator::<f32, NS>::new();
+    let mut a64 = Accumulator::<f64, Const<NS>>::new();
+    let mut a32 = Accumulator::<f32, Const<NS>>::new();
+    let mut chunk32 = Accumulator::<f32, Const<NS>>::new();
+    let mut total32 = Accumulator::<f32, Const<NS>>::new();
     let chunk = 1000;
     let mut sri = SqrtInfo::new();
     // Compensated references: over the f64 data, and over the f32-rounded
@@ -237,7 +237,7 @@ fn streaming(m: usize) {
         let dp = b * x_true + Vector3::from_fn(|_, _| 2e-5 * rng.normal());
         let w = Vector3::from_fn(|_, _| rng.range(0.5, 2.0));
         let blk = Block::new(b, dp).with_weights(w);
-        let b32: Block<f32, NS> = convert_block(&blk);
+        let b32: Block<f32, Const<NS>> = convert_block(&blk);
         a64.update(&blk).unwrap();
         a32.update(&b32).unwrap();
         chunk32.update(&b32).unwrap();
@@ -352,7 +352,7 @@ fn cancellation() {
         let noise = 10f64.powi(-e);
         let mut rng = Rng::new(5);
         let x_true = SVector::<f64, 4>::new(0.3, -0.7, 1.1, 0.5);
-        let blocks: Vec<Block<f64, 4>> = (0..100)
+        let blocks: Vec<Block<f64, Const<4>>> = (0..100)
             .map(|_| {
                 let b = SMatrix::<f64, 3, 4>::from_fn(|_, _| rng.normal());
                 Block::new(
@@ -361,7 +361,7 @@ fn cancellation() {
                 )
             })
             .collect();
-        let b32: Vec<Block<f32, 4>> = blocks.iter().map(convert_block).collect();
+        let b32: Vec<Block<f32, Const<4>>> = blocks.iter().map(convert_block).collect();
         let rel = |s2: f64, blocks_ref: &Batch| {
             let r = blocks_ref.solve();
             let want = r.wrss / (blocks_ref.rows() - 4) as f64;

@@ -5,13 +5,14 @@
 //! holds a NaN, so `==` is meaningful).
 
 use host_tests::{snapshot, Rng, ToF64};
-use nalgebra::{SMatrix, Vector3};
+use nalgebra::{Const, SMatrix, Vector3};
 use robcal::{Accumulator, Block, Error};
 
 const N: usize = 3;
+type D = Const<N>;
 
 /// A non-trivial accumulator: 5 blocks with weights and σ.
-fn primed<T: ToF64>() -> Accumulator<T, N> {
+fn primed<T: ToF64>() -> Accumulator<T, D> {
     let mut rng = Rng::new(7);
     let mut acc = Accumulator::new();
     for _ in 0..5 {
@@ -25,7 +26,7 @@ fn primed<T: ToF64>() -> Accumulator<T, N> {
     acc
 }
 
-fn good<T: ToF64>() -> Block<T, N> {
+fn good<T: ToF64>() -> Block<T, D> {
     let b = SMatrix::<T, 3, N>::from_fn(|i, j| T::of_f64((i * N + j) as f64 * 0.25 - 1.0));
     Block::new(b, Vector3::from_fn(|i, _| T::of_f64(i as f64)))
         .with_weights(Vector3::repeat(T::one()))
@@ -34,7 +35,7 @@ fn good<T: ToF64>() -> Block<T, N> {
 
 /// `update(block)` fails with `expected` and leaves `acc` bit-identical.
 #[track_caller]
-fn rejects<T: ToF64>(acc: &mut Accumulator<T, N>, block: &Block<T, N>, expected: Error) {
+fn rejects<T: ToF64>(acc: &mut Accumulator<T, D>, block: &Block<T, D>, expected: Error) {
     let before = snapshot(acc);
     let copy = acc.clone();
     assert_eq!(acc.update(block), Err(expected), "block {block:?}");
@@ -231,4 +232,44 @@ fn reset_forgets_everything() {
     acc.reset();
     assert!(acc == Accumulator::new());
     assert_eq!(acc.equations(), 0);
+}
+
+/// Masks are slices now: one flag per parameter, else `Mismatch` (and the
+/// accumulator is untouched).
+#[test]
+fn mask_of_the_wrong_length_is_a_mismatch() {
+    let acc = primed::<f64>();
+    let before = snapshot(&acc);
+    for mask in [&[true, true][..], &[true; 4][..], &[][..]] {
+        assert!(
+            matches!(acc.solve_active(mask), Err(Error::Mismatch { .. })),
+            "mask of {} flags",
+            mask.len()
+        );
+    }
+    assert_eq!(snapshot(&acc), before);
+    assert!(acc.solve_active(&[true; N]).is_ok());
+}
+
+/// At `Dyn` the block's width is a run-time value: a block of another width
+/// is refused with `Mismatch`, and the state is bit-identical.
+#[test]
+fn dyn_block_of_another_width_is_a_mismatch() {
+    use nalgebra::{Dyn, OMatrix, U3};
+    let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(N));
+    acc.update(&host_tests::to_dyn(&good::<f64>())).unwrap();
+    let before = snapshot(&acc);
+    for width in [0, N - 1, N + 1] {
+        let b = OMatrix::<f64, U3, Dyn>::from_element_generic(U3, Dyn(width), 1.0);
+        let blk = Block::new(b, Vector3::zeros());
+        assert!(
+            matches!(acc.update(&blk), Err(Error::Mismatch { .. })),
+            "width {width}"
+        );
+        assert_eq!(snapshot(&acc), before);
+    }
+    // Merging accumulators of different sizes, likewise.
+    let other = Accumulator::<f64, Dyn>::zeros(Dyn(N + 1));
+    assert!(matches!(acc.merge(&other), Err(Error::Mismatch { .. })));
+    assert_eq!(snapshot(&acc), before);
 }

@@ -4,7 +4,9 @@
 //!
 //! Problems are drawn from a `u64` seed (`host_tests::random_blocks`), so a
 //! failing case is reproducible from the seed proptest prints. `N` is a
-//! const generic, so a few sizes are instantiated: 1, 3, 6 and 12.
+//! const generic (the estimator at `Const<N>`), so a few sizes are
+//! instantiated: 1, 3, 6 and 12. `const_equals_dyn_*` run the same data at
+//! `Const<N>` and at `Dyn` and compare bit for bit.
 //!
 //! "Well-posed" means: at least as many weighted rows as parameters and a
 //! column-equilibrated `W B` with 2-norm condition ≤ [`MAX_COND`]; cases
@@ -28,11 +30,13 @@
 //!   with that bound added (see `docs/numerics.md`).
 
 use host_tests::{
-    accumulate, convert_block, cov_rel_err, random_blocks, scaled_rel_err, Batch, Rng, Spec, ToF64,
+    accumulate, accumulate_in, convert_block, cov_rel_err, random_blocks, scaled_rel_err,
+    state_bits, to_dyn, Batch, Rng, Spec, ToF64,
 };
-use nalgebra::{DMatrix, SMatrix};
+use nalgebra::{Const, DMatrix, DefaultAllocator, Dim, Dyn, SMatrix};
 use proptest::prelude::*;
-use robcal::{Accumulator, Block};
+use robcal::estimate::{identifiability, Alloc, IdentifiabilitySettings};
+use robcal::{Accumulator, Block, Solution};
 
 /// Largest condition number of the column-equilibrated `W B` accepted as
 /// well-posed.
@@ -64,7 +68,7 @@ fn problem<const N: usize>(
     seed: u64,
     spec: &Spec,
     col_scale: &[f64; N],
-) -> Result<Vec<Block<f64, N>>, TestCaseError> {
+) -> Result<Vec<Block<f64, Const<N>>>, TestCaseError> {
     let mut rng = Rng::new(seed);
     let (blocks, _) = random_blocks::<N>(&mut rng, spec, col_scale);
     let batch = Batch::from_blocks(&blocks);
@@ -111,7 +115,7 @@ fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), 
 
     // Eq. 13: with W = Σ⁻¹ the covariance is Λ⁻¹ = (Bᵀ Σ⁻² B)⁻¹, against
     // the batch computed from Σ alone; and the sandwich agrees with it.
-    let inv: Vec<Block<f64, N>> = blocks
+    let inv: Vec<Block<f64, Const<N>>> = blocks
         .iter()
         .map(|b| b.with_weights(b.sigma.unwrap().map(|s| 1.0 / s)))
         .collect();
@@ -137,7 +141,7 @@ fn check_f32_scaled<const N: usize>(seed: u64, blocks: usize) -> Result<(), Test
         ..spec(blocks, 0.0)
     };
     let blocks64 = problem::<N>(seed, &s, &scale)?;
-    let blocks: Vec<Block<f32, N>> = blocks64.iter().map(convert_block).collect();
+    let blocks: Vec<Block<f32, Const<N>>> = blocks64.iter().map(convert_block).collect();
     // The reference solves the f32-rounded data exactly widened to f64, so
     // only the accumulator's arithmetic is measured, not the input rounding.
     let batch = Batch::from_blocks(&blocks);
@@ -175,8 +179,8 @@ fn shuffled<T: Clone>(v: &[T], seed: u64) -> Vec<T> {
 /// Same statistics up to rounding: counts exact, matrices within
 /// `m·ε` of their diagonal scale (sums of the same terms in another order).
 fn same_up_to_rounding<T: ToF64, const N: usize>(
-    a: &Accumulator<T, N>,
-    b: &Accumulator<T, N>,
+    a: &Accumulator<T, Const<N>>,
+    b: &Accumulator<T, Const<N>>,
 ) -> Result<(), TestCaseError> {
     prop_assert_eq!(a.equations(), b.equations());
     prop_assert_eq!(a.sigma_rows(), b.sigma_rows());
@@ -253,6 +257,138 @@ fn check_inverse_symmetric<const N: usize>(seed: u64, blocks: usize) -> Result<(
     Ok(())
 }
 
+/// What a solve estimates, as bit patterns (`Err` as its text): `X̂`, the
+/// mask, `rcond` and the equations. (The residual sum and `Λ⁻¹`: see
+/// [`same_rest`].)
+fn estimate_bits<T: ToF64, D: Dim>(
+    r: &Result<Solution<T, D>, robcal::Error>,
+) -> Result<Vec<u64>, String>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    match r {
+        Ok(s) => {
+            let mut v: Vec<u64> = s.x.iter().map(|x| x.bits()).collect();
+            v.extend(s.active.iter().map(|a| u64::from(*a)));
+            v.extend([s.rcond.bits(), s.equations as u64]);
+            Ok(v)
+        }
+        Err(e) => Err(format!("{e:?}")),
+    }
+}
+
+/// The residual sum and `Λ⁻¹` of two solves of the same data at `Const<N>`
+/// and `Dyn`: bit for bit when `strict`, otherwise bit for bit except
+/// where robcal hands the arithmetic to nalgebra routines that are not the
+/// same code at both sizes (found by this test and reported; the fix
+/// belongs in the library):
+///
+/// - `wrss = yy − X̂ᵀη` uses nalgebra's `dot`, which special-cases static
+///   vectors of 2, 3 and 4 elements; for 4 it sums
+///   `(x₀η₀ + x₂η₂) + (x₁η₁ + x₃η₃)` where the `Dyn` loop sums in order:
+///   at N = 4 the residual sum can differ in the last bits. Each order is within `N·ε·Σ|xᵢηᵢ|`
+///   of the exact dot product.
+/// - `Λ⁻¹ = S L⁻ᵀ L⁻¹ S` uses nalgebra's matrix product, which hands `Dyn`
+///   products with every dimension above 5 to the `matrixmultiply` crate
+///   (blocked kernels, FMA where the CPU has it): for N ≥ 6, `Λ⁻¹` (the
+///   eq. 13 covariance, and the sandwich through it) can differ in the
+///   last bits. Each order is within `N·ε` of the exact value elementwise
+///   against `√(Λ⁻¹ᵢᵢ Λ⁻¹ⱼⱼ)` (Cauchy–Schwarz on the rows of `L⁻¹`); the
+///   bound below allows `4N·ε`.
+fn same_rest<T: ToF64, const N: usize>(
+    a: &Result<Solution<T, Const<N>>, robcal::Error>,
+    d: &Result<Solution<T, Dyn>, robcal::Error>,
+    eta: &nalgebra::SVector<T, N>,
+    strict: bool,
+) -> Result<(), TestCaseError> {
+    let (Ok(a), Ok(d)) = (a, d) else {
+        return Ok(());
+    };
+    if strict || N != 4 {
+        prop_assert_eq!(a.wrss.bits(), d.wrss.bits(), "wrss differs bitwise");
+    } else {
+        let scale: f64 = (0..N).map(|i| (a.x[i] * eta[i]).f64().abs()).sum();
+        let tol = 4.0 * N as f64 * T::default_epsilon().f64() * scale;
+        let e = (a.wrss.f64() - d.wrss.f64()).abs();
+        prop_assert!(e <= tol, "wrss at Const and Dyn: {e:e} > {tol:e}");
+    }
+    if strict || N <= 5 {
+        let ab: Vec<u64> = a.lambda_inv.iter().map(|x| x.bits()).collect();
+        let db: Vec<u64> = d.lambda_inv.iter().map(|x| x.bits()).collect();
+        prop_assert_eq!(ab, db, "Λ⁻¹ differs bitwise at N = {}", N);
+    } else {
+        let dd = DMatrix::from_fn(N, N, |i, j| d.lambda_inv[(i, j)].f64());
+        let e = cov_rel_err(&a.lambda_inv, &dd);
+        let tol = 4.0 * N as f64 * T::default_epsilon().f64();
+        prop_assert!(e <= tol, "Λ⁻¹ at Const and Dyn: {e:e} > {tol:e}");
+    }
+    Ok(())
+}
+
+/// The promise of the Dim-generic core: the same blocks through
+/// `Accumulator<T, Const<N>>` (the firmware) and `Accumulator<T, Dyn>` (the
+/// host) are the same arithmetic in the same order, so the statistics, the
+/// estimate `X̂`, `rcond` and the identifiable set are bit-identical — also
+/// after a merge and for a random mask. No well-posedness is assumed: a
+/// refusal must be the same refusal. The residual sum and `Λ⁻¹` are
+/// bit-identical with `strict`, otherwise see [`same_rest`].
+fn check_const_equals_dyn<T: ToF64, const N: usize>(
+    seed: u64,
+    blocks: usize,
+    wdec: f64,
+    split: f64,
+    mask: u64,
+    strict: bool,
+) -> Result<(), TestCaseError> {
+    let mut rng = Rng::new(seed);
+    let scale: [f64; N] = core::array::from_fn(|j| 10f64.powi(j as i32 % 5 - 2));
+    let (b64, _) = random_blocks::<N>(&mut rng, &spec(blocks, wdec), &scale);
+    let fixed: Vec<Block<T, Const<N>>> = b64.iter().map(convert_block).collect();
+    let dynamic: Vec<Block<T, Dyn>> = fixed.iter().map(to_dyn).collect();
+    let a = accumulate(&fixed);
+    let d = accumulate_in(Dyn(N), &dynamic);
+    prop_assert_eq!(d.parameters(), N);
+    prop_assert_eq!(state_bits(&a), state_bits(&d), "statistics differ");
+    let (sa, sd) = (a.solve(), d.solve());
+    prop_assert_eq!(estimate_bits(&sa), estimate_bits(&sd), "solve differs");
+    same_rest(&sa, &sd, a.eta(), strict)?;
+    let active: Vec<bool> = (0..N).map(|j| mask >> (j % 64) & 1 == 1).collect();
+    let (sa, sd) = (a.solve_active(&active), d.solve_active(&active));
+    prop_assert_eq!(
+        estimate_bits(&sa),
+        estimate_bits(&sd),
+        "solve_active({:?}) differs",
+        active
+    );
+    same_rest(&sa, &sd, a.eta(), strict)?;
+    // The identifiable set and its conditioning, from the same Λ.
+    let settings = IdentifiabilitySettings::default();
+    let ia = identifiability(&a.information(), &[true; N], &settings);
+    let id = identifiability(&d.information(), &[true; N], &settings);
+    match (ia, id) {
+        (Ok(ia), Ok(id)) => {
+            prop_assert_eq!(ia.kept.as_slice(), id.kept.as_slice());
+            prop_assert_eq!(ia.rcond.bits(), id.rcond.bits());
+        }
+        (ia, id) => prop_assert_eq!(ia.err(), id.err()),
+    }
+    // Split, accumulate both halves, merge: the same merge at both sizes.
+    let k = ((blocks as f64) * split) as usize;
+    let mut am = accumulate(&fixed[..k]);
+    am.merge(&accumulate(&fixed[k..])).unwrap();
+    let mut dm = accumulate_in(Dyn(N), &dynamic[..k]);
+    dm.merge(&accumulate_in(Dyn(N), &dynamic[k..])).unwrap();
+    prop_assert_eq!(state_bits(&am), state_bits(&dm), "merged statistics differ");
+    let (sa, sd) = (am.solve(), dm.solve());
+    prop_assert_eq!(
+        estimate_bits(&sa),
+        estimate_bits(&sd),
+        "merged solve differs"
+    );
+    same_rest(&sa, &sd, am.eta(), strict)?;
+    Ok(())
+}
+
 proptest! {
     // 64 cases per property by default (fast `cargo test`); `PROPTEST_CASES`
     // overrides (`.ci/props.sh`).
@@ -317,19 +453,65 @@ proptest! {
     fn lambda_inv_exactly_symmetric_n6(seed: u64, blocks in 8usize..30) {
         check_inverse_symmetric::<6>(seed, blocks)?;
     }
+
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n1(seed: u64, blocks in 1usize..8, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 1>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n4(seed: u64, blocks in 2usize..16, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 4>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n5(seed: u64, blocks in 2usize..20, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 5>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 9>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f64_n12(seed: u64, blocks in 4usize..48, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 12>(seed, blocks, wdec, split, mask, false)?;
+    }
+    #[test]
+    fn const_equals_dyn_bitwise_f32_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f32, 9>(seed, blocks, wdec, split, mask, false)?;
+    }
+
+    // Every output bit for bit, the residual sum and Λ⁻¹ included: fails
+    // on this commit at N = 4 (nalgebra's `dot` of static 4-vectors) and
+    // N ≥ 6 (nalgebra's `Dyn` matrix product), see `same_rest`. Reported;
+    // remove the `ignore` when the core does these sums in its own loops.
+    #[test]
+    #[ignore = "robcal: residual sum at N = 4 and Λ⁻¹ at N >= 6 differ in the last bits between Const and Dyn (see same_rest)"]
+    fn const_equals_dyn_every_output_bitwise_f64_n4(seed: u64, blocks in 2usize..16, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 4>(seed, blocks, wdec, split, mask, true)?;
+    }
+    #[test]
+    #[ignore = "robcal: residual sum at N = 4 and Λ⁻¹ at N >= 6 differ in the last bits between Const and Dyn (see same_rest)"]
+    fn const_equals_dyn_every_output_bitwise_f64_n9(seed: u64, blocks in 3usize..30, wdec in 0.0..1.0f64, split in 0.0..1.0f64, mask: u64) {
+        check_const_equals_dyn::<f64, 9>(seed, blocks, wdec, split, mask, true)?;
+    }
 }
 
-/// The case that showed the eq. 7 bound needed κ (found by a 2000-case
-/// run; κ ≈ 60, 9 equations, 3 parameters).
+/// A case over the κ-free bound of eq. 7 (4.0× over it: error 1.55e-7
+/// against 3.86e-8; κ ≈ 34, 4 equations, 3 parameters; 0.12 of the bound
+/// with κ). The random stream changed with the move to the project's one
+/// generator (`robcal_paper::rng::SplitMix64`), so the seeds of the cases
+/// that first showed the bound needed κ (a 2000-case run, κ ≈ 60, 9
+/// equations; and `.ci/props.sh` on the parser-fuzzing branch, 2.53e-5
+/// against 2.30e-5) no longer draw them (0.56 and 0.03 of the κ-free bound
+/// now); these two were found by a search of 400 000 problems with the new
+/// stream, 5 of which were over the κ-free bound.
 #[test]
 fn eq7_bound_regression_kappa() {
-    check_f64::<3>(648_116_794_374_954_785, 3, 0.963_385_983_483_048_8).unwrap();
+    check_f64::<3>(5_753_322_206_045_857_732, 3, 0.9408).unwrap();
 }
 
-/// A second case over the κ-free bound (2.53e-5 against 2.30e-5), found by
-/// `.ci/props.sh` on the parser-fuzzing branch (wdec as reported, rounded
-/// to four digits, so this is the neighbourhood of that case).
+/// A second case over the κ-free bound (1.7×: 7.47e-6 against 4.33e-6;
+/// κ ≈ 53, 4 equations), from the same search.
 #[test]
 fn eq7_bound_regression_kappa_2() {
-    check_f64::<3>(4_652_127_773_476_234_132, 3, 0.9597).unwrap();
+    check_f64::<3>(14_111_439_246_169_560_396, 4, 0.977).unwrap();
 }

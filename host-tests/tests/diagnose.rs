@@ -1,9 +1,10 @@
 //! Tail probabilities and the nested F test of the diagnosis.
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::{Const, SMatrix, SVector, U3};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use robcal::{diagnose::nested_test, stats, Accumulator, Block};
+use robcal::estimate::{distributions as stats, nested_test};
+use robcal::{Accumulator, Block};
 
 #[test]
 fn chi2_tails_match_closed_forms() {
@@ -41,7 +42,7 @@ const N: usize = 5;
 
 /// Rows with columns 0..3 the model and 3..5 a candidate effect of size
 /// `effect` in column 3.
-fn problem(seed: u64, effect: f64) -> Accumulator<f64, N> {
+fn problem(seed: u64, effect: f64) -> Accumulator<f64, Const<N>> {
     let mut rng = StdRng::seed_from_u64(seed);
     let x = SVector::<f64, N>::new(1.0, -0.5, 2.0, effect, 0.0);
     let noise = Normal::new(0.0, 0.1).unwrap();
@@ -100,7 +101,7 @@ fn p_values_are_uniform_without_the_effect_and_small_with_it() {
 fn a_candidate_the_model_already_spans_is_not_identifiable() {
     // Rounding leaves a residue of either sign; try many data sets.
     for seed in 0..20 {
-        let mut acc = Accumulator::<f64, 3>::new();
+        let mut acc = Accumulator::<f64, U3>::new();
         let mut rng = StdRng::seed_from_u64(seed);
         for _ in 0..10 {
             let mut b = SMatrix::<f64, 3, 3>::from_fn(|_, _| rng.random_range(-1.0..1.0));

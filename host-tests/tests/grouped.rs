@@ -1,18 +1,15 @@
 //! Grouped sufficient statistics and the iterative reweighting, against
 //! direct computations on the raw rows.
 
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::{Const, SMatrix, SVector, Vector3, U2};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use robcal::{
-    grouped::GroupedStats,
-    irls::{Fit, IrlsSettings, Iteration, Reweightable},
-    weights::RobustWeight,
-    Accumulator, Block,
-};
+use robcal::estimate::{Fit, GroupedStats, IrlsSettings, Iteration, Reweightable, RobustWeight};
+use robcal::{Accumulator, Block};
 
 const N: usize = 4;
 const G: usize = 6;
+type D = Const<N>;
 
 struct Data {
     rows: Vec<(i32, SMatrix<f64, 3, N>, Vector3<f64>)>,
@@ -37,7 +34,7 @@ fn data(seed: u64) -> Data {
     Data { rows, sigma }
 }
 
-fn grouped(d: &Data) -> GroupedStats<f64, N, G> {
+fn grouped(d: &Data) -> GroupedStats<f64, D, G> {
     let mut s = GroupedStats::new();
     for (g, b, dp) in &d.rows {
         s.update(*g, b, dp).unwrap();
@@ -55,7 +52,7 @@ fn weighted_grouped_equals_direct_accumulation() {
     let stats = grouped(&d);
     let weights: Vec<Vector3<f64>> = d.sigma.iter().map(|s| s.map(|v| 1.0 / v)).collect();
     let from_groups = stats.weighted(&weights, Some(&d.sigma)).unwrap();
-    let mut direct = Accumulator::<f64, N>::new();
+    let mut direct = Accumulator::<f64, D>::new();
     for (g, b, dp) in &d.rows {
         let gi = (*g / 10) as usize;
         direct
@@ -84,7 +81,14 @@ fn residual_sigma_equals_direct_residuals() {
     let d = data(2);
     let stats = grouped(&d);
     let x = SVector::<f64, N>::new(0.9, -2.1, 0.4, 3.2);
-    let sigma = stats.residual_sigma(&x, N);
+    let mut sigma = vec![Vector3::zeros(); G];
+    stats.residual_sigma_into(&x, N, &mut sigma).unwrap();
+    // One σ per group, or a `Mismatch`.
+    let mut short = vec![Vector3::zeros(); G - 1];
+    assert!(matches!(
+        stats.residual_sigma_into(&x, N, &mut short),
+        Err(robcal::Error::Mismatch { .. })
+    ));
     let m = d.rows.len() * 3;
     let correction = m as f64 / (m - N) as f64;
     for (gi, s) in sigma.iter().enumerate() {
@@ -108,7 +112,7 @@ fn residual_sigma_equals_direct_residuals() {
 
 #[test]
 fn new_group_beyond_capacity_is_an_error_and_changes_nothing() {
-    let mut s = GroupedStats::<f64, 2, 1>::new();
+    let mut s = GroupedStats::<f64, U2, 1>::new();
     let b = SMatrix::<f64, 3, 2>::identity();
     s.update(0, &b, &Vector3::new(1.0, 2.0, 3.0)).unwrap();
     let before = s.clone();
@@ -128,10 +132,16 @@ fn irls_recovers_sigma_and_beats_ols() {
     let d = data(3);
     let stats = grouped(&d);
     let all = [true; N];
-    let ols: Fit<f64, N, G> = stats.fit_ols(&all).unwrap();
+    let (mut weights, mut sigma) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    let ols: Fit<f64, D> = stats.fit_ols(&all, &mut weights, &mut sigma).unwrap();
+    assert!(weights.iter().all(|w| *w == Vector3::repeat(1.0)));
     let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
-    let mut history = heapless::Vec::<Iteration<f64, N>, 64>::new();
-    let fit: Fit<f64, N, G> = stats.fit_irls(&settings, &all, &mut history).unwrap();
+    let mut history = Vec::<Iteration<f64, D>>::new();
+    let fit: Fit<f64, D> = stats
+        .fit_irls(&settings, &all, &mut weights, &mut sigma, |it| {
+            history.push(*it)
+        })
+        .unwrap();
     assert!(fit.converged, "iterations {}", fit.iterations);
     assert_eq!(history.len(), fit.iterations + 1);
     assert_eq!(history[0].x, ols.solution.x);
@@ -139,7 +149,7 @@ fn irls_recovers_sigma_and_beats_ols() {
     assert!(history.last().unwrap().change < settings.tolerance);
     // Weights are eq. 14 of the previous iteration's σ (here: the final σ
     // of a converged fit is close to the one that made its weights).
-    for (w, s) in fit.weights.iter().zip(d.sigma.iter()) {
+    for (w, s) in weights.iter().zip(d.sigma.iter()) {
         for a in 0..3 {
             // The weights follow eq. 14 of the true σ within the sampling
             // error of σ estimated from 60 rows (≈ 9 %; the bound is 4.4 of
@@ -148,7 +158,141 @@ fn irls_recovers_sigma_and_beats_ols() {
             assert!((w[a] / ideal - 1.0).abs() < 0.4, "{} vs {ideal}", w[a]);
         }
     }
+    // On return `sigma` is the residual σ of the final estimate.
+    let mut again = vec![Vector3::zeros(); G];
+    stats
+        .residual_sigma_into(&fit.solution.x, N, &mut again)
+        .unwrap();
+    assert_eq!(sigma, again);
     // WLS reports smaller variances than OLS on heteroscedastic data.
     let (so, sw) = (ols.std(), fit.std());
     assert!((0..N).all(|i| sw[i] < so[i]), "{so} vs {sw}");
+}
+
+/// One IRLS iteration: X̂, its standard deviations, the change.
+type Step = (Vec<f64>, Vec<f64>, f64);
+
+/// IRLS on the same grouped statistics at `Const<N>` (the device) and at
+/// `Dyn` (the host), every iteration recorded.
+struct Both {
+    history: [Vec<Step>; 2],
+    fits: (Fit<f64, D>, Fit<f64, nalgebra::Dyn>),
+    weights: [Vec<Vector3<f64>>; 2],
+    sigma: [Vec<Vector3<f64>>; 2],
+}
+
+fn irls_at_both_sizes(seed: u64) -> Both {
+    use nalgebra::Dyn;
+    let d = data(seed);
+    let fixed = grouped(&d);
+    let mut dynamic = GroupedStats::<f64, Dyn, G>::with_dim(Dyn(N));
+    for (g, b, dp) in &d.rows {
+        let b = nalgebra::OMatrix::<f64, nalgebra::U3, Dyn>::from_column_slice(b.as_slice());
+        dynamic.update(*g, &b, dp).unwrap();
+    }
+    let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
+    let all = [true; N];
+    let (mut wf, mut sf) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    let mut hf = Vec::new();
+    let ff = fixed
+        .fit_irls(&settings, &all, &mut wf, &mut sf, |it| {
+            hf.push((
+                it.x.as_slice().to_vec(),
+                it.std.as_slice().to_vec(),
+                it.change,
+            ))
+        })
+        .unwrap();
+    let (mut wd, mut sd) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    let mut hd = Vec::new();
+    let fd = dynamic
+        .fit_irls(&settings, &all, &mut wd, &mut sd, |it| {
+            hd.push((
+                it.x.as_slice().to_vec(),
+                it.std.as_slice().to_vec(),
+                it.change,
+            ))
+        })
+        .unwrap();
+    assert!(hf.len() > 2, "a few iterations");
+    Both {
+        history: [hf, hd],
+        fits: (ff, fd),
+        weights: [wf, wd],
+        sigma: [sf, sd],
+    }
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The same grouped statistics at `Dyn` iterate as at `Const<N>`: the OLS
+/// start bit for bit (statistics and solve are the same loops), then every
+/// iteration to rounding, with the same number of iterations.
+///
+/// Not bit for bit past the start (found porting this test; reported): the
+/// residual σ per group comes from `yy − 2Xᵀu + XᵀSX` with nalgebra's
+/// `dot`, which sums static 4-vectors as `(a₀b₀ + a₂b₂) + (a₁b₁ + a₃b₃)`
+/// and `Dyn` ones in order, so at N = 4 the σ, hence the weights, hence
+/// the next estimate differ in the last bits (and the sandwich covariance
+/// goes through nalgebra's matrix product). The σ come from a difference
+/// that cancels (module docs of `grouped`): a last-bit difference in
+/// `Xᵀu` shows up in σ² amplified by `yy / RSS`, up to 1.1e4 for this
+/// data, so "to rounding" is `64 ε · 1.1e4` ≈ 1.6e-10 relative, after which
+/// the iteration contracts.
+#[test]
+fn irls_at_dyn_equals_const() {
+    let b = irls_at_both_sizes(4);
+    let [hf, hd] = &b.history;
+    assert_eq!(bits(&hf[0].0), bits(&hd[0].0), "the OLS start");
+    assert_eq!(hf.len(), hd.len());
+    assert_eq!(
+        (b.fits.0.iterations, b.fits.0.converged),
+        (b.fits.1.iterations, b.fits.1.converged)
+    );
+    let rel = |a: &[f64], b: &[f64]| {
+        let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        a.iter()
+            .zip(b)
+            .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs() / scale))
+    };
+    let tol = 64.0 * f64::EPSILON * 1.1e4;
+    for (k, (f, d)) in hf.iter().zip(hd).enumerate() {
+        assert!(
+            rel(&f.0, &d.0) < tol,
+            "iteration {k}: {:?} vs {:?}",
+            f.0,
+            d.0
+        );
+        assert!(
+            rel(&f.1, &d.1) < tol,
+            "iteration {k}: {:?} vs {:?}",
+            f.1,
+            d.1
+        );
+    }
+    let flat = |v: &[Vector3<f64>]| v.iter().flat_map(|x| x.iter().copied()).collect::<Vec<_>>();
+    assert!(rel(&flat(&b.weights[0]), &flat(&b.weights[1])) < tol);
+    assert!(rel(&flat(&b.sigma[0]), &flat(&b.sigma[1])) < tol);
+}
+
+/// The same, bit for bit: what the Dim-generic core promises. Fails on this
+/// commit (see [`irls_at_dyn_equals_const`]); remove the `ignore` when the
+/// core's dot products and matrix products are its own loops.
+#[test]
+#[ignore = "robcal: nalgebra's dot of static 4-vectors and its Dyn matrix product sum in other orders than at Const"]
+fn irls_at_dyn_equals_const_bitwise() {
+    let b = irls_at_both_sizes(4);
+    let [hf, hd] = &b.history;
+    let all_bits = |h: &[Step]| {
+        h.iter()
+            .map(|(x, s, c)| (bits(x), bits(s), c.to_bits()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(all_bits(hf), all_bits(hd));
+    assert_eq!(
+        bits(b.fits.0.covariance.as_slice()),
+        bits(b.fits.1.covariance.as_slice())
+    );
 }

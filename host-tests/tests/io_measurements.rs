@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use host_tests::Rng;
 use robcal::io::{
     parse_measurements, read_measurements, write_measurements, AngleUnit, ErrorKind, InputError,
     Job, LengthUnit, Measurements, Observation, Units,
@@ -368,22 +369,9 @@ fn read_from_file_and_missing_file() {
     assert_eq!((e.kind, e.file), (ErrorKind::Io, temp("none.csv")));
 }
 
-/// xorshift64*: deterministic test values without a dependency on rand's API.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
-
 fn rows(n: usize, time: bool) -> Vec<Observation> {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    // The project's one seeded generator: deterministic test values.
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut out = Vec::new();
     for i in 0..n {
         let q = vec![

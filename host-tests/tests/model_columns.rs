@@ -5,10 +5,11 @@ mod model_common;
 
 use model_common::*;
 use nalgebra::{Matrix3, Vector3};
-use robcal::elastostatic::{
-    compliance_columns, deflection_m, gravity_torques, joint_torques, PointLoad, Wrench,
+use robcal::model::{
+    base_columns, compliance_columns, deflection_m, joint_frame_columns, joint_offset_columns,
+    marker_columns,
 };
-use robcal::geometric::{base_columns, joint_frame_columns, joint_offset_columns, marker_columns};
+use robcal::robot::{gravity_torques, joint_torques, PointLoad, Wrench};
 use robcal::Chain;
 
 /// Central-difference step. Truncation error ~h² (1e-12 relative), rounding
@@ -281,4 +282,94 @@ fn short_slices_are_errors() {
     assert!(joint_offset_columns(&frames, &Vector3::x(), &mut cols).is_err());
     assert!(compliance_columns(&frames, &Vector3::x(), &[0.0; 6], &mut cols).is_err());
     assert!(joint_frame_columns(&frames, 6, &Vector3::x()).is_err());
+}
+
+/// `Param::column` is the free functions above in the parameter's reported
+/// unit (`mm`, `mrad`, `urad/(N*m)`, `um/N`: SI × 1e-3 or 1e-6) on an
+/// absolute sample; on a deflection the geometric parameters cancel (zero
+/// columns) and the compliances act with the sample's torques.
+fn param_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
+    use robcal::model::{Param, Sample};
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let marker = [0.12, -0.07, 0.2];
+    let g = Vector3::new(0.0, 0.0, -9.80665);
+    let same = |a: Vector3<f64>, b: Vector3<f64>, what: &str| {
+        assert!(
+            (a - b).norm() <= 1e-15 * (1.0 + b.norm()),
+            "{what}: {a:?} vs {b:?}"
+        )
+    };
+    for q in poses {
+        let frames = chain.frames(q).unwrap();
+        let p = frames.point_m(&v(marker));
+        let mut tau = [0.0; J];
+        gravity_torques(&chain, &frames, &g, &mut tau).unwrap();
+        let abs = Sample::absolute(&frames, p, 2, &tau[..n]);
+        let def = Sample::deflection(&frames, p, 2, &tau[..n], None);
+        let mut offsets = [Vector3::zeros(); J];
+        joint_offset_columns(&frames, &p, &mut offsets).unwrap();
+        let mut compliances = [Vector3::zeros(); J];
+        compliance_columns(&frames, &p, &tau[..n], &mut compliances).unwrap();
+        for j in 0..n {
+            let joint = j as u8;
+            let off = Param::JointOffset { joint };
+            same(off.column(&abs).unwrap(), offsets[j] * 1e-3, "offset");
+            same(
+                off.column(&def).unwrap(),
+                Vector3::zeros(),
+                "offset, deflection",
+            );
+            let k = Param::Compliance { joint };
+            same(k.column(&abs).unwrap(), compliances[j] * 1e-6, "compliance");
+            same(
+                k.column(&def).unwrap(),
+                compliances[j] * 1e-6,
+                "compliance, deflection",
+            );
+            let six = joint_frame_columns(&frames, j, &p).unwrap();
+            for (a, col) in six.iter().enumerate() {
+                let fr = Param::JointFrame {
+                    joint,
+                    axis: a as u8,
+                };
+                same(fr.column(&abs).unwrap(), col * 1e-3, "joint frame");
+                same(
+                    fr.column(&def).unwrap(),
+                    Vector3::zeros(),
+                    "joint frame, deflection",
+                );
+            }
+        }
+        for (a, col) in base_columns(&p).iter().enumerate() {
+            let b = Param::Base { axis: a as u8 };
+            same(b.column(&abs).unwrap(), col * 1e-3, "base");
+        }
+        for (a, col) in marker_columns(&frames).iter().enumerate() {
+            let own = Param::Marker {
+                marker: 2,
+                axis: a as u8,
+            };
+            same(own.column(&abs).unwrap(), col * 1e-3, "marker");
+            let other = Param::Marker {
+                marker: 0,
+                axis: a as u8,
+            };
+            same(
+                other.column(&abs).unwrap(),
+                Vector3::zeros(),
+                "another marker",
+            );
+        }
+        // A joint the chain does not have, an axis out of range.
+        assert!(Param::JointOffset { joint: n as u8 }.column(&abs).is_err());
+        assert!(Param::Base { axis: 6 }.column(&abs).is_err());
+    }
+}
+
+#[test]
+fn param_columns_are_the_free_functions_in_reported_units() {
+    let c = cases();
+    param_case::<6>(&c[0].0, &c[0].1);
+    param_case::<7>(&c[1].0, &c[1].1);
 }

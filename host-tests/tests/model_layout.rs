@@ -4,12 +4,11 @@
 mod model_common;
 
 use model_common::*;
-use nalgebra::{SMatrix, SVector, Vector3};
-use robcal::elastostatic::{compliance_columns, joint_torques, PointLoad};
-use robcal::layout::{
-    angle_urad, identifiability, IdentifiabilitySettings, Layout, Marker, Param, Pivoting,
-};
-use robcal::{Accumulator, Block, Chain, Error};
+use nalgebra::{Const, SMatrix, SVector, Vector3, U1};
+use robcal::estimate::{identifiability, IdentifiabilitySettings, Pivoting};
+use robcal::model::{angle_urad, compliance_columns, Layout, Marker, Param, Sample};
+use robcal::robot::{gravity_torques, joint_torques, PointLoad};
+use robcal::{Accumulator, Block, Chain, Error, Solution};
 
 const Q2_BINS_DEG: [f64; 5] = [-0.01, -25.24, -56.9, -99.85, -140.0];
 
@@ -26,7 +25,7 @@ fn markers() -> Vec<Marker<f64>> {
         .iter()
         .enumerate()
         .map(|(i, m)| Marker {
-            id: i as u8 + 1,
+            index: i as u8,
             xyz_m: v(*m),
         })
         .collect()
@@ -35,12 +34,11 @@ fn markers() -> Vec<Marker<f64>> {
 /// The paper's model: k21…k25 (A2 by angle), k3…k6.
 fn paper_layout(chain: &Chain<f64, 6>) -> Layout<9> {
     let mut l = Layout::new();
-    for (bin, q2) in Q2_BINS_DEG.iter().enumerate() {
+    for q2 in Q2_BINS_DEG {
         l.push(
             chain,
-            Param::ComplianceByAngle {
+            Param::ComplianceAt {
                 joint: 1,
-                bin: bin as u8,
                 angle_urad: angle_urad(q2.to_radians()),
             },
         )
@@ -52,16 +50,42 @@ fn paper_layout(chain: &Chain<f64, 6>) -> Layout<9> {
     l
 }
 
-/// Λ of a layout over the paper's configurations and markers.
+/// Gravity \[m/s²\] in the base frame.
+const G: [f64; 3] = [0.0, 0.0, -9.80665];
+
+/// `B` of an absolute position measurement (geometric calibration, eq. 2)
+/// of marker `m` at `q`: every parameter acts, the joints carry the robot's
+/// own weight. (`Layout::block` builds a deflection: loaded minus unloaded
+/// position at the same pose, where geometric parameters cancel.)
+fn absolute_block<const N: usize, const M: usize>(
+    layout: &Layout<N>,
+    chain: &Chain<f64, 6>,
+    q: &[f64],
+    m: &Marker<f64>,
+) -> SMatrix<f64, 3, M> {
+    let frames = chain.frames(q).unwrap();
+    let mut tau = [0.0; 6];
+    gravity_torques(chain, &frames, &v(G), &mut tau).unwrap();
+    let sample = Sample::absolute(&frames, frames.point_m(&m.xyz_m), m.index, &tau);
+    let mut b = SMatrix::zeros();
+    layout.fill(&sample, &mut b).unwrap();
+    b
+}
+
+/// Λ of a layout over the paper's configurations and markers: deflections
+/// under `load`, or absolute positions without one.
 fn information<const N: usize>(
     layout: &Layout<N>,
     chain: &Chain<f64, 6>,
     load: Option<&PointLoad<f64>>,
 ) -> SMatrix<f64, N, N> {
-    let mut acc = Accumulator::<f64, N>::new();
+    let mut acc = Accumulator::<f64, Const<N>>::new();
     for q in PAPER_Q_DEG.iter().map(|q| rad(q)) {
         for m in markers() {
-            let b = layout.block(chain, &q, &m, load).unwrap();
+            let b = match load {
+                Some(l) => layout.block(chain, &q, &m, Some(l)).unwrap(),
+                None => absolute_block(layout, chain, &q, &m),
+            };
             acc.update(&Block::new(b, Vector3::zeros())).unwrap();
         }
     }
@@ -72,13 +96,14 @@ fn information<const N: usize>(
 fn paper_experiment_rows_recover_the_compliances() {
     let chain: Chain<f64, 6> = kr270().chain();
     let layout = paper_layout(&chain);
-    assert_eq!(layout.columns()[0].unit, "urad/(N*m)");
+    assert_eq!(layout.columns()[0].unit.name, "urad/(N*m)");
+    assert_eq!(layout.columns()[0].unit.si, 1e-6);
     // Table 3, WLS, µrad/(N·m).
     let k = SVector::<f64, 9>::from_column_slice(&[
         0.287, 0.277, 0.302, 0.293, 0.246, 0.416, 2.786, 3.483, 2.074,
     ]);
     let load = load(270.0);
-    let mut acc = Accumulator::<f64, 9>::new();
+    let mut acc = Accumulator::<f64, Const<9>>::new();
     for (c, q) in PAPER_Q_DEG.iter().map(|q| rad(q)).enumerate() {
         let frames = chain.frames(&q).unwrap();
         let mut tau = [0.0; 6];
@@ -108,7 +133,7 @@ fn paper_experiment_rows_recover_the_compliances() {
     assert!((sol.x - k).norm() < 1e-9 * k.norm(), "{:?}", sol.x);
     let report = identifiability(&acc.information(), &[true; 9], &Default::default()).unwrap();
     assert_eq!(report.rank(), 9);
-    assert!(report.dropped.is_empty());
+    assert_eq!(report.left_out().count(), 0);
 }
 
 #[test]
@@ -125,17 +150,21 @@ fn vertical_load_leaves_a1_compliance_unidentifiable() {
             ..Default::default()
         };
         let report = identifiability(&lambda, &[true; 6], &settings).unwrap();
-        assert_eq!(report.kept, [false, true, true, true, true, true]);
-        let d = report.dropped_param(0).unwrap();
+        assert_eq!(
+            report.kept.as_slice(),
+            [false, true, true, true, true, true]
+        );
+        assert!(report.is_left_out(0));
         assert!(
-            d.absorbed_by.is_empty(),
+            report.absorbed_by(0).is_empty(),
             "no information, nothing absorbs it"
         );
-        assert_eq!(report.dropped.len(), 1);
+        assert_eq!(report.residual(0), 0.0);
+        assert_eq!(report.left_out().collect::<Vec<_>>(), [0]);
     }
     // And the solve on the kept set works.
     let report = identifiability(&lambda, &[true; 6], &Default::default()).unwrap();
-    assert!(robcal::solve::solve(&lambda, &SVector::zeros(), 0.0, 270, &report.kept).is_ok());
+    assert!(Solution::new(&lambda, &SVector::zeros(), 0.0, 270, report.kept.as_slice()).is_ok());
 }
 
 #[test]
@@ -154,14 +183,15 @@ fn a1_offset_is_absorbed_by_base_yaw() {
     // Layout order: the base comes first, so a1's offset is the one dropped.
     let report = identifiability(&lambda, &[true; 12], &Default::default()).unwrap();
     assert_eq!(report.rank(), 11);
-    let d = report.dropped_param(a1).unwrap();
-    assert!(d.residual < 1e-10);
+    assert!(report.is_left_out(a1));
+    assert!(report.residual(a1) < 1e-10);
     // a1's axis is −z through the base origin: its offset column is minus
     // the base yaw column, both in mrad.
-    let top = d.absorbed_by[0];
+    let absorbed = report.absorbed_by(a1);
+    let top = absorbed[0];
     assert_eq!(top.param, yaw);
     assert!((top.coefficient + 1.0).abs() < 1e-8, "{top:?}");
-    assert_eq!(d.absorbed_by.len(), 1, "{:?}", d.absorbed_by);
+    assert_eq!(absorbed.len(), 1, "{absorbed:?}");
     // Largest-pivot order drops one of the two and names the other.
     let s = IdentifiabilitySettings {
         pivoting: Pivoting::Largest,
@@ -169,42 +199,50 @@ fn a1_offset_is_absorbed_by_base_yaw() {
     };
     let report = identifiability(&lambda, &[true; 12], &s).unwrap();
     assert_eq!(report.rank(), 11);
-    let d = &report.dropped[0];
-    let other = if d.param == a1 { yaw } else { a1 };
-    assert!(d.param == a1 || d.param == yaw);
-    assert_eq!(d.absorbed_by[0].param, other);
-    assert!((d.absorbed_by[0].scaled + 1.0).abs() < 1e-8);
+    let left: Vec<usize> = report.left_out().collect();
+    assert_eq!(left.len(), 1);
+    let d = left[0];
+    let other = if d == a1 { yaw } else { a1 };
+    assert!(d == a1 || d == yaw);
+    let absorbed = report.absorbed_by(d);
+    assert_eq!(absorbed[0].param, other);
+    assert!((absorbed[0].scaled + 1.0).abs() < 1e-8);
     // Without the base yaw among the candidates the offset is identifiable.
     let mut cand = [true; 12];
     cand[yaw] = false;
     let report = identifiability(&lambda, &cand, &Default::default()).unwrap();
     assert_eq!(report.rank(), 11);
-    assert!(report.dropped.is_empty());
+    assert_eq!(report.left_out().count(), 0);
     assert!(!report.kept[yaw]);
+    assert!(
+        !report.is_left_out(yaw),
+        "not a candidate: neither kept nor left out"
+    );
 }
 
 #[test]
 fn marker_columns_only_for_their_marker_and_bins_must_match() {
     let chain: Chain<f64, 6> = kr270().chain();
     let mut layout = Layout::<4>::new();
+    // The second marker (indices count from 0).
     layout
-        .push(&chain, Param::Marker { id: 2, axis: 0 })
+        .push(&chain, Param::Marker { marker: 1, axis: 0 })
         .unwrap();
     layout
         .push(
             &chain,
-            Param::ComplianceByAngle {
+            Param::ComplianceAt {
                 joint: 1,
-                bin: 0,
                 angle_urad: angle_urad(-0.01f64.to_radians()),
             },
         )
         .unwrap();
     let q = rad(&PAPER_Q_DEG[0]);
     let ms = markers();
-    let l = load(100.0);
-    let b1: SMatrix<f64, 3, 4> = layout.block(&chain, &q, &ms[0], Some(&l)).unwrap();
-    let b2: SMatrix<f64, 3, 4> = layout.block(&chain, &q, &ms[1], Some(&l)).unwrap();
+    // Absolute positions: the marker parameter acts on its own marker, the
+    // compliance under the robot's own weight.
+    let b1: SMatrix<f64, 3, 4> = absolute_block(&layout, &chain, &q, &ms[0]);
+    let b2: SMatrix<f64, 3, 4> = absolute_block(&layout, &chain, &q, &ms[1]);
     assert_eq!(b1.column(0).norm(), 0.0);
     assert!(
         (b2.column(0).norm() - 1e-3).abs() < 1e-15,
@@ -216,17 +254,32 @@ fn marker_columns_only_for_their_marker_and_bins_must_match() {
         0.0,
         "columns past the layout"
     );
+    // Deflections under a load: the marker's position cancels, the
+    // compliance under the load acts.
+    let l = load(100.0);
+    let d2: SMatrix<f64, 3, 4> = layout.block(&chain, &q, &ms[1], Some(&l)).unwrap();
+    assert_eq!(d2.column(0).norm(), 0.0, "geometry cancels in a deflection");
+    assert!(d2.column(1).norm() > 0.0);
     // q2 = −25.24°: no bin of joint 1 matches.
     let q4 = rad(&PAPER_Q_DEG[3]);
     let mut b = SMatrix::<f64, 3, 4>::repeat(7.0);
     let frames = chain.frames(&q4).unwrap();
+    let sample = Sample::deflection(
+        &frames,
+        frames.point_m(&ms[0].xyz_m),
+        ms[0].index,
+        &[0.0; 6],
+        None,
+    );
     assert!(matches!(
-        layout.fill(&frames, &ms[0], &[0.0; 6], &mut b),
+        layout.fill(&sample, &mut b),
         Err(Error::Mismatch { .. })
     ));
     assert_eq!(b, SMatrix::<f64, 3, 4>::repeat(7.0), "unchanged on error");
     // A layout wider than B.
-    assert!(layout.block::<f64, 6, 1>(&chain, &q, &ms[0], None).is_err());
+    assert!(layout
+        .block::<f64, 6, U1>(&chain, &q, &ms[0], None)
+        .is_err());
 }
 
 #[test]
@@ -242,14 +295,15 @@ fn push_validates() {
         Err(Error::OutOfRange { .. })
     ));
     assert!(matches!(
-        layout.push(&chain, Param::Marker { id: 1, axis: 3 }),
+        layout.push(&chain, Param::Marker { marker: 0, axis: 3 }),
         Err(Error::OutOfRange { .. })
     ));
     assert_eq!(
         layout.push(&chain, Param::JointFrame { joint: 2, axis: 4 }),
         Ok(0)
     );
-    assert_eq!(layout.columns()[0].unit, "mrad");
+    assert_eq!(layout.columns()[0].unit.name, "mrad");
+    assert_eq!(layout.columns()[0].unit.si, 1e-3);
     assert!(matches!(
         layout.push(&chain, Param::JointFrame { joint: 2, axis: 4 }),
         Err(Error::Mismatch { .. })
@@ -260,24 +314,29 @@ fn push_validates() {
         Err(Error::CapacityExceeded { .. })
     ));
     assert_eq!(layout.len(), 2);
-    assert_eq!(format!("{}", layout.columns()[0].param), "joint2.ry");
+    // Generic names with joint indices (the host names them after the
+    // URDF's joints instead).
+    assert_eq!(format!("{}", layout.columns()[0].param), "j2.ry");
+    assert_eq!(format!("{}", layout.columns()[1].param), "k_j5");
     assert_eq!(
         format!(
             "{}",
-            Param::ComplianceByAngle {
+            Param::ComplianceAt {
                 joint: 1,
-                bin: 1,
                 angle_urad: angle_urad(-25.24f64.to_radians())
             }
         ),
-        "k_joint1@-25.24deg"
+        "k_j1@-25.24deg"
     );
     // Prismatic joints get length units.
     let arm: Chain<f64, 7> = arm7().chain();
     let mut l = Layout::<2>::new();
     l.push(&arm, Param::JointOffset { joint: 1 }).unwrap();
     l.push(&arm, Param::Compliance { joint: 1 }).unwrap();
-    assert_eq!((l.columns()[0].unit, l.columns()[1].unit), ("mm", "um/N"));
+    assert_eq!(
+        (l.columns()[0].unit.name, l.columns()[1].unit.name),
+        ("mm", "um/N")
+    );
 }
 
 #[test]
@@ -285,6 +344,44 @@ fn identifiability_rejects_non_finite_information() {
     let mut lambda = SMatrix::<f64, 2, 2>::identity();
     lambda[(0, 1)] = f64::NAN;
     assert!(identifiability(&lambda, &[true; 2], &Default::default()).is_err());
+}
+
+/// The default tolerance of the identifiability test is
+/// `independence_tolerance()` = 1e-6 in f64, a margin of ~64 over the
+/// solver's `√ε` (1.5e-8): a parameter whose column is explained to
+/// `1 − R²` = 1e-7 by the others is left out by default, though the solver
+/// would still take it. Candidates not passed are ignored; a mask of the
+/// wrong length is a `Mismatch`.
+#[test]
+fn identifiability_tolerance_has_a_margin_over_the_solver() {
+    use robcal::estimate::{independence_tolerance, pivot_tolerance};
+    assert_eq!(independence_tolerance::<f64>(), 1e-6);
+    let settings = IdentifiabilitySettings::<f64>::default();
+    assert_eq!(settings.tolerance, 1e-6);
+    assert_eq!(settings.negligible, f64::EPSILON * f64::EPSILON);
+    // Columns with correlation c, 1 − c² = 1e-7 (scaled: unit diagonal).
+    let c = (1.0 - 1e-7f64).sqrt();
+    let lambda = SMatrix::<f64, 3, 3>::new(1.0, c, 0.0, c, 1.0, 0.0, 0.0, 0.0, 4.0);
+    let r = identifiability(&lambda, &[true; 3], &settings).unwrap();
+    assert_eq!(r.kept.as_slice(), [true, false, true]);
+    assert!((r.residual(1) - 1e-7).abs() < 1e-12, "{}", r.residual(1));
+    assert_eq!(r.absorbed_by(1)[0].param, 0);
+    // At the solver's own tolerance it is kept, and the solver takes it.
+    let at_solver = IdentifiabilitySettings {
+        tolerance: pivot_tolerance::<f64>(),
+        ..settings
+    };
+    let r = identifiability(&lambda, &[true; 3], &at_solver).unwrap();
+    assert_eq!(r.rank(), 3);
+    assert!(Solution::new(&lambda, &SVector::zeros(), 0.0, 9, &[true; 3]).is_ok());
+    // Not a candidate: neither kept nor left out.
+    let r = identifiability(&lambda, &[true, false, true], &settings).unwrap();
+    assert_eq!(r.kept.as_slice(), [true, false, true]);
+    assert!(!r.is_left_out(1));
+    assert!(matches!(
+        identifiability(&lambda, &[true; 2], &settings),
+        Err(Error::Mismatch { .. })
+    ));
 }
 
 #[test]
@@ -311,7 +408,7 @@ fn f32_rows_agree_with_f64() {
     };
     let m = markers()[0];
     let m32 = Marker {
-        id: m.id,
+        index: m.index,
         xyz_m: m.xyz_m.cast::<f32>(),
     };
     let q = rad(&PAPER_Q_DEG[7]);
@@ -320,7 +417,7 @@ fn f32_rows_agree_with_f64() {
     let b32: SMatrix<f32, 3, 9> = layout.block(&chain32, &q32, &m32, Some(&l32)).unwrap();
     // f32 rounding, relative ~1e-6 on columns of ~1e-2 m.
     assert!((b32.cast::<f64>() - b64).norm() < 1e-5 * b64.norm());
-    let mut acc = Accumulator::<f32, 9>::new();
+    let mut acc = Accumulator::<f32, Const<9>>::new();
     acc.update(&Block::new(b32, Vector3::zeros())).unwrap();
     let r = identifiability(&acc.information(), &[true; 9], &Default::default()).unwrap();
     assert!(r.rank() <= 3, "one marker, three rows");
@@ -360,14 +457,13 @@ fn frame_rotation_about_the_joint_axis_is_absorbed_by_the_offset() {
                 axis: 3 + k as u8,
             })
             .unwrap();
-        let d = report
-            .dropped_param(rot)
-            .unwrap_or_else(|| panic!("joint {j} rotation kept"));
-        assert!(d.residual < 1e-10);
+        assert!(report.is_left_out(rot), "joint {j} rotation kept");
+        assert!(report.residual(rot) < 1e-10);
         // Rotating the frame about its axis by δ is the offset δ·sign.
-        assert_eq!(d.absorbed_by.len(), 1, "{:?}", d.absorbed_by);
-        assert_eq!(d.absorbed_by[0].param, j);
-        assert!((d.absorbed_by[0].coefficient - sign).abs() < 1e-8);
+        let absorbed = report.absorbed_by(rot);
+        assert_eq!(absorbed.len(), 1, "{absorbed:?}");
+        assert_eq!(absorbed[0].param, j);
+        assert!((absorbed[0].coefficient - sign).abs() < 1e-8);
     }
 }
 
@@ -389,7 +485,7 @@ fn linear_model_under_the_full_paper_load() {
         joint_torques(&frames, &l.wrench(&frames), &mut tau).unwrap();
         for m in tool_markers() {
             let p = frames.point_m(&v(m));
-            let lin = robcal::elastostatic::deflection_m(&frames, &p, &tau, &k).unwrap();
+            let lin = robcal::model::deflection_m(&frames, &p, &tau, &k).unwrap();
             let qd: Vec<f64> = q
                 .iter()
                 .zip(&tau)

@@ -2,10 +2,10 @@
 //! sandwich (eq. 8 / 11) and eq. 13 against the Monte Carlo spread of the
 //! estimator under heteroscedastic noise.
 
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::{Const, SMatrix, SVector, Vector3, U1};
 use rand::{rngs::StdRng, Rng as _, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use robcal::weights::{inverse_sigma, RobustWeight};
+use robcal::estimate::{inverse_sigma, RobustWeight};
 use robcal::{Accumulator, Block};
 
 /// Section 4: one parameter, `Δpᵢ = xᵢ X + εᵢ`, `εᵢ ~ N(0, σᵢ²)`.
@@ -33,7 +33,7 @@ fn scalar_example_of_section_4() {
     assert!(var_wls < var_ols, "WLS must not be worse than OLS");
 
     let block = |i: usize, w: f64| {
-        let mut b = Block::<f64, 1>::new(
+        let mut b = Block::<f64, U1>::new(
             SMatrix::<f64, 3, 1>::new(x[i], 0.0, 0.0),
             Vector3::new(0.7 * x[i], 0.0, 0.0),
         )
@@ -44,7 +44,7 @@ fn scalar_example_of_section_4() {
     };
 
     // OLS.
-    let mut ols = Accumulator::<f64, 1>::new();
+    let mut ols = Accumulator::<f64, U1>::new();
     for i in 0..x.len() {
         ols.update(&block(i, 1.0)).unwrap();
     }
@@ -59,7 +59,7 @@ fn scalar_example_of_section_4() {
     assert!((sol.x[0] - 0.7).abs() < 1e-14);
 
     // WLS, W = Σ⁻¹.
-    let mut wls = Accumulator::<f64, 1>::new();
+    let mut wls = Accumulator::<f64, U1>::new();
     for (i, s) in sigma.iter().enumerate() {
         wls.update(&block(i, inverse_sigma(1.0, *s).unwrap()))
             .unwrap();
@@ -81,7 +81,7 @@ fn scalar_example_of_section_4() {
     // w = a/σ with a ≠ 1: Λ⁻¹ is scaled by 1/a², the sandwich is not (the
     // variance of the estimate does not depend on the unit of the weights).
     let a = 1e-5;
-    let mut wa = Accumulator::<f64, 1>::new();
+    let mut wa = Accumulator::<f64, U1>::new();
     for (i, s) in sigma.iter().enumerate() {
         wa.update(&block(i, inverse_sigma(a, *s).unwrap())).unwrap();
     }
@@ -91,6 +91,7 @@ fn scalar_example_of_section_4() {
 }
 
 const N: usize = 3;
+type D = Const<N>;
 const BLOCKS: usize = 30;
 /// Monte Carlo runs. The sample variance of R Gaussian draws has a relative
 /// standard error `√(2/(R−1))` = 1.0 % at R = 20 000; the tolerance is 5
@@ -126,7 +127,7 @@ fn design() -> Design {
 /// the sample covariance with the sandwich; returns the sandwich.
 fn monte_carlo(weight: impl Fn(f64) -> f64, seed: u64) -> SMatrix<f64, N, N> {
     let d = design();
-    let blocks: Vec<Block<f64, N>> = (0..BLOCKS)
+    let blocks: Vec<Block<f64, D>> = (0..BLOCKS)
         .map(|i| {
             Block::new(d.b[i], d.b[i] * d.x_true)
                 .with_weights(d.sigma[i].map(&weight))
@@ -134,7 +135,7 @@ fn monte_carlo(weight: impl Fn(f64) -> f64, seed: u64) -> SMatrix<f64, N, N> {
         })
         .collect();
     // The sandwich from one accumulation (noise does not enter Λ or M).
-    let mut acc = Accumulator::<f64, N>::new();
+    let mut acc = Accumulator::<f64, D>::new();
     for b in &blocks {
         acc.update(b).unwrap();
     }
@@ -145,7 +146,7 @@ fn monte_carlo(weight: impl Fn(f64) -> f64, seed: u64) -> SMatrix<f64, N, N> {
     let mut sum = SVector::<f64, N>::zeros();
     let mut sum2 = SMatrix::<f64, N, N>::zeros();
     for _ in 0..RUNS {
-        let mut acc = Accumulator::<f64, N>::new();
+        let mut acc = Accumulator::<f64, D>::new();
         for (b, s) in blocks.iter().zip(&d.sigma) {
             let noise = Vector3::from_fn(|i, _| s[i] * unit.sample(&mut rng));
             let mut nb = *b;
@@ -197,7 +198,7 @@ fn eq13_matches_monte_carlo_for_inverse_sigma_weights() {
     // W = Σ⁻¹: the sandwich equals Λ⁻¹ (eq. 13), and both match the spread.
     let sandwich = monte_carlo(|s| 1.0 / s, 3);
     let d = design();
-    let mut acc = Accumulator::<f64, N>::new();
+    let mut acc = Accumulator::<f64, D>::new();
     for i in 0..BLOCKS {
         acc.update(
             &Block::new(d.b[i], d.b[i] * d.x_true)

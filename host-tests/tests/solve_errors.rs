@@ -3,10 +3,11 @@
 //! the condition it saw), and that a solve never changes the accumulator.
 
 use host_tests::{snapshot, Rng, ToF64};
-use nalgebra::{SMatrix, Vector3};
+use nalgebra::{Const, SMatrix, Vector3, U2};
 use robcal::{Accumulator, Block, Error};
 
 const N: usize = 4;
+type D = Const<N>;
 
 /// Random blocks whose column `dup` is a copy of column `of` (times
 /// `factor`), or of the combination `col0 + col1` when `of == usize::MAX`.
@@ -15,7 +16,7 @@ fn with_dependent_column<T: ToF64>(
     of: usize,
     factor: f64,
     blocks: usize,
-) -> Accumulator<T, N> {
+) -> Accumulator<T, D> {
     let mut rng = Rng::new(3 + dup as u64);
     let mut acc = Accumulator::new();
     for _ in 0..blocks {
@@ -34,7 +35,7 @@ fn with_dependent_column<T: ToF64>(
     acc
 }
 
-fn not_identifiable<T: ToF64>(acc: &Accumulator<T, N>) -> (usize, f64) {
+fn not_identifiable<T: ToF64>(acc: &Accumulator<T, D>) -> (usize, f64) {
     let before = snapshot(acc);
     let r = acc.solve();
     assert_eq!(snapshot(acc), before, "solve changed the accumulator");
@@ -80,7 +81,7 @@ fn duplicate_column_names_the_later_column_f32() {
 
 #[test]
 fn zero_column_is_not_identifiable() {
-    let mut acc = Accumulator::<f64, N>::new();
+    let mut acc = Accumulator::<f64, D>::new();
     let mut rng = Rng::new(1);
     for _ in 0..4 {
         let mut b = SMatrix::<f64, 3, N>::from_fn(|_, _| rng.normal());
@@ -101,7 +102,7 @@ fn zero_column_is_not_identifiable() {
 
 #[test]
 fn too_few_equations() {
-    let mut acc = Accumulator::<f64, N>::new();
+    let mut acc = Accumulator::<f64, D>::new();
     assert_eq!(
         acc.solve(),
         Err(Error::TooFewEquations {
@@ -121,7 +122,7 @@ fn too_few_equations() {
         })
     );
     // Zero-weight rows are not equations.
-    let mut acc = Accumulator::<f64, 2>::new();
+    let mut acc = Accumulator::<f64, U2>::new();
     let b = SMatrix::<f64, 3, 2>::new(1.0, 0.0, 0.0, 1.0, 1.0, 1.0);
     acc.update(&Block::new(b, Vector3::zeros()).with_weights(Vector3::new(1.0, 0.0, 0.0)))
         .unwrap();
@@ -143,7 +144,7 @@ fn near_collinear_is_refused_with_the_condition_seen() {
     // below √ε ≈ 1.5e-8, i.e. around δ ≈ 1e-4; f32 below 3.5e-4, δ ≈ 2e-2.
     fn pivot_refusal<T: ToF64>(delta: f64) -> Result<f64, (usize, f64)> {
         let mut rng = Rng::new(5);
-        let mut acc = Accumulator::<T, 2>::new();
+        let mut acc = Accumulator::<T, U2>::new();
         for _ in 0..50 {
             let c0 = Vector3::from_fn(|_, _| rng.normal());
             let c1 = c0 + Vector3::from_fn(|_, _| delta * rng.normal());

@@ -251,7 +251,7 @@ pub fn arm7() -> RefRobot {
 
 /// The paper's 15 configurations (Table 2), degrees (data, shared with the
 /// crate: not code under test).
-pub const PAPER_Q_DEG: [[f64; 6]; 15] = robcal::kr270::CONFIGURATIONS_DEG;
+pub const PAPER_Q_DEG: [[f64; 6]; 15] = robcal_paper::kr270::CONFIGURATIONS_DEG;
 
 pub fn rad(q_deg: &[f64]) -> Vec<f64> {
     q_deg.iter().map(|d| d.to_radians()).collect()
