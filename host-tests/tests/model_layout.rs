@@ -63,13 +63,7 @@ fn absolute_block<const N: usize, const M: usize>(
     q: &[f64],
     m: &Marker<f64>,
 ) -> SMatrix<f64, 3, M> {
-    let frames = chain.frames(q).unwrap();
-    let mut tau = [0.0; 6];
-    gravity_torques(chain, &frames, &v(G), &mut tau).unwrap();
-    let sample = Sample::absolute(&frames, frames.point_m(&m.xyz_m), m.index, &tau);
-    let mut b = SMatrix::zeros();
-    layout.fill(&sample, &mut b).unwrap();
-    b
+    layout.absolute_block(chain, q, m, &v(G)).unwrap()
 }
 
 /// Λ of a layout over the paper's configurations and markers: deflections

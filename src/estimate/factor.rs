@@ -19,6 +19,7 @@
 //! - (13) `Λ⁻¹` itself, which is the covariance when `W Σ = I` (the paper
 //!   prints `Σ²` in (13) where it means `Σ⁻²`).
 
+use super::linalg::{dot, mat_mul};
 use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
@@ -302,10 +303,7 @@ where
         if !(x.iter().all(|v| v.is_finite()) && inv.iter().all(|v| v.is_finite())) {
             return Err(Error::NonFinite { what: "estimate" });
         }
-        // X̂ᵀη summed in index order (not nalgebra's `dot`, which sums small
-        // static vectors in another order than dynamic ones).
-        let xe = x.iter().zip(eta.iter()).fold(T::zero(), |s, (a, b)| s + *a * *b);
-        let wrss = (yy - xe).max(T::zero());
+        let wrss = (yy - dot(&x, eta)).max(T::zero());
         Ok(Self {
             x,
             lambda_inv: inv,
@@ -347,7 +345,7 @@ where
     /// `M = Bᵀ W² Σ² W² B` (e.g. [`super::Accumulator::middle`]).
     #[must_use]
     pub fn cov_sandwich(&self, middle: &OMatrix<T, D, D>) -> OMatrix<T, D, D> {
-        let c = &self.lambda_inv * middle * &self.lambda_inv;
+        let c = mat_mul(&mat_mul(&self.lambda_inv, middle), &self.lambda_inv);
         // Symmetrise what rounding left asymmetric.
         (&c + c.transpose()) * nalgebra::convert::<f64, T>(0.5)
     }

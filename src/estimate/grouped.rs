@@ -27,6 +27,7 @@ use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField, Vector3, U3};
 
 use super::accumulator::{symmetric, Accumulator};
+use super::linalg::{dot, mat_vec};
 use crate::Error;
 
 /// Moments of the rows of one group and one axis.
@@ -63,7 +64,7 @@ where
     pub fn rss(&self, x: &OVector<T, D>) -> T {
         let s = symmetric(&self.s_upper);
         let two = T::one() + T::one();
-        (self.yy - two * x.dot(&self.u) + (s * x).dot(x)).max(T::zero())
+        (self.yy - two * dot(x, &self.u) + dot(&mat_vec(&s, x), x)).max(T::zero())
     }
 }
 

@@ -55,6 +55,7 @@ pub mod distributions;
 pub mod factor;
 pub mod grouped;
 pub mod irls;
+mod linalg;
 pub mod nested;
 pub mod rank;
 pub mod weights;

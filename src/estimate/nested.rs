@@ -24,6 +24,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 use super::accumulator::Accumulator;
 use super::distributions;
 use super::factor::{pivot_tolerance, Solution};
+use super::linalg::{dot, mat_mul, mat_vec};
 use crate::Error;
 
 /// The outcome of one nested test.
@@ -89,8 +90,8 @@ where
     let dim = acc.dim();
     let lambda = acc.information();
     // Λ_CA Λ_AA⁻¹ Λ_AC: `lambda_inv` is zero outside A.
-    let through_model: OMatrix<T, D, D> = &lambda * &fit.lambda_inv * &lambda;
-    let lx: OVector<T, D> = &lambda * &fit.x;
+    let through_model: OMatrix<T, D, D> = mat_mul(&mat_mul(&lambda, &fit.lambda_inv), &lambda);
+    let lx: OVector<T, D> = mat_vec(&lambda, &fit.x);
     let mut schur = OMatrix::<T, D, D>::zeros_generic(dim, dim);
     let mut g = OVector::<T, D>::zeros_generic(dim, Const::<1>);
     for j in (0..n).filter(|&j| candidate[j]) {
@@ -119,7 +120,7 @@ where
     let z = Solution::new(&schur, &g, T::zero(), m, candidate)?;
     let to_f64 = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
     let rss_before = to_f64(fit.wrss);
-    let delta = to_f64(z.x.dot(&g)).clamp(0.0, rss_before);
+    let delta = to_f64(dot(&z.x, &g)).clamp(0.0, rss_before);
     let dof_den = m - p - q;
     let rss_after = rss_before - delta;
     let f = if delta <= 0.0 {

@@ -25,6 +25,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
 use super::accumulator::Accumulator;
 use super::factor::{cholesky_in_place, solve_lower_in_place, solve_upper_t_in_place};
+use super::linalg::dot;
 use crate::Error;
 
 /// Margin of [`independence_tolerance`] over the solver's `√ε`.
@@ -317,7 +318,7 @@ where
         } else {
             b.fill(T::zero());
         }
-        residual[d] = (T::one() - b.dot(&rhs)).max(T::zero());
+        residual[d] = (T::one() - dot(&b, &rhs)).max(T::zero());
         beta.set_column(d, &b);
     }
     Ok(Identifiability {

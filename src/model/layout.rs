@@ -30,7 +30,7 @@ use nalgebra::{DefaultAllocator, Dim, DimName, Matrix, OMatrix, RealField, Vecto
 
 use super::param::{Param, Unit, BIN_TOLERANCE_RAD};
 use super::sample::Sample;
-use crate::robot::{joint_torques, Chain, JointKind, PointLoad};
+use crate::robot::{gravity_torques, joint_torques, Chain, JointKind, PointLoad};
 use crate::Error;
 
 /// One column of a layout: the parameter and its unit.
@@ -182,11 +182,13 @@ impl<const N: usize> Layout<N> {
         Ok(())
     }
 
-    /// `B` (eq. 4) for one marker at joint values `q` under an optional
-    /// hanging load (the elastostatic experiment: the measured `Δp` is the
-    /// loaded minus the unloaded position, so only the load's torques
-    /// enter). Without a load, compliance columns are zero. `D` must hold
-    /// the layout (columns past it are zero).
+    /// `B` (eq. 4) of one **deflection** of a marker at joint values `q`
+    /// under an optional hanging load (the elastostatic experiment: the
+    /// measured `Δp` is the loaded minus the unloaded position, so only the
+    /// load's torques enter, and geometric parameters do not act: their
+    /// columns are zero). Without a load, compliance columns are zero too.
+    /// `D` must hold the layout (columns past it are zero). For an absolute
+    /// position, [`Layout::absolute_block`].
     ///
     /// # Errors
     /// As [`crate::Chain::frames`] and [`Layout::fill`].
@@ -208,6 +210,35 @@ impl<const N: usize> Layout<N> {
         }
         let point = frames.point_m(&marker.xyz_m);
         let sample = Sample::deflection(&frames, point, marker.index, &tau[..frames.dof()], wrench);
+        let mut b = OMatrix::<T, U3, D>::zeros();
+        self.fill(&sample, &mut b)?;
+        Ok(b)
+    }
+
+    /// `B` (eq. 4) of the **absolute position** of a marker at joint values
+    /// `q` (geometric calibration, eq. 2): every parameter acts, and the
+    /// robot's own weight under gravity `gravity_mps2` \[m/s², base frame\]
+    /// loads the joints (the chain's link inertias; compliance columns are
+    /// the deflection under it). The measured `Δp` is the position minus
+    /// the forward kinematics of the current model.
+    ///
+    /// # Errors
+    /// As [`crate::Chain::frames`] and [`Layout::fill`].
+    pub fn absolute_block<T: RealField + Copy, const J: usize, D: DimName>(
+        &self,
+        chain: &Chain<T, J>,
+        q: &[T],
+        marker: &Marker<T>,
+        gravity_mps2: &Vector3<T>,
+    ) -> Result<OMatrix<T, U3, D>, Error>
+    where
+        DefaultAllocator: Allocator<U3, D>,
+    {
+        let frames = chain.frames(q)?;
+        let mut tau = [T::zero(); J];
+        gravity_torques(chain, &frames, gravity_mps2, &mut tau)?;
+        let point = frames.point_m(&marker.xyz_m);
+        let sample = Sample::absolute(&frames, point, marker.index, &tau[..frames.dof()]);
         let mut b = OMatrix::<T, U3, D>::zeros();
         self.fill(&sample, &mut b)?;
         Ok(b)
