@@ -209,7 +209,7 @@ fn unused_rows_of_b_w_and_sigma_are_ignored() {
     assert_eq!(acc.equations(), 16);
 }
 
-// Finding F2 (host-tests/PROPOSED-FIXES.md): `Block::rows` says "rows past
+// A regression of the first session's finding F2: `Block::rows` says "rows past
 // it are ignored", and they are for B, w and σ, but not for Δp: the update
 // multiplies the zero weighted row by Δp[r] for all three rows, so a NaN or
 // ∞ in an unused Δp makes 0·NaN = NaN and the block is rejected as

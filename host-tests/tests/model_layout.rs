@@ -7,7 +7,7 @@ use model_common::*;
 use nalgebra::{Const, SMatrix, SVector, Vector3, U1};
 use robcal::estimate::{identifiability, IdentifiabilitySettings, Pivoting};
 use robcal::model::{angle_urad, compliance_columns, Layout, Marker, Param, Sample};
-use robcal::robot::{gravity_torques, joint_torques, PointLoad};
+use robcal::robot::{joint_torques, PointLoad};
 use robcal::{Accumulator, Block, Chain, Error, Solution};
 
 const Q2_BINS_DEG: [f64; 5] = [-0.01, -25.24, -56.9, -99.85, -140.0];
