@@ -52,8 +52,8 @@ fn assert_report(r: &Report, b: &BatchFit, what: &str) {
     assert_std(&sd, &b.cov, what);
     assert_cov(&r.covariance, &b.cov, what);
     for (n, s) in r.noise.iter().zip(&b.sigma) {
-        for a in 0..3 {
-            let e = (n.sigma_um[a] * 1e-6 - s[a]).abs() / s[a];
+        for (&got_um, &want_m) in n.sigma_um.iter().zip(s.iter()) {
+            let e = (got_um * 1e-6 - want_m).abs() / want_m;
             assert!(
                 e <= RTOL,
                 "{what}: σ of configuration {} rel {e:e}",

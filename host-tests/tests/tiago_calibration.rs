@@ -34,7 +34,9 @@ fn near(what: &str, got: f64, want: f64, tol: f64) {
 }
 
 /// (model, points, parameters, BL train, BL valid, all train, all valid) [mm].
-const TABLE: [(Model, &[u32], usize, f64, f64, f64, f64); 6] = [
+type Line = (Model, &'static [u32], usize, f64, f64, f64, f64);
+
+const TABLE: [Line; 6] = [
     (
         Model::Registration,
         &[1],

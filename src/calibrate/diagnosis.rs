@@ -55,12 +55,13 @@ fn extended(
     Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
 }
 
+/// The candidates of one round and the tests of those that could be
+/// tested: `(index into the candidates, test)`, most significant first.
+type Round = (Vec<Candidate>, Vec<(usize, Tested)>);
+
 /// Every candidate `current` lacks, tested against its residuals; most
 /// significant first.
-fn test_round(
-    e: &mut Engine<'_>,
-    current: &Fitted,
-) -> Result<(Vec<Candidate>, Vec<(usize, Tested)>), CalibrationError> {
+fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, CalibrationError> {
     let cands = candidates(
         &e.names,
         &current.params,
@@ -161,124 +162,127 @@ pub fn run(
     let mut last_round: Vec<Tested> = Vec::new();
     let mut plots: Vec<PlotSeries> = Vec::new();
     let mut rejected: Vec<String> = Vec::new();
-    while settings.diagnose {
-        let lof = lack_of_fit(
-            &e.rows,
-            &current.fit,
-            current.params.len(),
-            &current.residuals,
-        );
-        let (cands, tested) = test_round(&mut e, &current)?;
-        last_round = tested.iter().map(|t| t.1.clone()).collect();
-        let tried = tested.len().max(1) as f64;
-        let lof_significant = lof.is_some_and(|l| l.p_value < alpha);
-        let eligible: Vec<&(usize, Tested)> = tested
-            .iter()
-            .filter(|(_, t)| {
-                let significant = t.p_value * tried < alpha;
-                let share_ok = match lof {
-                    Some(l) if lof_significant && l.excess() > 0.0 => {
-                        t.delta_rss >= e.policy.min_share * l.excess()
+    if settings.diagnose {
+        loop {
+            let lof = lack_of_fit(
+                &e.rows,
+                &current.fit,
+                current.params.len(),
+                &current.residuals,
+            );
+            let (cands, tested) = test_round(&mut e, &current)?;
+            last_round = tested.iter().map(|t| t.1.clone()).collect();
+            let tried = tested.len().max(1) as f64;
+            let lof_significant = lof.is_some_and(|l| l.p_value < alpha);
+            let eligible: Vec<&(usize, Tested)> = tested
+                .iter()
+                .filter(|(_, t)| {
+                    let significant = t.p_value * tried < alpha;
+                    let share_ok = match lof {
+                        Some(l) if lof_significant && l.excess() > 0.0 => {
+                            t.delta_rss >= e.policy.min_share * l.excess()
+                        }
+                        _ => true,
+                    };
+                    significant && share_ok
+                })
+                .collect();
+            if !eligible.is_empty() && steps.len() >= e.policy.max_effects {
+                break;
+            }
+            // The most significant candidate whose estimate is physical and that
+            // lowers the leave-one-configuration-out RMS; one that fails is
+            // rejected (a note the first time) and the next is tried.
+            let mut accepted = None;
+            for (ci, t) in eligible {
+                let c = &cands[*ci];
+                let on = t
+                    .about
+                    .as_deref()
+                    .map(|a| format!(" on {a}"))
+                    .unwrap_or_default();
+                let new_params = extended(&e, &current.params, c)?;
+                let next = e.fit(&new_params)?;
+                let why = match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add)
+                {
+                    Some(why) => Some(format!("rejected: its estimate is not physical ({why})")),
+                    None => {
+                        let next = e.with_heldout(next)?;
+                        match (current.heldout_rms_um, next.heldout_rms_um) {
+                            (Some(before), Some(after)) if after >= before => Some(format!(
+                                "not added: significant (p = {:.1e}) but the \
+                             leave-one-configuration-out RMS does not drop \
+                             ({before:.1} -> {after:.1} um)",
+                                t.p_value
+                            )),
+                            _ => {
+                                accepted = Some((*ci, t.clone(), next));
+                                break;
+                            }
+                        }
                     }
-                    _ => true,
                 };
-                significant && share_ok
-            })
-            .collect();
-        if !eligible.is_empty() && steps.len() >= e.policy.max_effects {
-            break;
-        }
-        // The most significant candidate whose estimate is physical and that
-        // lowers the leave-one-configuration-out RMS; one that fails is
-        // rejected (a note the first time) and the next is tried.
-        let mut accepted = None;
-        for (ci, t) in eligible {
-            let c = &cands[*ci];
+                if let Some(why) = why {
+                    let key = format!("{}{on}", c.effect);
+                    if !rejected.contains(&key) {
+                        let note = format!("{key} {why} (step {})", steps.len() + 1);
+                        (e.progress)(&note);
+                        notes.push(note);
+                        rejected.push(key);
+                    }
+                    e.restore(&current)?;
+                }
+            }
+            let Some((ci, t, next)) = accepted else {
+                if let Some(l) = lof.filter(|_| lof_significant) {
+                    let (variable, _) =
+                        most_followed(&e.rows, &e.names, &current.fit.weights, &current.residuals);
+                    unexplained = Some(Unexplained {
+                        variable,
+                        statistic: l.f,
+                        p_value: l.p_value,
+                    });
+                }
+                break;
+            };
+            let c = &cands[ci];
             let on = t
                 .about
                 .as_deref()
                 .map(|a| format!(" on {a}"))
                 .unwrap_or_default();
-            let new_params = extended(&e, &current.params, c)?;
-            let next = e.fit(&new_params)?;
-            let why = match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add) {
-                Some(why) => Some(format!("rejected: its estimate is not physical ({why})")),
-                None => {
-                    let next = e.with_heldout(next)?;
-                    match (current.heldout_rms_um, next.heldout_rms_um) {
-                        (Some(before), Some(after)) if after >= before => Some(format!(
-                            "not added: significant (p = {:.1e}) but the \
-                             leave-one-configuration-out RMS does not drop \
-                             ({before:.1} -> {after:.1} um)",
-                            t.p_value
-                        )),
-                        _ => {
-                            accepted = Some((*ci, t.clone(), next));
-                            break;
-                        }
-                    }
-                }
-            };
-            if let Some(why) = why {
-                let key = format!("{}{on}", c.effect);
-                if !rejected.contains(&key) {
-                    let note = format!("{key} {why} (step {})", steps.len() + 1);
-                    (e.progress)(&note);
-                    notes.push(note);
-                    rejected.push(key);
-                }
-                e.restore(&current)?;
-            }
+            (e.progress)(&format!("adding {}{on} (p = {:.3e})", c.effect, t.p_value));
+            let (variable, x) = traced_variable(&e.rows, &e.names, c);
+            plots.push(PlotSeries {
+                title: format!(
+                    "{}{}",
+                    c.effect,
+                    t.about
+                        .as_deref()
+                        .map(|a| format!(" {a}"))
+                        .unwrap_or_default()
+                ),
+                variable,
+                x,
+                before_um: current.residuals.iter().map(|r| r * 1e6).collect(),
+                after_um: next.residuals.iter().map(|r| r * 1e6).collect(),
+            });
+            steps.push(EffectStep {
+                effect: c.effect,
+                joint: c.joint.map(|j| e.names.joints[j].clone()),
+                marker: c.marker.map(|m| e.names.marker_id(m)),
+                p_value: t.p_value,
+                f: t.f,
+                tried: tested.len(),
+                rms_um_before: current.rms_um,
+                rms_um_after: next.rms_um,
+                heldout_rms_um_before: current.heldout_rms_um,
+                heldout_rms_um_after: next.heldout_rms_um,
+                parameters_before: e.parameters(&current),
+                parameters_after: e.parameters(&next),
+            });
+            current = next;
         }
-        let Some((ci, t, next)) = accepted else {
-            if let Some(l) = lof.filter(|_| lof_significant) {
-                let (variable, _) =
-                    most_followed(&e.rows, &e.names, &current.fit.weights, &current.residuals);
-                unexplained = Some(Unexplained {
-                    variable,
-                    statistic: l.f,
-                    p_value: l.p_value,
-                });
-            }
-            break;
-        };
-        let c = &cands[ci];
-        let on = t
-            .about
-            .as_deref()
-            .map(|a| format!(" on {a}"))
-            .unwrap_or_default();
-        (e.progress)(&format!("adding {}{on} (p = {:.3e})", c.effect, t.p_value));
-        let (variable, x) = traced_variable(&e.rows, &e.names, c);
-        plots.push(PlotSeries {
-            title: format!(
-                "{}{}",
-                c.effect,
-                t.about
-                    .as_deref()
-                    .map(|a| format!(" {a}"))
-                    .unwrap_or_default()
-            ),
-            variable,
-            x,
-            before_um: current.residuals.iter().map(|r| r * 1e6).collect(),
-            after_um: next.residuals.iter().map(|r| r * 1e6).collect(),
-        });
-        steps.push(EffectStep {
-            effect: c.effect,
-            joint: c.joint.map(|j| e.names.joints[j].clone()),
-            marker: c.marker.map(|m| e.names.marker_id(m)),
-            p_value: t.p_value,
-            f: t.f,
-            tried: tested.len(),
-            rms_um_before: current.rms_um,
-            rms_um_after: next.rms_um,
-            heldout_rms_um_before: current.heldout_rms_um,
-            heldout_rms_um_after: next.heldout_rms_um,
-            parameters_before: e.parameters(&current),
-            parameters_after: e.parameters(&next),
-        });
-        current = next;
     }
     let final_lof: Option<LackOfFit> = lack_of_fit(
         &e.rows,

@@ -371,10 +371,10 @@ impl Compliances {
         for (p, &v) in &self.0 {
             match *p {
                 Param::Compliance { joint } => k[usize::from(joint)] += v,
-                Param::ComplianceAt { joint, angle_urad } => {
-                    if crate::model::in_bin(angle_urad, row.q[usize::from(joint)]) {
-                        k[usize::from(joint)] += v;
-                    }
+                Param::ComplianceAt { joint, angle_urad }
+                    if crate::model::in_bin(angle_urad, row.q[usize::from(joint)]) =>
+                {
+                    k[usize::from(joint)] += v;
                 }
                 _ => {}
             }

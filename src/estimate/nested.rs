@@ -105,7 +105,10 @@ where
     // scales S by its own diagonal, so it cannot see this.)
     let tol = pivot_tolerance::<T>();
     for j in (0..n).filter(|&j| candidate[j]) {
-        if !(schur[(j, j)] > tol * lambda[(j, j)]) {
+        // Negated so that a NaN is refused too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let absorbed = !(schur[(j, j)] > tol * lambda[(j, j)]);
+        if absorbed {
             let left = schur[(j, j)] / lambda[(j, j)];
             return Err(Error::NotIdentifiable {
                 column: j,

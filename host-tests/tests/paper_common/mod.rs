@@ -132,8 +132,8 @@ pub fn batch(job: &Job, data: &Measurements) -> Batch {
         for a in 0..3 {
             let r = 3 * i + a;
             b[(r, q2)] = cols[1][a] * 1e-6;
-            for j in 2..6 {
-                b[(r, 3 + j)] = cols[j][a] * 1e-6;
+            for (j, c) in cols.iter().enumerate().take(6).skip(2) {
+                b[(r, 3 + j)] = c[a] * 1e-6;
             }
             y[r] = d.dp_m[a];
             group.push(d.config as usize - 1);

@@ -176,9 +176,12 @@ fn transform(xyz: [f64; 3], rpy: [f64; 3]) -> Matrix4<f64> {
     m
 }
 
-/// The chain from `base` to `tip` of the URDF at `path`: each joint's origin,
-/// axis and whether it is prismatic (fixed joints: axis `None`).
-pub struct Fk(Vec<(Matrix4<f64>, Option<(Vector3<f64>, bool)>)>);
+/// A joint's motion: its axis and whether it is prismatic (`None`: fixed).
+type Motion = Option<(Vector3<f64>, bool)>;
+
+/// The chain from `base` to `tip` of the URDF at `path`: each joint's origin
+/// and motion.
+pub struct Fk(Vec<(Matrix4<f64>, Motion)>);
 
 impl Fk {
     pub fn new(path: &Path, base: &str, tip: &str) -> Self {
