@@ -111,7 +111,7 @@ impl Dense {
         (x, sd, sigma)
     }
 
-    /// The iterative WLS of `robcal::irls` (same weights, same stop rule).
+    /// The iterative WLS of `robcal::estimate::irls` (same weights, same stop rule).
     fn irls(&self, settings: &IrlsSettings<f64>) -> (DVector<f64>, DVector<f64>, usize) {
         let (mut x, mut sd, mut sigma) = self.fit(&[Vector3::new(1.0, 1.0, 1.0); G]);
         for k in 1..=settings.max_iterations {
