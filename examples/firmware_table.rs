@@ -37,7 +37,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use nalgebra::Vector3;
-use robcal::calibrate::{self, Report, Settings};
+use robcal::calibrate::{self, DeflectionModel, Report, Settings};
 use robcal::io::{Job, Measurements};
 use robcal_paper::kr270;
 
@@ -47,11 +47,15 @@ const G: usize = kr270::CONFIGS;
 const DP_QUANTUM_M: f64 = 1e-9;
 
 /// The reference: the declared model of the job, iterative WLS, nothing
-/// added by the diagnosis.
+/// added by the diagnosis — with the first-order deflection model of
+/// eq. 3 (`robcal calibrate --linear`), which is what the device streams:
+/// its rows are the columns at the commanded pose (the exact equilibrium
+/// per row and pass would cost the device several times the fit).
 fn irls(job: &Job, data: &Measurements) -> Result<Report, Box<dyn StdError>> {
     let settings = Settings {
         diagnose: false,
         heldout: false,
+        deflection_model: DeflectionModel::Linear,
         ..Settings::default()
     };
     let report = calibrate::calibrate(job, data, &settings, &mut |_| {})?;

@@ -203,7 +203,8 @@ fn core_rows(job: &Job, data: &Measurements) -> Res<Stats> {
 fn check_rows(stats: &Stats, ols: &Report) -> Res<()> {
     let mut w = vec![Vector3::zeros(); stats.groups().len()];
     let mut s = w.clone();
-    let fit = stats.fit_ols(&[true; N], &mut w, &mut s)?;
+    let mut dof = w.clone();
+    let fit = stats.fit_ols(&[true; N], &mut w, &mut s, &mut dof)?;
     let dev = (0..N)
         .map(|i| (fit.solution.x[i] - ols.parameters[i].value).abs() / ols.parameters[i].std)
         .fold(0.0, f64::max);

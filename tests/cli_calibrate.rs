@@ -57,6 +57,7 @@ fn kr270_naive_model_traces_the_compensator() {
     assert_eq!(
         keys(&v),
         [
+            "deflection_model",
             "effects",
             "heldout_rms_um",
             "iterations",
@@ -68,6 +69,7 @@ fn kr270_naive_model_traces_the_compensator() {
         ]
     );
     assert_eq!(v["method"], "irls");
+    assert_eq!(v["deflection_model"], "exact");
     assert!(v["iterations"].as_u64().unwrap() >= 1);
     assert!(v["validation"].is_null());
     assert!(v["unexplained"].is_null(), "{}", v["unexplained"]);
@@ -188,7 +190,7 @@ fn human_report_shows_the_errors_before_and_after() {
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("added compensator on a2"), "{text}");
-    assert!(text.contains("RMS 262.1 -> 123.2 um"), "{text}");
+    assert!(text.contains("RMS 261.8 -> 122.6 um"), "{text}");
     assert!(text.contains("held-out RMS"), "{text}");
 }
 

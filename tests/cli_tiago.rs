@@ -246,6 +246,9 @@ fn effects(v: &Value) -> Vec<String> {
 ///   the other day's BL at 3.31 mm: better than registration (4.87) and
 ///   offsets (4.23), not better than FIGAROH's full model (3.07).
 /// - Days swapped (fit and choose on 2021-11-26): BL 2.37 mm on 2021-11-30.
+/// - Rerun with the exact deflection model (issue 13; docs/tiago.md): the
+///   same choice and effects, leave-one-out 2.352 / 2.597 mm (were 2.349 /
+///   2.501 with eq. 3), BL 3.310 mm; days swapped 2.413 mm.
 #[test]
 fn protocol_pins_the_validation_run() {
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-proto-{}", std::process::id()));
@@ -275,8 +278,8 @@ fn protocol_pins_the_validation_run() {
     let chosen = calibrate_ols(&select, &d30, Some(&d26));
     let other = calibrate_ols(&full, &d30, None);
     let loo = |v: &Value| v["heldout_rms_um"].as_f64().unwrap() / 1e3;
-    assert!(near(loo(&chosen), 2.349), "{}", loo(&chosen));
-    assert!(near(loo(&other), 2.501), "{}", loo(&other));
+    assert!(near(loo(&chosen), 2.352), "{}", loo(&chosen));
+    assert!(near(loo(&other), 2.597), "{}", loo(&other));
     assert_eq!(
         effects(&chosen),
         [
@@ -290,7 +293,7 @@ fn protocol_pins_the_validation_run() {
     let bl = chosen["validation"]["per_marker_rms_mm"]["1"]
         .as_f64()
         .unwrap();
-    assert!(near(bl, 3.311), "BL validation {bl} mm");
+    assert!(near(bl, 3.310), "BL validation {bl} mm");
     assert!(bl < 4.23, "not better than FIGAROH's joint offsets");
 
     // Days swapped.
@@ -300,6 +303,6 @@ fn protocol_pins_the_validation_run() {
     let bl = rev["validation"]["per_marker_rms_mm"]["1"]
         .as_f64()
         .unwrap();
-    assert!(near(bl, 2.369), "BL validation, days swapped: {bl} mm");
+    assert!(near(bl, 2.413), "BL validation, days swapped: {bl} mm");
     let _ = std::fs::remove_dir_all(&dir);
 }

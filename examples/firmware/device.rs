@@ -214,19 +214,20 @@ fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
         acc.equations(),
         acc.eta()
     );
-    let x = solution_x(&acc);
+    let fit = solution(&acc);
     let mut sigma = [nalgebra::Vector3::zeros(); G];
+    let mut dof = [nalgebra::Vector3::zeros(); G];
     phase(
         k,
         "kr270 pass: residual sigma f32 (270 rows streamed)",
-        || src.residual_sigma_into(&x, kr270::N, &mut sigma),
+        || src.residual_sigma_into(&fit, &ones, &mut sigma, &mut dof),
     )
     .unwrap_or_else(|e| fail("residual pass", e));
 }
 
 #[inline(never)]
-fn solution_x(acc: &Accumulator<f32, kr270::Dn>) -> nalgebra::SVector<f32, { kr270::N }> {
-    acc.solve().unwrap_or_else(|e| fail("solve", e)).x
+fn solution(acc: &Accumulator<f32, kr270::Dn>) -> robcal::estimate::Solution<f32, kr270::Dn> {
+    acc.solve().unwrap_or_else(|e| fail("solve", e))
 }
 
 #[inline(never)]
@@ -234,16 +235,22 @@ fn kr270_iteration(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSetti
     let active = [true; kr270::N];
     let mut weights = [nalgebra::Vector3::zeros(); G];
     let mut sigma = [nalgebra::Vector3::zeros(); G];
+    let mut dof = [nalgebra::Vector3::zeros(); G];
     phase(k, "kr270 OLS start f32 (3 passes, 2 solves)", || {
-        src.fit_ols(&active, &mut weights, &mut sigma)
+        src.fit_ols(&active, &mut weights, &mut sigma, &mut dof)
     })
     .unwrap_or_else(|e| fail("OLS", e));
     let one = phase(
         k,
         "kr270 one IRLS iteration f32 (weights, 3 passes, solve, sandwich)",
         || {
-            robcal::estimate::robust_weights(&sigma, &settings.weight, &mut weights)
-                .and_then(|()| src.fit_weighted(&weights, &active, &mut sigma))
+            src.fit_reweighted(
+                &settings.weight,
+                &active,
+                &mut weights,
+                &mut sigma,
+                &mut dof,
+            )
         },
     )
     .unwrap_or_else(|e| fail("one iteration", e));
@@ -261,6 +268,7 @@ fn kr270_irls(
     let mut history = heapless::Vec::<_, HISTORY>::new();
     let mut weights = [nalgebra::Vector3::zeros(); G];
     let mut sigma = [nalgebra::Vector3::zeros(); G];
+    let mut dof = [nalgebra::Vector3::zeros(); G];
     let fit = phase(
         k,
         "kr270 whole iterative WLS f32 (OLS start + iterations)",
@@ -270,6 +278,7 @@ fn kr270_irls(
                 &[true; kr270::N],
                 &mut weights,
                 &mut sigma,
+                &mut dof,
                 |it| {
                     let _ = history.push(*it);
                 },

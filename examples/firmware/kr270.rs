@@ -23,7 +23,7 @@
 use nalgebra::{
     Const, Isometry3, RealField, SMatrix, SVector, Translation3, UnitQuaternion, Vector3,
 };
-use robcal::estimate::RobustWeight;
+use robcal::estimate::{group_dof, group_sigma, leverage, Noise, RobustWeight, Solution};
 use robcal::model::{Layout, Marker, Sample};
 use robcal::robot::{joint_torques, PointLoad};
 use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Joint, JointKind, Reweightable};
@@ -210,9 +210,9 @@ impl<T: RealField + Copy> Reweightable<T, Dn> for Kr270<T> {
     fn weighted(
         &self,
         weights: &[Vector3<T>],
-        sigma: Option<&[Vector3<T>]>,
+        noise: Option<Noise<'_, T>>,
     ) -> Result<Accumulator<T, Dn>, Error> {
-        if weights.len() != G || sigma.is_some_and(|s| s.len() != G) {
+        if weights.len() != G || noise.is_some_and(|n| !n.fits(G)) {
             return Err(Error::Mismatch {
                 what: "one weight (and sigma) per group",
             });
@@ -220,8 +220,8 @@ impl<T: RealField + Copy> Reweightable<T, Dn> for Kr270<T> {
         let mut acc = Accumulator::new();
         self.stream(|g, b, dp| {
             let mut block = Block::new(*b, *dp).with_weights(weights[g]);
-            if let Some(s) = sigma {
-                block = block.with_sigma(s[g]);
+            if let Some(n) = noise {
+                block = block.with_sigma(n.sigma(g, &weights[g]));
             }
             acc.update(&block)
         })?;
@@ -229,39 +229,36 @@ impl<T: RealField + Copy> Reweightable<T, Dn> for Kr270<T> {
     }
 
     /// One pass over the table: the residuals `Δp − B x` directly (no
-    /// difference of large sums), σ per configuration and axis with the
-    /// global correction `m / (m − parameters)`, as
+    /// difference of large sums) and each row's leverage `w² bᵀ Λ⁻¹ b`; σ
+    /// per configuration and axis with its own degrees of freedom, as
     /// [`robcal::GroupedStats::residual_sigma_into`].
     fn residual_sigma_into(
         &self,
-        x: &SVector<T, N>,
-        parameters: usize,
-        out: &mut [Vector3<T>],
+        fit: &Solution<T, Dn>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<(), Error> {
-        if out.len() != G {
+        if sigma.len() != G || dof.len() != G || weights.len() != G {
             return Err(Error::Mismatch {
-                what: "one sigma per group",
+                what: "one sigma and one weight per group",
             });
         }
-        out.fill(Vector3::zeros());
+        let mut rss = [Vector3::<T>::zeros(); G];
+        let mut h = [Vector3::<T>::zeros(); G];
         let mut rows = [0usize; G];
-        let mut m = 0usize;
         self.stream(|g, b, dp| {
-            let r = dp - b * x;
-            out[g] += r.component_mul(&r);
+            let r = dp - b * fit.x;
+            rss[g] += r.component_mul(&r);
+            for a in 0..3 {
+                h[g][a] += leverage(&fit.lambda_inv, |k| b[(a, k)], weights[g][a]);
+            }
             rows[g] += 1;
-            m += 3;
             Ok(())
         })?;
-        let correction = if m > parameters {
-            c::<T>(m as f64 / (m - parameters) as f64)
-        } else {
-            T::one()
-        };
-        for (o, &n) in out.iter_mut().zip(&rows) {
-            if n > 0 {
-                *o = (*o * (correction / c(n as f64))).map(|v| v.sqrt());
-            }
+        for g in 0..G {
+            sigma[g] = Vector3::from_fn(|a, _| group_sigma(rss[g][a], rows[g], h[g][a]));
+            dof[g] = Vector3::from_fn(|a, _| group_dof(rows[g], h[g][a]));
         }
         Ok(())
     }

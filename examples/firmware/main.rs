@@ -138,11 +138,13 @@ fn host_kr270(fault: SelfTest) -> bool {
     fn run<T: nalgebra::RealField + Copy, R: Reweightable<T, Dn>>(src: &R) -> Fit<T, Dn> {
         let mut weights = [nalgebra::Vector3::zeros(); G];
         let mut sigma = [nalgebra::Vector3::zeros(); G];
+        let mut dof = [nalgebra::Vector3::zeros(); G];
         src.fit_irls(
             &kr270::settings().unwrap(),
             &[true; N],
             &mut weights,
             &mut sigma,
+            &mut dof,
             |_| {},
         )
         .expect("fit")

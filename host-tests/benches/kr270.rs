@@ -76,34 +76,55 @@ impl Dense {
         (x, &r_inv * r_inv.transpose())
     }
 
-    /// σ per group and axis of the residuals, with the global `m / (m − p)`.
-    fn sigma(&self, x: &DVector<f64>) -> Vec<Vector3<f64>> {
+    /// σ per group and axis of the residuals of the fit `x`, `Λ⁻¹` made
+    /// with weights `w`: `RSS / (n − h)`, `h` the group and axis's part of
+    /// the trace of the hat matrix; and those degrees of freedom.
+    fn sigma(
+        &self,
+        x: &DVector<f64>,
+        li: &DMatrix<f64>,
+        w: &[Vector3<f64>],
+    ) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
         let r = &self.y - &self.b * x;
-        let mut s = vec![Vector3::zeros(); G];
+        let mut s = vec![Vector3::<f64>::zeros(); G];
+        let mut h = vec![Vector3::<f64>::zeros(); G];
         let mut n = [0usize; G];
         for (k, v) in r.iter().enumerate() {
-            s[self.group[k]][k % 3] += v * v;
-            if k % 3 == 0 {
-                n[self.group[k]] += 1;
+            let (g, a) = (self.group[k], k % 3);
+            s[g][a] += v * v;
+            let b = self.b.row(k).transpose();
+            h[g][a] += w[g][a] * w[g][a] * (b.transpose() * li * &b)[0];
+            if a == 0 {
+                n[g] += 1;
             }
         }
-        let m = r.len() as f64;
-        let corr = m / (m - N as f64);
-        for (s, n) in s.iter_mut().zip(n) {
-            *s = (*s * corr / n as f64).map(f64::sqrt);
-        }
-        s
+        let nu: Vec<Vector3<f64>> = (0..G).map(|g| h[g].map(|h: f64| n[g] as f64 - h)).collect();
+        let sigma = (0..G)
+            .map(|g| s[g].component_div(&nu[g]).map(f64::sqrt))
+            .collect();
+        (sigma, nu)
     }
 
-    /// One fit as `Reweightable::fit_weighted`: x̂, σ from its residuals,
-    /// sandwich covariance (eq. 11).
-    fn fit(&self, w: &[Vector3<f64>]) -> (DVector<f64>, DVector<f64>, Vec<Vector3<f64>>) {
+    /// One fit as `Reweightable::fit_weighted` (`estimated`: as
+    /// `fit_reweighted`, eq. 14 weights from these data): x̂, σ from its
+    /// residuals, sandwich covariance (eq. 11) — with the middle term's σ²
+    /// times `ν / (ν − 4(1 − w))` when the weights were estimated.
+    fn fit(
+        &self,
+        w: &[Vector3<f64>],
+        estimated: bool,
+    ) -> (DVector<f64>, DVector<f64>, Vec<Vector3<f64>>) {
         let (x, li) = self.wls(w);
-        let sigma = self.sigma(&x);
+        let (sigma, nu) = self.sigma(&x, &li, w);
         let mut bs = self.b.clone();
         for (r, mut row) in bs.row_iter_mut().enumerate() {
             let (g, a) = (self.group[r], r % 3);
-            row *= w[g][a] * w[g][a] * sigma[g][a];
+            let c = if estimated {
+                nu[g][a] / (nu[g][a] - 4.0 * (1.0 - w[g][a]))
+            } else {
+                1.0
+            };
+            row *= w[g][a] * w[g][a] * sigma[g][a] * c.sqrt();
         }
         let middle = bs.transpose() * &bs;
         let cov = &li * middle * &li;
@@ -113,11 +134,11 @@ impl Dense {
 
     /// The iterative WLS of `robcal::estimate::irls` (same weights, same stop rule).
     fn irls(&self, settings: &IrlsSettings<f64>) -> (DVector<f64>, DVector<f64>, usize) {
-        let (mut x, mut sd, mut sigma) = self.fit(&[Vector3::new(1.0, 1.0, 1.0); G]);
+        let (mut x, mut sd, mut sigma) = self.fit(&[Vector3::new(1.0, 1.0, 1.0); G], false);
         for k in 1..=settings.max_iterations {
             let mut w = vec![Vector3::zeros(); G];
             robust_weights(&sigma, &settings.weight, &mut w).unwrap();
-            let (nx, nsd, ns) = self.fit(&w);
+            let (nx, nsd, ns) = self.fit(&w, true);
             let change = (0..N)
                 .map(|i| (nx[i] - x[i]).abs() / nsd[i])
                 .fold(0.0, f64::max);
@@ -135,8 +156,12 @@ fn irls_of<R: Reweightable<f64, Dn>>(
     src: &R,
     settings: &IrlsSettings<f64>,
 ) -> robcal::Fit<f64, Dn> {
-    let (mut w, mut s) = ([Vector3::zeros(); G], [Vector3::zeros(); G]);
-    src.fit_irls(settings, &[true; N], &mut w, &mut s, |_| {})
+    let (mut w, mut s, mut n) = (
+        [Vector3::zeros(); G],
+        [Vector3::zeros(); G],
+        [Vector3::zeros(); G],
+    );
+    src.fit_irls(settings, &[true; N], &mut w, &mut s, &mut n, |_| {})
         .unwrap()
 }
 
@@ -168,8 +193,13 @@ fn benches(c: &mut Criterion) {
     group.finish();
 
     // One weighted fit with the first WLS step's weights.
-    let (mut w, mut sigma) = ([Vector3::zeros(); G], [Vector3::zeros(); G]);
-    src.fit_ols(&[true; N], &mut w, &mut sigma).unwrap();
+    let (mut w, mut sigma, mut dof) = (
+        [Vector3::zeros(); G],
+        [Vector3::zeros(); G],
+        [Vector3::zeros(); G],
+    );
+    src.fit_ols(&[true; N], &mut w, &mut sigma, &mut dof)
+        .unwrap();
     robust_weights(&sigma, &settings.weight, &mut w).unwrap();
     let mut group = c.benchmark_group("kr270/wls");
     group.bench_function("stream_pass_solve", |b| {

@@ -14,6 +14,10 @@
 //!   explicit `diag(w)`, `diag(σ)`;
 //! - eq. 13: `(Bᵀ Σ⁻² B)⁻¹ = (Σ⁻¹B)⁺ (Σ⁻¹B)⁺ᵀ`, from `Σ` alone (not from `W`).
 //!
+//! [`exact`] is an independent model of a loaded robot (forward kinematics
+//! from the URDF text, the equilibrium of the deflected robot) that makes
+//! the KR-270 data and the Monte Carlo jobs.
+//!
 //! Also: a small deterministic generator of random problems ([`Rng`],
 //! [`random_blocks`]), comparison helpers and the fuzz-script interpreter
 //! shared by the fuzz targets and the stable property tests ([`fuzz_ops`]).
@@ -33,6 +37,8 @@ use robcal::{Accumulator, Block};
 /// report.
 pub use robcal_paper::rng::SplitMix64 as Rng;
 
+pub mod coverage;
+pub mod exact;
 pub mod fuzz_io;
 pub mod fuzz_ops;
 

@@ -28,12 +28,14 @@ fn job() -> (Job, robcal::io::Measurements) {
 fn irls<T: RealField + Copy, R: Reweightable<T, Dn>>(src: &R) -> (Fit<T, Dn>, Vec<Vector3<T>>) {
     let mut w = vec![Vector3::zeros(); G];
     let mut s = vec![Vector3::zeros(); G];
+    let mut n = vec![Vector3::zeros(); G];
     let fit = src
         .fit_irls(
             &kr270::settings().unwrap(),
             &[true; N],
             &mut w,
             &mut s,
+            &mut n,
             |_| {},
         )
         .unwrap();

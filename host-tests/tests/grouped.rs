@@ -80,34 +80,53 @@ fn weighted_grouped_equals_direct_accumulation() {
 fn residual_sigma_equals_direct_residuals() {
     let d = data(2);
     let stats = grouped(&d);
-    let x = SVector::<f64, N>::new(0.9, -2.1, 0.4, 3.2);
-    let mut sigma = vec![Vector3::zeros(); G];
-    stats.residual_sigma_into(&x, N, &mut sigma).unwrap();
+    // A weighted fit, so that the leverage has weights in it.
+    let weights: Vec<Vector3<f64>> = (0..G)
+        .map(|g| Vector3::new(1.0, 0.5 + g as f64, 2.0))
+        .collect();
+    let fit = stats.weighted(&weights, None).unwrap().solve().unwrap();
+    let (mut sigma, mut dof) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    stats
+        .residual_sigma_into(&fit, &weights, &mut sigma, &mut dof)
+        .unwrap();
     // One σ per group, or a `Mismatch`.
     let mut short = vec![Vector3::zeros(); G - 1];
     assert!(matches!(
-        stats.residual_sigma_into(&x, N, &mut short),
+        stats.residual_sigma_into(&fit, &weights, &mut short, &mut dof),
         Err(robcal::Error::Mismatch { .. })
     ));
-    let m = d.rows.len() * 3;
-    let correction = m as f64 / (m - N) as f64;
-    for (gi, s) in sigma.iter().enumerate() {
+    let mut total_h = 0.0;
+    for (gi, (s, nu)) in sigma.iter().zip(&dof).enumerate() {
         for a in 0..3 {
-            let r: Vec<f64> = d
+            let rows: Vec<_> = d
                 .rows
                 .iter()
                 .filter(|(g, _, _)| *g == gi as i32 * 10)
-                .map(|(_, b, dp)| dp[a] - (b.row(a) * x)[0])
                 .collect();
-            let direct =
-                (r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64 * correction).sqrt();
+            let rss: f64 = rows
+                .iter()
+                .map(|(_, b, dp)| (dp[a] - (b.row(a) * fit.x)[0]).powi(2))
+                .sum();
+            // The group and axis's part of the hat matrix's trace.
+            let h: f64 = rows
+                .iter()
+                .map(|(_, b, _)| {
+                    let r = b.row(a);
+                    weights[gi][a].powi(2) * (r * fit.lambda_inv * r.transpose())[0]
+                })
+                .sum();
+            total_h += h;
+            let direct = (rss / (rows.len() as f64 - h)).sqrt();
             assert!(
                 rel(s[a], direct) < 1e-9,
                 "group {gi} axis {a}: {} vs {direct}",
                 s[a]
             );
+            assert!(rel(nu[a], rows.len() as f64 - h) < 1e-9);
         }
     }
+    // The shares add up to the number of parameters.
+    assert!((total_h - N as f64).abs() < 1e-9, "Σ h = {total_h}");
 }
 
 #[test]
@@ -133,12 +152,15 @@ fn irls_recovers_sigma_and_beats_ols() {
     let stats = grouped(&d);
     let all = [true; N];
     let (mut weights, mut sigma) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
-    let ols: Fit<f64, D> = stats.fit_ols(&all, &mut weights, &mut sigma).unwrap();
+    let mut dof = vec![Vector3::zeros(); G];
+    let ols: Fit<f64, D> = stats
+        .fit_ols(&all, &mut weights, &mut sigma, &mut dof)
+        .unwrap();
     assert!(weights.iter().all(|w| *w == Vector3::repeat(1.0)));
     let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
     let mut history = Vec::<Iteration<f64, D>>::new();
     let fit: Fit<f64, D> = stats
-        .fit_irls(&settings, &all, &mut weights, &mut sigma, |it| {
+        .fit_irls(&settings, &all, &mut weights, &mut sigma, &mut dof, |it| {
             history.push(*it)
         })
         .unwrap();
@@ -158,12 +180,14 @@ fn irls_recovers_sigma_and_beats_ols() {
             assert!((w[a] / ideal - 1.0).abs() < 0.4, "{} vs {ideal}", w[a]);
         }
     }
-    // On return `sigma` is the residual σ of the final estimate.
-    let mut again = vec![Vector3::zeros(); G];
+    // On return `sigma` is the residual σ of the final estimate (these
+    // groups have 60 rows: none is pooled).
+    let (mut again, mut again_dof) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
     stats
-        .residual_sigma_into(&fit.solution.x, N, &mut again)
+        .residual_sigma_into(&fit.solution, &weights, &mut again, &mut again_dof)
         .unwrap();
     assert_eq!(sigma, again);
+    assert_eq!(dof, again_dof);
     // WLS reports smaller variances than OLS on heteroscedastic data.
     let (so, sw) = (ols.std(), fit.std());
     assert!((0..N).all(|i| sw[i] < so[i]), "{so} vs {sw}");
@@ -193,9 +217,10 @@ fn irls_at_both_sizes(seed: u64) -> Both {
     let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
     let all = [true; N];
     let (mut wf, mut sf) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    let mut nf = vec![Vector3::zeros(); G];
     let mut hf = Vec::new();
     let ff = fixed
-        .fit_irls(&settings, &all, &mut wf, &mut sf, |it| {
+        .fit_irls(&settings, &all, &mut wf, &mut sf, &mut nf, |it| {
             hf.push((
                 it.x.as_slice().to_vec(),
                 it.std.as_slice().to_vec(),
@@ -204,9 +229,10 @@ fn irls_at_both_sizes(seed: u64) -> Both {
         })
         .unwrap();
     let (mut wd, mut sd) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+    let mut nd = vec![Vector3::zeros(); G];
     let mut hd = Vec::new();
     let fd = dynamic
-        .fit_irls(&settings, &all, &mut wd, &mut sd, |it| {
+        .fit_irls(&settings, &all, &mut wd, &mut sd, &mut nd, |it| {
             hd.push((
                 it.x.as_slice().to_vec(),
                 it.std.as_slice().to_vec(),

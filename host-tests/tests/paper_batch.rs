@@ -73,7 +73,7 @@ fn the_products_fits_equal_the_dense_batch_solution() {
     let ols_report = fit(&job, &data, Method::Ols, None);
     let configs: Vec<i64> = ols_report.noise.iter().map(|n| n.config).collect();
     assert_eq!(configs, (1..=15).collect::<Vec<_>>(), "configuration order");
-    let ols = batch_fit(&s, &vec![1.0; 810]);
+    let ols = batch_fit(&s, &vec![1.0; 810], false);
     assert_report(&ols_report, &ols, "OLS");
 
     // Eq. 7 of the same rows, with the core.
@@ -91,7 +91,7 @@ fn the_products_fits_equal_the_dense_batch_solution() {
     // One-step WLS, weights eq. 14 from the OLS residuals; covariance (11).
     for lambda in kr270::LAMBDAS {
         let w = weights_eq14(&s, &ols.sigma, 10e-6, lambda);
-        let wls = batch_fit(&s, &w);
+        let wls = batch_fit(&s, &w, true);
         let r = fit(&job, &data, Method::Wls, Some(lambda));
         assert_report(&r, &wls, &format!("WLS λ = {lambda}"));
     }
@@ -106,7 +106,7 @@ fn the_products_fits_equal_the_dense_batch_solution() {
     assert_std(&irls.history[0].std, &prev.cov, "iteration 0");
     for (k, h) in irls.history.iter().enumerate().skip(1) {
         let w = weights_eq14(&s, &prev.sigma, 10e-6, 1.0);
-        let next = batch_fit(&s, &w);
+        let next = batch_fit(&s, &w, true);
         assert_x(&h.x, &next.x, &format!("iteration {k}"));
         assert_std(&h.std, &next.cov, &format!("iteration {k}"));
         prev = next;

@@ -20,6 +20,7 @@ mod tiago_common;
 
 use nalgebra::Vector3;
 use robcal::io::{GeometryModel, MarkerModel};
+use host_tests::exact::Fk;
 use tiago_common::*;
 
 /// Rounding tolerance of the pinned RMSE values [mm]: they are pinned to

@@ -17,7 +17,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
 
-use robcal::calibrate::{self, Method, PlotSeries, Report, Settings};
+use robcal::calibrate::{self, DeflectionModel, Method, PlotSeries, Report, Settings};
 use robcal::io::Job;
 
 #[derive(Parser)]
@@ -84,6 +84,11 @@ struct CalibrateArgs {
     /// Fit the declared model only.
     #[arg(long = "no-diagnose")]
     no_diagnose: bool,
+    /// The paper's first-order deflection model (eq. 3: torques and
+    /// columns at the commanded pose) instead of the exact equilibrium of
+    /// the deflected robot.
+    #[arg(long)]
+    linear: bool,
     /// Evaluate the fitted model on this file without re-estimating.
     #[arg(long)]
     validate: Option<PathBuf>,
@@ -163,6 +168,11 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         lambda: a.lambda,
         max_iterations: a.max_iter,
         diagnose: !a.no_diagnose,
+        deflection_model: if a.linear {
+            DeflectionModel::Linear
+        } else {
+            DeflectionModel::Exact
+        },
         ..Settings::default()
     };
     let mut progress = |m: &str| eprintln!("robcal: {m}");
@@ -205,6 +215,7 @@ fn opt_num(v: Option<f64>) -> Value {
 fn to_json(r: &Report) -> Value {
     let mut v = json!({
         "method": r.method,
+        "deflection_model": r.deflection_model,
         "iterations": r.iterations,
         "parameters": r.parameters.iter().map(|p| json!({
             "name": p.name, "value": num(p.value), "std": num(p.std), "unit": p.unit,

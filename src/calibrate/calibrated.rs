@@ -2,8 +2,9 @@
 //! the rows of another measurement file of the same job.
 
 use super::geometry::Geometry;
+use super::linearisation::Linearisation;
 use super::names::Names;
-use super::rows::{Compliances, DataKinds};
+use super::rows::DataKinds;
 use super::settings::Policy;
 use crate::model::Param;
 
@@ -21,8 +22,9 @@ pub struct CalibratedModel {
     /// Their estimate (reported units; geometric ones are the last, unapplied
     /// Gauss–Newton step).
     pub x: Vec<f64>,
-    /// The compliances the linearised effects were taken about.
-    pub compliances: Compliances,
+    /// The estimate's joint law and deflection model (the rows of another
+    /// file are evaluated at it).
+    pub linearisation: Linearisation,
     /// The kinds of rows the calibration used.
     pub kinds: DataKinds,
     /// The decision constants of the run.

@@ -3,7 +3,8 @@
 
 use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
-use super::rows::{Compliances, Row};
+use super::linearisation::Linearisation;
+use super::rows::Row;
 use crate::estimate::{Accumulator, Block};
 use crate::model::Param;
 use crate::Error;
@@ -26,8 +27,8 @@ pub struct Design {
 }
 
 impl Design {
-    /// Columns of `params` at `rows`, the linearised effects about
-    /// `compliances`.
+    /// Columns of `params` at `rows`; `load_com` about the compliances of
+    /// `lin`.
     ///
     /// # Errors
     /// [`Error`] when a column cannot be computed (a parameter naming a
@@ -35,7 +36,7 @@ impl Design {
     pub fn new(
         rows: &[Row],
         params: &[Param],
-        compliances: &Compliances,
+        lin: &Linearisation,
         names: &super::names::Names,
         groups: usize,
     ) -> Result<Self, Error> {
@@ -44,7 +45,7 @@ impl Design {
         let mut y = Vec::with_capacity(3 * rows.len());
         for (i, row) in rows.iter().enumerate() {
             let k = if linearised {
-                compliances.at(row)
+                lin.compliance_at(&row.q)
             } else {
                 Vec::new()
             };

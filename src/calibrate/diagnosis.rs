@@ -202,11 +202,31 @@ pub fn run(
                     .map(|a| format!(" on {a}"))
                     .unwrap_or_default();
                 let new_params = extended(&e, &current.params, c)?;
-                let next = e.fit(&new_params)?;
-                let why = match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add)
-                {
-                    Some(why) => Some(format!("rejected: its estimate is not physical ({why})")),
-                    None => {
+                // A candidate whose fit cannot be made is rejected, never
+                // the run: no equilibrium under its estimate, or a column
+                // the estimator finds dependent on the others.
+                let next = match e.fit(&new_params) {
+                    Ok(next) => Ok(next),
+                    Err(CalibrationError::NoEquilibrium(why)) => Err(format!(
+                        "rejected: with its estimate the robot has no equilibrium ({why})"
+                    )),
+                    Err(CalibrationError::Core(
+                        _,
+                        err @ (Error::NotIdentifiable { .. }
+                        | Error::TooFewEquations { .. }
+                        | Error::NotConverged { .. }),
+                    )) => Err(format!("rejected: its fit cannot be made ({err})")),
+                    Err(err) => return Err(err),
+                };
+                let why = match next.map(|next| {
+                    let bad = inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add);
+                    (next, bad)
+                }) {
+                    Err(why) => Some(why),
+                    Ok((_, Some(why))) => {
+                        Some(format!("rejected: its estimate is not physical ({why})"))
+                    }
+                    Ok((next, None)) => {
                         let next = e.with_heldout(next)?;
                         match (current.heldout_rms_um, next.heldout_rms_um) {
                             (Some(before), Some(after)) if after >= before => Some(format!(
@@ -304,7 +324,8 @@ pub fn run(
         method: e.fit_settings.method.name(),
         iterations: current.fit.iterations,
         relinearisations: current.relinearisations,
-        converged: current.fit.converged,
+        converged: current.converged,
+        deflection_model: current.linearisation.model.name(),
         parameters: e.parameters(&current),
         covariance: nalgebra::DMatrix::from_iterator(
             current.params.len(),

@@ -8,10 +8,11 @@ use super::calibrated::CalibratedModel;
 use super::design::Design;
 use super::fit::{fit, FitOut, FitSettings};
 use super::geometry::Geometry;
+use super::linearisation::Linearisation;
 use super::names::Names;
 use super::report::Parameter;
 use super::residuals::rms_um;
-use super::rows::{Compliances, RowKind, Rows};
+use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy, Progress};
 use crate::model::Param;
 use crate::Error;
@@ -27,10 +28,13 @@ pub struct Fitted {
     /// The geometry the fit is linearised at (its geometric steps are below
     /// [`Policy::step_tolerance`]).
     pub geometry: Geometry,
-    /// The compliances the linearised effects were taken about.
-    pub compliances: Compliances,
+    /// The joint law the rows were evaluated at.
+    pub linearisation: Linearisation,
     /// Gauss–Newton relinearisations.
     pub relinearisations: usize,
+    /// Whether Gauss–Newton settled within [`Policy::max_steps`] (and, for
+    /// IRLS, the reweighting within its iterations).
+    pub converged: bool,
     /// RMS of the position residuals \[µm\].
     pub rms_um: f64,
     /// Leave-one-configuration-out RMS \[µm\], when computed.
@@ -48,8 +52,8 @@ pub struct Engine<'a> {
     pub names: Names,
     /// The current geometry (Gauss–Newton).
     pub geometry: Geometry,
-    /// The current compliances (linearised effects).
-    pub compliances: Compliances,
+    /// The current joint law and deflection model.
+    pub lin: Linearisation,
     /// How each fit is made.
     pub fit_settings: FitSettings,
     /// Decision constants.
@@ -69,7 +73,7 @@ impl Engine<'_> {
         Design::new(
             &self.rows.rows,
             params,
-            &self.compliances,
+            &self.lin,
             &self.names,
             self.rows.configs.len(),
         )
@@ -81,7 +85,7 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn relinearise(&mut self) -> Result<(), CalibrationError> {
-        self.rows.relinearise(&self.geometry)
+        self.rows.relinearise(&self.geometry, &self.lin)
     }
 
     /// Places the base by a rigid registration of the predicted marker
@@ -106,73 +110,97 @@ impl Engine<'_> {
         self.relinearise()
     }
 
-    /// Fits `params`: linearised effects are evaluated about the estimate
-    /// and refitted until the compliances settle (at most
-    /// [`Policy::linearised_passes`]); geometric parameters of absolute rows
-    /// by Gauss–Newton, refitted at the moved model until the step is below
-    /// [`Policy::step_tolerance`] (at most [`Policy::max_steps`]).
+    /// Fits `params` by Gauss–Newton ([`super::linearisation`]): the
+    /// rows at the current model, the fit, the geometric step applied and
+    /// the joint law moved to the estimate, until no geometric step exceeds
+    /// [`Policy::step_tolerance`] and no parameter acting through a joint
+    /// value moves by more than [`Policy::gauss_newton_sigma`] of its σ (at
+    /// most [`Policy::max_steps`] relinearisations).
     ///
     /// # Errors
     /// [`CalibrationError::Core`] from the estimator.
     pub fn fit(&mut self, params: &[Param]) -> Result<Fitted, CalibrationError> {
-        let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
         let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
-        let mut passes: u32 = if linearised {
-            self.policy.linearised_passes
-        } else {
-            1
-        };
+        let iterates = self.lin.iterates(params);
         let mut relinearisations = 0;
+        let mut settled = true;
         let cols: Vec<usize> = (0..params.len()).collect();
         loop {
             let d = self.design(params)?;
             let out = fit(&d, &cols, None, &self.fit_settings)
                 .map_err(|e| CalibrationError::Core("fit", e))?;
-            let before = std::mem::replace(
-                &mut self.compliances,
-                Compliances::of(params, &out.x, &self.names),
-            );
-            passes = passes.saturating_sub(1);
-            let moved = self.compliances.moved(&before, 1e-6);
             let step = params
                 .iter()
                 .zip(&out.x)
                 .filter(|(p, _)| p.is_geometric())
                 .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
-            if geometric
-                && step > self.policy.step_tolerance
-                && relinearisations < self.policy.max_steps
+            let moved = params
+                .iter()
+                .zip(out.x.iter().zip(&out.std))
+                .filter(|(p, _)| iterates && Linearisation::tracks(p))
+                .map(|(p, (x, sd))| {
+                    (x - self.lin.value(p, &self.names)).abs() / sd.max(f64::MIN_POSITIVE)
+                })
+                .fold(0.0_f64, f64::max);
+            if (geometric && step > self.policy.step_tolerance)
+                || moved > self.policy.gauss_newton_sigma
             {
-                self.geometry.apply(params, &out.x);
-                self.relinearise()?;
-                relinearisations += 1;
-                continue;
+                if relinearisations < self.policy.max_steps {
+                    self.geometry.apply(params, &out.x);
+                    let to = Linearisation::of(self.lin.model, params, &out.x, &self.names);
+                    self.step_towards(&to)?;
+                    relinearisations += 1;
+                    continue;
+                }
+                settled = false;
             }
-            if passes == 0 || !moved {
-                let residuals: Vec<Vector3<f64>> = (0..d.rows())
-                    .map(|i| d.residual(&cols, &out.x, i))
-                    .collect();
-                return Ok(Fitted {
-                    params: params.to_vec(),
-                    rms_um: rms_um(&residuals),
-                    fit: out,
-                    geometry: self.geometry.clone(),
-                    compliances: self.compliances.clone(),
-                    relinearisations,
-                    heldout_rms_um: None,
-                    residuals,
-                });
+            let residuals: Vec<Vector3<f64>> = (0..d.rows())
+                .map(|i| d.residual(&cols, &out.x, i))
+                .collect();
+            return Ok(Fitted {
+                params: params.to_vec(),
+                rms_um: rms_um(&residuals),
+                converged: settled && out.converged,
+                fit: out,
+                geometry: self.geometry.clone(),
+                linearisation: self.lin.clone(),
+                relinearisations,
+                heldout_rms_um: None,
+                residuals,
+            });
+        }
+    }
+
+    /// Moves the joint law to `to` and relinearises; where a loaded robot
+    /// has no equilibrium there, halves the step (at most
+    /// [`Policy::max_halvings`] times) — damped Gauss–Newton.
+    ///
+    /// # Errors
+    /// [`CalibrationError::NoEquilibrium`] when even the smallest step has
+    /// none; as [`Rows::relinearise`].
+    fn step_towards(&mut self, to: &Linearisation) -> Result<(), CalibrationError> {
+        let from = self.lin.clone();
+        let mut t = 1.0;
+        let mut halvings = 0;
+        loop {
+            self.lin = from.towards(to, t);
+            match self.relinearise() {
+                Err(CalibrationError::NoEquilibrium(_)) if halvings < self.policy.max_halvings => {
+                    t *= 0.5;
+                    halvings += 1;
+                }
+                other => return other,
             }
         }
     }
 
-    /// Puts the problem back at `f`'s linearisation: its compliances and its
+    /// Puts the problem back at `f`'s linearisation: its joint law and its
     /// geometry.
     ///
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
-        self.compliances = f.compliances.clone();
+        self.lin = f.linearisation.clone();
         self.geometry = f.geometry.clone();
         self.relinearise()
     }
@@ -252,7 +280,12 @@ impl Engine<'_> {
             geometry: f.geometry.clone(),
             params: f.params.clone(),
             x: f.fit.x.clone(),
-            compliances: f.compliances.clone(),
+            linearisation: Linearisation::of(
+                f.linearisation.model,
+                &f.params,
+                &f.fit.x,
+                &self.names,
+            ),
             kinds: self.rows.kinds,
             policy: self.policy,
         }

@@ -2,13 +2,13 @@
 //! [`Reweightable`] source of the core, at the exact number of parameters
 //! (`Dyn`), and the fits and tests the engine asks for.
 
-use nalgebra::{Dyn, OMatrix, OVector, Vector3, U3};
+use nalgebra::{Dyn, OMatrix, Vector3, U3};
 
 use super::design::Design;
 pub use super::settings::Method;
 use crate::estimate::{
-    nested_test, robust_weights, Accumulator, Block, Fit, IrlsSettings, NestedTest, Reweightable,
-    RobustWeight,
+    group_dof, group_sigma, leverage, nested_test, Accumulator, Block, Fit, IrlsSettings,
+    NestedTest, Noise, Reweightable, RobustWeight, Solution,
 };
 use crate::Error;
 
@@ -40,9 +40,13 @@ pub struct FitOut {
     pub weights: Vec<Vector3<f64>>,
     /// Residual σ per group and axis \[m\].
     pub sigma: Vec<Vector3<f64>>,
+    /// Its degrees of freedom per group and axis (a pooled σ carries the
+    /// pool's, [`crate::estimate::pool_small_groups`]).
+    pub dof: Vec<Vector3<f64>>,
     /// Reweighting iterations.
     pub iterations: usize,
-    /// Whether IRLS converged.
+    /// Whether the fit settled: IRLS within its iterations (OLS and one WLS
+    /// step are direct: always).
     pub converged: bool,
     /// The OLS start and every reweighting step after it: estimate,
     /// standard deviations, and the largest move in σ (the paper's
@@ -84,9 +88,9 @@ impl Reweightable<f64, Dyn> for View<'_> {
     fn weighted(
         &self,
         weights: &[Vector3<f64>],
-        sigma: Option<&[Vector3<f64>]>,
+        noise: Option<Noise<'_, f64>>,
     ) -> Result<Accumulator<f64, Dyn>, Error> {
-        if weights.len() != self.d.groups || sigma.is_some_and(|s| s.len() != self.d.groups) {
+        if weights.len() != self.d.groups || noise.is_some_and(|n| !n.fits(self.d.groups)) {
             return Err(Error::Mismatch {
                 what: "one weight per group",
             });
@@ -104,7 +108,7 @@ impl Reweightable<f64, Dyn> for View<'_> {
             }
             block.dp = Vector3::new(self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]);
             block.w = weights[g];
-            block.sigma = sigma.map(|s| s[g]);
+            block.sigma = noise.map(|n| n.sigma(g, &weights[g]));
             acc.update(&block)?;
         }
         Ok(acc)
@@ -112,32 +116,36 @@ impl Reweightable<f64, Dyn> for View<'_> {
 
     fn residual_sigma_into(
         &self,
-        x: &OVector<f64, Dyn>,
-        parameters: usize,
-        out: &mut [Vector3<f64>],
+        fit: &Solution<f64, Dyn>,
+        weights: &[Vector3<f64>],
+        sigma: &mut [Vector3<f64>],
+        dof: &mut [Vector3<f64>],
     ) -> Result<(), Error> {
-        if out.len() != self.d.groups {
+        let groups = self.d.groups;
+        if sigma.len() != groups || dof.len() != groups || weights.len() != groups {
             return Err(Error::Mismatch {
-                what: "one sigma per group",
+                what: "one sigma and one weight per group",
             });
         }
         let mut ss = vec![Vector3::<f64>::zeros(); self.d.groups];
+        let mut h = vec![Vector3::<f64>::zeros(); self.d.groups];
         let mut n = vec![0usize; self.d.groups];
-        let mut m = 0usize;
         for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
-            let r = self.d.residual(self.cols, x.as_slice(), i);
+            let r = self.d.residual(self.cols, fit.x.as_slice(), i);
             let g = self.d.group[i];
             ss[g] += r.component_mul(&r);
+            for a in 0..3 {
+                h[g][a] += leverage(
+                    &fit.lambda_inv,
+                    |k| self.d.b[(3 * i + a, self.cols[k])],
+                    weights[g][a],
+                );
+            }
             n[g] += 1;
-            m += 3;
         }
-        let dof = m as f64 / (m.saturating_sub(parameters).max(1)) as f64;
-        for g in 0..self.d.groups {
-            out[g] = if n[g] == 0 {
-                Vector3::zeros()
-            } else {
-                (ss[g] * (dof / n[g] as f64)).map(f64::sqrt)
-            };
+        for g in 0..groups {
+            sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[g][a], n[g], h[g][a]));
+            dof[g] = Vector3::from_fn(|a, _| group_dof(n[g], h[g][a]));
         }
         Ok(())
     }
@@ -162,6 +170,7 @@ pub fn fit(
     let active = vec![true; cols.len()];
     let mut weights = vec![Vector3::zeros(); d.groups];
     let mut sigma = vec![Vector3::zeros(); d.groups];
+    let mut dof = vec![Vector3::zeros(); d.groups];
     let mut history = Vec::new();
     let step = |f: &Fit<f64, Dyn>, change| Step {
         x: f.solution.x.as_slice().to_vec(),
@@ -170,16 +179,15 @@ pub fn fit(
     };
     let fit: Fit<f64, Dyn> = match s.method {
         Method::Ols => {
-            let f = view.fit_ols(&active, &mut weights, &mut sigma)?;
+            let f = view.fit_ols(&active, &mut weights, &mut sigma, &mut dof)?;
             history.push(step(&f, 0.0));
             f
         }
         Method::Wls => {
-            let ols = view.fit_ols(&active, &mut weights, &mut sigma)?;
+            let ols = view.fit_ols(&active, &mut weights, &mut sigma, &mut dof)?;
             history.push(step(&ols, 0.0));
-            let ols_sigma = sigma.clone();
-            robust_weights(&ols_sigma, &s.weight, &mut weights)?;
-            let mut f = view.fit_weighted(&weights, &active, &mut sigma)?;
+            let mut f =
+                view.fit_reweighted(&s.weight, &active, &mut weights, &mut sigma, &mut dof)?;
             f.iterations = 1;
             let std = f.std();
             let change = (0..cols.len())
@@ -195,13 +203,20 @@ pub fn fit(
                 tolerance: s.tolerance,
                 max_iterations: s.max_iterations.max(1),
             };
-            view.fit_irls(&settings, &active, &mut weights, &mut sigma, |it| {
-                history.push(Step {
-                    x: it.x.as_slice().to_vec(),
-                    std: it.std.as_slice().to_vec(),
-                    change: it.change,
-                });
-            })?
+            view.fit_irls(
+                &settings,
+                &active,
+                &mut weights,
+                &mut sigma,
+                &mut dof,
+                |it| {
+                    history.push(Step {
+                        x: it.x.as_slice().to_vec(),
+                        std: it.std.as_slice().to_vec(),
+                        change: it.change,
+                    });
+                },
+            )?
         }
     };
     let std = fit.std();
@@ -212,8 +227,9 @@ pub fn fit(
         covariance: fit.covariance,
         weights,
         sigma,
+        dof,
         iterations: fit.iterations,
-        converged: fit.converged,
+        converged: s.method != Method::Irls || fit.converged,
         history,
     })
 }

@@ -30,6 +30,7 @@
 //! | [`design`] | the stacked columns of some parameters; the independence test |
 //! | [`fit`] | the core's fits and nested test on a design, at the exact size |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
+//! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
@@ -53,6 +54,7 @@ pub mod effects;
 pub mod engine;
 pub mod fit;
 pub mod geometry;
+pub mod linearisation;
 pub mod names;
 pub mod report;
 pub mod residuals;
@@ -66,6 +68,7 @@ pub use calibrated::CalibratedModel;
 pub use effects::{Candidate, Effect};
 pub use fit::Step;
 pub use geometry::Geometry;
+pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
 pub use report::{ConfigNoise, EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
 pub use rows::{DataKinds, Row, RowKind, Rows};
@@ -117,7 +120,7 @@ pub fn calibrate(
         geometry: Geometry::nominal(&job.robot.chain, &markers),
         rows,
         names,
-        compliances: Default::default(),
+        lin: Linearisation::nominal(settings.deflection_model),
         fit_settings: fit::FitSettings {
             method: settings.method,
             weight,

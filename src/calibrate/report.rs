@@ -126,9 +126,11 @@ pub struct Report {
     pub iterations: usize,
     /// Whether IRLS converged.
     pub converged: bool,
-    /// Gauss–Newton relinearisations of the final fit (geometric terms of
-    /// absolute rows; 0 otherwise).
+    /// Gauss–Newton relinearisations of the final fit.
     pub relinearisations: usize,
+    /// The deflection model of the rows: `exact` (the equilibrium of the
+    /// deflected robot) or `linear` (eq. 3).
+    pub deflection_model: &'static str,
     /// The final model.
     pub parameters: Vec<Parameter>,
     /// Covariance of the final estimate (sandwich, eq. 8 / 11), in the
@@ -301,11 +303,20 @@ impl fmt::Display for Report {
         writeln!(f)?;
         writeln!(
             f,
-            "final model ({} iterations{}{}):",
+            "final model ({} deflection model, {} iterations{}{}):",
+            self.deflection_model,
             self.iterations,
-            if self.converged { ", converged" } else { "" },
+            if self.converged {
+                ", converged"
+            } else {
+                ", NOT converged"
+            },
             if self.relinearisations > 0 {
-                format!(", {} Gauss-Newton relinearisations", self.relinearisations)
+                format!(
+                    ", {} Gauss-Newton relinearisation{}",
+                    self.relinearisations,
+                    if self.relinearisations == 1 { "" } else { "s" }
+                )
             } else {
                 String::new()
             }

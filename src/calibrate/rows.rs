@@ -10,17 +10,25 @@
 //! load. The configurations are the groups of the per-axis noise estimate
 //! (eq. 14).
 
-use std::collections::BTreeMap;
-
 use nalgebra::Vector3;
 
 use super::geometry::{Geometry, J};
+use super::linearisation::Linearisation;
 use super::names::Names;
 use super::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
-use crate::model::{angle_urad, Param, Sample, BIN_TOLERANCE_RAD};
-use crate::robot::{gravity_torques, joint_torques, Frames, JointKind, PointLoad, Wrench};
+use crate::model::{angle_urad, Sample, BIN_TOLERANCE_RAD};
+use crate::robot::{
+    equilibrium, EquilibriumSettings, Frames, JointKind, JointLaw, Loading, PointLoad, Wrench,
+};
 use crate::Error;
+
+/// When a row's equilibrium has settled: the next Newton step below
+/// 1e-13 rad (or m); 50 steps at most (an industrial robot needs 2 or 3).
+const EQUILIBRIUM: EquilibriumSettings<f64> = EquilibriumSettings {
+    tolerance: 1e-13,
+    max_iterations: 50,
+};
 
 /// What one row of the problem is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,17 +62,26 @@ pub struct Row {
     pub measured: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
-    /// Frames at `q` in the current model, in the measurement frame.
+    /// Frames of the current model in the measurement frame, at the pose
+    /// the row's point is at: `q`, or with the exact deflection model the
+    /// equilibrium (the loaded one for a deflection).
     pub frames: Frames<f64, J>,
-    /// Predicted marker position \[m, measurement frame\] at `q`.
+    /// Predicted marker position \[m, measurement frame\] at `frames`.
     pub p: Vector3<f64>,
-    /// Joint torques behind the row: the load's (deflection rows) or the
-    /// links' own weight (absolute rows) \[N·m or N\].
+    /// Joint torques behind the row at `frames`: the load's (deflection
+    /// rows) or the links' own weight (absolute rows) \[N·m or N\].
     pub tau: Vec<f64>,
-    /// The load's wrench (deflection rows).
+    /// The load's wrench at `frames` (deflection rows).
     pub load: Option<Wrench<f64>>,
-    /// `Δp` \[m\]: measured minus predicted at the current model (absolute
-    /// rows), or the measured deflection.
+    /// With the exact model, the column of each joint's yield at the
+    /// equilibrium ([`crate::robot::Equilibrium::twist_column`]); empty for
+    /// the first-order columns at `frames`.
+    pub twists: Vec<Vector3<f64>>,
+    /// The row's left-hand side \[m\], linearised at the current model
+    /// ([`super::linearisation`]): measured minus predicted plus the
+    /// linearised joint-law part, `measured − f(x₀) + B(x₀) x₀`. With the
+    /// first-order model, the measured deflection, or the measured minus
+    /// the rigid forward kinematics.
     pub y: Vector3<f64>,
 }
 
@@ -74,6 +91,8 @@ impl Row {
     pub fn sample<'a>(&'a self, compliance: &'a [f64]) -> Sample<'a, f64, J> {
         Sample {
             frames: &self.frames,
+            q: &self.q,
+            twists: &self.twists,
             point_m: self.p,
             marker: self.marker,
             tau: &self.tau,
@@ -115,6 +134,8 @@ pub struct Rows {
     pub gravity: Vector3<f64>,
     /// The load's centre of mass \[m, tip frame\].
     pub com: Vector3<f64>,
+    /// The measurement file (for errors).
+    pub file: String,
 }
 
 /// Values within `tol` of a running cluster mean, merged; the cluster
@@ -237,6 +258,7 @@ impl Rows {
                 p: Vector3::zeros(),
                 tau: vec![0.0; dof],
                 load: None,
+                twists: Vec::new(),
                 y: Vector3::from(measured),
             });
             Ok::<(), CalibrationError>(())
@@ -289,46 +311,124 @@ impl Rows {
             compensator_ok,
             gravity,
             com,
+            file: data.file.display().to_string(),
         })
     }
 
-    /// Recomputes every row at `geometry`: frames, predicted position and
-    /// torques, and `Δp` of the absolute rows (a deflection row's `Δp` is
-    /// what was measured; its columns move with the model, e.g. into the
-    /// measurement frame once the base is placed).
+    /// Recomputes every row at `geometry` and `lin` (see
+    /// [`super::linearisation`]): frames, predicted position, torques, the
+    /// columns' joint twists and the left-hand side `y`.
     ///
     /// # Errors
-    /// [`CalibrationError::Core`] when the forward kinematics fails.
-    pub fn relinearise(&mut self, geometry: &Geometry) -> Result<(), CalibrationError> {
+    /// [`CalibrationError::Core`] when the forward kinematics fails;
+    /// [`CalibrationError::Data`] when a loaded robot has no equilibrium
+    /// near its measured pose under the current joint law.
+    pub fn relinearise(
+        &mut self,
+        geometry: &Geometry,
+        lin: &Linearisation,
+    ) -> Result<(), CalibrationError> {
         let chain = geometry.placed_chain();
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
-        let core = |what: &'static str| move |e: Error| CalibrationError::Core(what, e);
+        let com = self.com;
+        let file = self.file.clone();
         for row in &mut self.rows {
             let m = geometry
                 .markers
                 .get(usize::from(row.marker))
                 .copied()
                 .unwrap_or_default();
-            row.frames = chain.frames(&row.q).map_err(core("forward kinematics"))?;
-            row.p = row.frames.point_m(&m);
-            match row.kind {
-                RowKind::Absolute => {
-                    gravity_torques(&chain, &row.frames, &gravity, &mut row.tau)
-                        .map_err(core("gravity torques"))?;
-                    row.y = row.measured - row.p;
+            let absolute = row.kind == RowKind::Absolute;
+            let loading = Loading {
+                load: (!absolute).then_some(PointLoad {
+                    mass_kg: row.load_kg,
+                    com_m: com,
+                    gravity_mps2: gravity,
+                }),
+                own_weight_mps2: absolute.then_some(gravity),
+            };
+            let core = |what: &'static str| {
+                let line = row.line;
+                let file = file.clone();
+                move |e: Error| match e {
+                    Error::NotConverged { .. }
+                    | Error::NotIdentifiable { .. }
+                    | Error::NonFinite {
+                        what: "equilibrium",
+                    } => CalibrationError::NoEquilibrium(format!(
+                        "{file}:{line}: the loaded robot has no equilibrium near the \
+                         measured pose under the current joint law ({e})"
+                    )),
+                    e => CalibrationError::Core(what, e),
                 }
-                RowKind::Deflection => {
-                    let load = PointLoad {
-                        mass_kg: row.load_kg,
-                        com_m: self.com,
-                        gravity_mps2: gravity,
+            };
+            let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+            let p_rigid = rigid.point_m(&m);
+            match lin.law(&row.q, absolute) {
+                None => {
+                    loading
+                        .torques(&chain, &rigid, &mut row.tau)
+                        .map_err(core("torques"))?;
+                    row.load = loading.load.map(|l| l.wrench(&rigid));
+                    row.frames = rigid;
+                    row.p = p_rigid;
+                    row.twists.clear();
+                    row.y = if absolute {
+                        row.measured - p_rigid
+                    } else {
+                        row.measured
                     };
-                    let wrench = load.wrench(&row.frames);
-                    joint_torques(&row.frames, &wrench, &mut row.tau)
-                        .map_err(core("load torques"))?;
-                    row.load = Some(wrench);
+                }
+                Some(law) => {
+                    // From the last equilibrium of this row when there is
+                    // one (the law moves little between relinearisations).
+                    let guess: Vec<f64> = if row.frames.q().len() == row.q.len() {
+                        row.frames.q().to_vec()
+                    } else {
+                        row.q.clone()
+                    };
+                    let eq = equilibrium(&chain, &row.q, &guess, &loading, &law, &EQUILIBRIUM)
+                        .or_else(|_| {
+                            equilibrium(&chain, &row.q, &row.q, &loading, &law, &EQUILIBRIUM)
+                        })
+                        .map_err(core("equilibrium"))?;
+                    let dof = row.q.len();
+                    // A joint that softens under torque (nonlinear stiffness)
+                    // until its stiffness turns negative has no stable
+                    // equilibrium there.
+                    if let Some(j) = (0..dof)
+                        .find(|&j| law.quadratic[j] != 0.0 && law.deflection(j, eq.tau[j]).1 < 0.0)
+                    {
+                        return Err(CalibrationError::NoEquilibrium(format!(
+                            "{file}:{}: joint {} would have a negative stiffness at its \
+                             torque of {:.3} (nonlinear stiffness)",
+                            row.line,
+                            j + 1,
+                            eq.tau[j]
+                        )));
+                    }
+                    let p = eq.frames.point_m(&m);
+                    row.twists = (0..dof)
+                        .map(|j| eq.twist_column(j, &p))
+                        .collect::<Result<_, _>>()
+                        .map_err(core("equilibrium"))?;
+                    let linear: Vector3<f64> = row
+                        .twists
+                        .iter()
+                        .zip(&eq.deflection)
+                        .map(|(t, d)| t * *d)
+                        .sum();
+                    row.tau.copy_from_slice(&eq.tau[..dof]);
+                    row.load = loading.load.map(|l| l.wrench(&eq.frames));
+                    row.y = if absolute {
+                        row.measured - p + linear
+                    } else {
+                        row.measured - (p - p_rigid) + linear
+                    };
+                    row.frames = eq.frames;
+                    row.p = p;
                 }
             }
         }
@@ -342,55 +442,6 @@ impl Rows {
             n[r.group] += 1;
         }
         n
-    }
-}
-
-/// The current compliance estimate, about which the linearised effects
-/// (`load_com`) are taken: the SI value of every compliance parameter.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Compliances(BTreeMap<Param, f64>);
-
-impl Compliances {
-    /// The compliances of a fit of `params` with estimate `x` (reported
-    /// units).
-    pub fn of(params: &[Param], x: &[f64], names: &Names) -> Self {
-        Self(
-            params
-                .iter()
-                .zip(x)
-                .filter(|(p, _)| p.is_compliance())
-                .map(|(p, v)| (*p, v * names.unit(p).si))
-                .collect(),
-        )
-    }
-
-    /// The effective compliance of every joint at `row` \[rad/(N·m) or
-    /// m/N\]: its constant compliance plus that of the bin it is in.
-    pub fn at(&self, row: &Row) -> Vec<f64> {
-        let mut k = vec![0.0; row.q.len()];
-        for (p, &v) in &self.0 {
-            match *p {
-                Param::Compliance { joint } => k[usize::from(joint)] += v,
-                Param::ComplianceAt { joint, angle_urad }
-                    if crate::model::in_bin(angle_urad, row.q[usize::from(joint)]) =>
-                {
-                    k[usize::from(joint)] += v;
-                }
-                _ => {}
-            }
-        }
-        k
-    }
-
-    /// Whether any compliance moved by more than `rel` of its value from
-    /// `other`'s.
-    pub fn moved(&self, other: &Self, rel: f64) -> bool {
-        self.0.len() != other.0.len()
-            || self
-                .0
-                .iter()
-                .zip(&other.0)
-                .any(|((p, a), (q, b))| p != q || (a - b).abs() > rel * b.abs().max(1e-12))
     }
 }
 

@@ -39,6 +39,9 @@ pub struct Settings {
     /// Compute the leave-one-configuration-out RMS, and add an effect only
     /// when it lowers it.
     pub heldout: bool,
+    /// The deflection model of the rows: the exact equilibrium (default)
+    /// or the paper's first-order eq. 3.
+    pub deflection_model: super::DeflectionModel,
     /// The decision constants.
     pub policy: Policy,
 }
@@ -51,6 +54,7 @@ impl Default for Settings {
             max_iterations: 100,
             diagnose: true,
             heldout: true,
+            deflection_model: super::DeflectionModel::Exact,
             policy: Policy::default(),
         }
     }
@@ -80,11 +84,16 @@ pub struct Policy {
     /// Gauss–Newton stops when no geometric step exceeds this (reported
     /// units: 1 nm, 1 µrad). 1e-6.
     pub step_tolerance: f64,
+    /// Gauss–Newton stops when, besides the geometric steps, no parameter
+    /// that acts through a joint value (compliances, backlash, …) moves by
+    /// more than this many of its σ. 0.01: the bias left is a hundredth of
+    /// the uncertainty.
+    pub gauss_newton_sigma: f64,
     /// Gauss–Newton relinearisations at most. 50.
     pub max_steps: usize,
-    /// Refits of a model with linearised effects (`load_com`) about the
-    /// new compliances, at most. 5.
-    pub linearised_passes: u32,
+    /// Halvings of a Gauss–Newton step whose joint law leaves a loaded
+    /// robot without equilibrium, at most. 10 (a step of 1/1024).
+    pub max_halvings: usize,
     /// A joint with more distinct angles than this gets no angle bins (no
     /// compensator candidate, no `compliance_by_angle`). 32.
     pub max_bins: usize,
@@ -112,8 +121,9 @@ impl Default for Policy {
             min_rows_per_group: 2,
             irls_tolerance: 1e-3,
             step_tolerance: 1e-6,
+            gauss_newton_sigma: 0.01,
             max_steps: 50,
-            linearised_passes: 5,
+            max_halvings: 10,
             max_bins: 32,
             compensator_bins: (2, 8),
             compensator_min_configs: 2,
@@ -142,12 +152,15 @@ pub enum CalibrationError {
     Data(String),
     /// A numerical error of the core, with what was being done.
     Core(&'static str, Error),
+    /// With the current joint law a loaded robot has no (stable)
+    /// equilibrium near a measured pose (one line naming the row).
+    NoEquilibrium(String),
 }
 
 impl core::fmt::Display for CalibrationError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            CalibrationError::Data(s) => write!(f, "{s}"),
+            CalibrationError::Data(s) | CalibrationError::NoEquilibrium(s) => write!(f, "{s}"),
             CalibrationError::Core(what, e) => write!(f, "{what}: {e}"),
         }
     }

@@ -29,7 +29,7 @@ pub fn validate(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
-    rows.relinearise(&model.geometry)?;
+    rows.relinearise(&model.geometry, &model.linearisation)?;
     rows.rows.retain(|r| match r.kind {
         RowKind::Deflection => model.kinds.deflections,
         RowKind::Absolute => model.kinds.absolute,
@@ -52,7 +52,7 @@ pub fn validate(
     let d = Design::new(
         &rows.rows,
         &model.params,
-        &model.compliances,
+        &model.linearisation,
         &model.names,
         rows.configs.len(),
     )

@@ -27,6 +27,8 @@ use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField, Vector3, U3};
 
 use super::accumulator::{symmetric, Accumulator};
+use super::factor::Solution;
+use super::irls::Noise;
 use super::linalg::{dot, mat_vec};
 use crate::Error;
 
@@ -222,41 +224,53 @@ where
         Ok(())
     }
 
-    /// σ per group and axis of the residuals of `x`, written to `out` (one
-    /// entry per group, in [`Self::groups`] order):
-    /// `σ²_ga = RSS_ga / n_ga · m / (m − p)`, where `m` is the total number of
-    /// rows and `p` the number of estimated parameters (a global
-    /// degrees-of-freedom correction, so that σ² is unbiased on average).
-    /// In the unit of `Δp`.
+    /// σ per group and axis of the residuals of `fit`, made with `weights`:
+    /// [`group_sigma`] of each group and axis's residual sum, rows and
+    /// share of the leverage `h = w² tr(Λ⁻¹ S)`, written to `sigma`, and
+    /// [`group_dof`] to `dof`.
     ///
     /// # Errors
-    /// [`Error::Mismatch`] when `out` does not have one entry per group.
+    /// [`Error::Mismatch`] when `out` or `weights` does not have one entry
+    /// per group, or `fit` has another number of parameters.
     pub fn residual_sigma_into(
         &self,
-        x: &OVector<T, D>,
-        parameters: usize,
-        out: &mut [Vector3<T>],
+        fit: &Solution<T, D>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<(), Error> {
-        if out.len() != self.groups.len() {
+        let g = self.groups.len();
+        if sigma.len() != g || dof.len() != g || weights.len() != g {
             return Err(Error::Mismatch {
-                what: "one sigma per group",
+                what: "one sigma and one weight per group",
             });
         }
-        let m = self.equations();
-        let correction = if m > parameters {
-            nalgebra::convert::<f64, T>(m as f64 / (m - parameters) as f64)
-        } else {
-            T::one()
-        };
-        for (o, g) in out.iter_mut().zip(&self.groups) {
-            *o = Vector3::from_fn(|a, _| {
-                let ax = &g.axes[a];
-                if ax.n == 0 {
-                    return T::zero();
-                }
-                let n = nalgebra::convert::<f64, T>(ax.n as f64);
-                (ax.rss(x) / n * correction).sqrt()
+        let inv = &fit.lambda_inv;
+        if inv.nrows() != self.dim.value() {
+            return Err(Error::Mismatch {
+                what: "fit of another number of parameters",
             });
+        }
+        for (((o, d), g), w) in sigma
+            .iter_mut()
+            .zip(dof.iter_mut())
+            .zip(&self.groups)
+            .zip(weights)
+        {
+            for a in 0..3 {
+                let ax = &g.axes[a];
+                // tr(Λ⁻¹ S) from S's upper triangle.
+                let mut tr = T::zero();
+                for c in 0..inv.ncols() {
+                    tr += inv[(c, c)] * ax.s_upper[(c, c)];
+                    for r in 0..c {
+                        tr += (inv[(r, c)] + inv[(r, c)]) * ax.s_upper[(r, c)];
+                    }
+                }
+                let h = w[a] * w[a] * tr;
+                o[a] = group_sigma(ax.rss(&fit.x), ax.n, h);
+                d[a] = group_dof(ax.n, h);
+            }
         }
         Ok(())
     }
@@ -274,19 +288,90 @@ where
         weights: &[Vector3<T>],
         sigma: Option<&[Vector3<T>]>,
     ) -> Result<Accumulator<T, D>, Error> {
-        if weights.len() != self.groups.len() || sigma.is_some_and(|s| s.len() != self.groups.len())
-        {
+        self.weighted_noise(weights, sigma.map(Noise::known))
+    }
+
+    /// [`GroupedStats::weighted`] with the middle term's σ from `noise`
+    /// ([`Noise::sigma`]).
+    ///
+    /// # Errors
+    /// As [`GroupedStats::weighted`].
+    pub fn weighted_noise(
+        &self,
+        weights: &[Vector3<T>],
+        noise: Option<Noise<'_, T>>,
+    ) -> Result<Accumulator<T, D>, Error> {
+        let groups = self.groups.len();
+        if weights.len() != groups || noise.is_some_and(|n| !n.fits(groups)) {
             return Err(Error::Mismatch {
                 what: "one weight (and sigma) per group",
             });
         }
         let mut acc = Accumulator::zeros(self.dim);
         for (gi, g) in self.groups.iter().enumerate() {
+            let s = noise.map(|n| n.sigma(gi, &weights[gi]));
             for (a, ax) in g.axes.iter().enumerate() {
-                let s = sigma.map(|s| s[gi][a]);
-                acc.add_moments(&ax.s_upper, &ax.u, ax.yy, ax.n, weights[gi][a], s)?;
+                acc.add_moments(
+                    &ax.s_upper,
+                    &ax.u,
+                    ax.yy,
+                    ax.n,
+                    weights[gi][a],
+                    s.map(|s| s[a]),
+                )?;
             }
         }
         Ok(acc)
     }
+}
+
+/// `σ̂ = √(RSS / (n − h))`: the residual σ of one group and axis from its
+/// residual sum `rss` over `n` rows, `h` being its share of the fit's
+/// leverage (`Σ w² bᵀ Λ⁻¹ b` over its rows; the shares of all groups and
+/// axes add up to the number of parameters). The expected residual sum of
+/// a group is `σ² (n − h)`, so this is unbiased group by group where the
+/// global `m / (m − p)` is unbiased only on average: a group that pins a
+/// parameter (a compensator bin seen in three configurations) leaves
+/// smaller residuals, and the global correction would call it precise and
+/// weight it up. The degrees of freedom are kept at ≥ ½ (a group that one
+/// parameter fits exactly has no residual to speak of either way). 0 for
+/// no row.
+pub fn group_sigma<T: RealField + Copy>(rss: T, n: usize, h: T) -> T {
+    if n == 0 {
+        return T::zero();
+    }
+    (rss.max(T::zero()) / group_dof(n, h)).sqrt()
+}
+
+/// `ν = n − h`, at least ½ (0 without rows): the degrees of freedom of
+/// [`group_sigma`].
+pub fn group_dof<T: RealField + Copy>(n: usize, h: T) -> T {
+    if n == 0 {
+        return T::zero();
+    }
+    let half = nalgebra::convert::<f64, T>(0.5);
+    (nalgebra::convert::<f64, T>(n as f64) - h).max(half)
+}
+
+/// `w² bᵀ Λ⁻¹ b`: the leverage of one row of weight `w` in a fit with
+/// `Λ⁻¹`, the row's elements given by `b(j)` (summed over a group and
+/// axis, the `h` of [`group_sigma`]).
+pub fn leverage<T: RealField + Copy, D: Dim>(
+    lambda_inv: &OMatrix<T, D, D>,
+    b: impl Fn(usize) -> T,
+    w: T,
+) -> T
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = lambda_inv.nrows();
+    let mut q = T::zero();
+    for c in 0..n {
+        let mut s = T::zero();
+        for r in 0..n {
+            s += lambda_inv[(r, c)] * b(r);
+        }
+        q += s * b(c);
+    }
+    w * w * q
 }

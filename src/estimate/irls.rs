@@ -117,32 +117,39 @@ where
     fn group_count(&self) -> usize;
 
     /// The statistics with weight `weights[g][a]` on every row of group `g`,
-    /// axis `a`; with `sigma`, the sandwich middle term `M = Σ w⁴σ² bbᵀ` too.
+    /// axis `a`; with `noise`, the sandwich middle term `M = Σ w⁴σ² bbᵀ`
+    /// too, `σ` per group from [`Noise::sigma`].
     ///
     /// # Errors
     /// [`Error::Mismatch`] without one entry per group; bad weights.
     fn weighted(
         &self,
         weights: &[Vector3<T>],
-        sigma: Option<&[Vector3<T>]>,
+        noise: Option<Noise<'_, T>>,
     ) -> Result<Accumulator<T, D>, Error>;
 
-    /// σ per group and axis of the residuals of `x`, with the global
-    /// degrees-of-freedom correction `m / (m − parameters)`, written to
-    /// `out` (one entry per group).
+    /// σ per group and axis of the residuals of `fit`, made with `weights`
+    /// (one entry per group), written to `sigma`, and its degrees of
+    /// freedom to `dof`: each group and axis on its own, `ν = n − h` and
+    /// `σ̂ = √(RSS / ν)` ([`group_sigma`]; `h` is the group and axis's share
+    /// of the fit's leverage, [`leverage`]).
     ///
     /// # Errors
-    /// [`Error::Mismatch`] when `out` does not have one entry per group.
+    /// [`Error::Mismatch`] when `sigma`, `dof` or `weights` does not have
+    /// one entry per group.
     fn residual_sigma_into(
         &self,
-        x: &OVector<T, D>,
-        parameters: usize,
-        out: &mut [Vector3<T>],
+        fit: &Solution<T, D>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<(), Error>;
 
-    /// Fit with the given weights per group and axis; covariance by the
-    /// sandwich (eq. 11) with σ from this fit's residuals, which are
-    /// written to `sigma` (one entry per group).
+    /// Fit with the given weights per group and axis, known in advance
+    /// (not estimated from these data); covariance by the sandwich (eq. 11)
+    /// with σ from this fit's residuals, which are written to `sigma` and
+    /// their degrees of freedom to `dof` (one entry per group; groups too
+    /// small for their own σ pooled, [`pool_small_groups`]).
     ///
     /// # Errors
     /// From [`Reweightable::weighted`] and the solve.
@@ -151,22 +158,33 @@ where
         weights: &[Vector3<T>],
         active: &[bool],
         sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<Fit<T, D>, Error> {
-        let acc = self.weighted(weights, None)?;
-        let solution = acc.solve_active(active)?;
-        self.residual_sigma_into(&solution.x, solution.parameters(), sigma)?;
-        let middle = self.weighted(weights, Some(sigma))?.middle();
-        let covariance = solution.cov_sandwich(&middle);
-        Ok(Fit {
-            solution,
-            covariance,
-            iterations: 0,
-            converged: false,
-        })
+        fit_with(self, weights, active, sigma, dof, false)
+    }
+
+    /// One WLS step (eq. 10) with the weights of eq. 14 computed from the
+    /// previous fit's `sigma` and `dof` (which are overwritten with this
+    /// fit's); the weights are written to `weights`. The sandwich (eq. 11)
+    /// accounts for the weights having been estimated from the same data
+    /// ([`estimated_weight_factor`]).
+    ///
+    /// # Errors
+    /// As [`robust_weights`] and [`Reweightable::fit_weighted`].
+    fn fit_reweighted(
+        &self,
+        weight: &RobustWeight<T>,
+        active: &[bool],
+        weights: &mut [Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
+    ) -> Result<Fit<T, D>, Error> {
+        robust_weights(sigma, weight, weights)?;
+        fit_with(self, weights, active, sigma, dof, true)
     }
 
     /// Ordinary least squares (eq. 6) with the sandwich covariance (eq. 8).
-    /// `weights` is set to one and `sigma` to the residual σ.
+    /// `weights` is set to one, `sigma` and `dof` to the residual σ.
     ///
     /// # Errors
     /// As [`Reweightable::fit_weighted`].
@@ -175,14 +193,16 @@ where
         active: &[bool],
         weights: &mut [Vector3<T>],
         sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<Fit<T, D>, Error> {
         weights.fill(Vector3::repeat(T::one()));
-        self.fit_weighted(weights, active, sigma)
+        self.fit_weighted(weights, active, sigma, dof)
     }
 
-    /// Iteratively reweighted least squares from the OLS start (section 5).
-    /// On return `weights` and `sigma` hold the final fit's weights and
-    /// residual σ. The OLS start and every iteration are passed to
+    /// Iteratively reweighted least squares from the OLS start (section 5):
+    /// [`Reweightable::fit_reweighted`] until no parameter moves by more
+    /// than the tolerance. On return `weights`, `sigma` and `dof` hold the
+    /// final fit's. The OLS start and every iteration are passed to
     /// `history`.
     ///
     /// # Errors
@@ -193,6 +213,7 @@ where
         active: &[bool],
         weights: &mut [Vector3<T>],
         sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
         mut history: impl FnMut(&Iteration<T, D>),
     ) -> Result<Fit<T, D>, Error> {
         if settings.max_iterations == 0 {
@@ -202,15 +223,14 @@ where
                 len: 0,
             });
         }
-        let mut fit = self.fit_ols(active, weights, sigma)?;
+        let mut fit = self.fit_ols(active, weights, sigma, dof)?;
         history(&Iteration {
             x: fit.solution.x.clone(),
             std: fit.std(),
             change: T::zero(),
         });
         for k in 1..=settings.max_iterations {
-            robust_weights(sigma, &settings.weight, weights)?;
-            let next = self.fit_weighted(weights, active, sigma)?;
+            let next = self.fit_reweighted(&settings.weight, active, weights, sigma, dof)?;
             let std = next.std();
             let mut change = T::zero();
             for i in 0..active.len() {
@@ -232,6 +252,140 @@ where
         }
         Ok(fit)
     }
+}
+
+/// The fit behind [`Reweightable::fit_weighted`] (`estimated = false`) and
+/// [`Reweightable::fit_reweighted`] (`true`: eq. 14 weights from these
+/// data's σ, the middle term corrected by [`estimated_weight_factor`]).
+fn fit_with<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+    src: &R,
+    weights: &[Vector3<T>],
+    active: &[bool],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+    estimated: bool,
+) -> Result<Fit<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let acc = src.weighted(weights, None)?;
+    let solution = acc.solve_active(active)?;
+    src.residual_sigma_into(&solution, weights, sigma, dof)?;
+    pool_small_groups(sigma, dof);
+    let noise = Noise {
+        sigma,
+        estimated_from: estimated.then_some(&*dof),
+    };
+    let middle = src.weighted(weights, Some(noise))?.middle();
+    let covariance = solution.cov_sandwich(&middle);
+    Ok(Fit {
+        solution,
+        covariance,
+        iterations: 0,
+        converged: false,
+    })
+}
+
+/// The noise of the sandwich's middle term (eq. 8, 11): σ per group and
+/// axis, and whether the weights were estimated from it.
+#[derive(Debug, Clone, Copy)]
+pub struct Noise<'a, T> {
+    /// σ per group and axis, in the unit of `Δp`.
+    pub sigma: &'a [Vector3<T>],
+    /// `Some(ν)`: the weights are eq. 14 of this σ, estimated from these
+    /// data with `ν` degrees of freedom per group and axis; the middle term
+    /// then uses `σ² · c` ([`estimated_weight_factor`]). `None`: weights
+    /// known in advance.
+    pub estimated_from: Option<&'a [Vector3<T>]>,
+}
+
+impl<'a, T: RealField + Copy> Noise<'a, T> {
+    /// Weights known in advance (OLS, or weights not from these data).
+    pub fn known(sigma: &'a [Vector3<T>]) -> Self {
+        Self {
+            sigma,
+            estimated_from: None,
+        }
+    }
+
+    /// Whether `σ` (and `ν`) have one entry for each of `groups`.
+    pub fn fits(&self, groups: usize) -> bool {
+        self.sigma.len() == groups && self.estimated_from.is_none_or(|d| d.len() == groups)
+    }
+
+    /// The middle term's σ of group `g` whose rows carry the weights `w`:
+    /// `σ √c` per axis, `c` the [`estimated_weight_factor`] of eq. 14's
+    /// elasticity `1 − w` when the weights were estimated, else `σ`.
+    pub fn sigma(&self, g: usize, w: &Vector3<T>) -> Vector3<T> {
+        let s = self.sigma[g];
+        match self.estimated_from {
+            None => s,
+            Some(dof) => Vector3::from_fn(|a, _| {
+                s[a] * estimated_weight_factor(dof[g][a], T::one() - w[a]).sqrt()
+            }),
+        }
+    }
+}
+
+/// A group and axis whose σ has fewer degrees of freedom than this shares
+/// one σ with the other such groups of its axis ([`pool_small_groups`]).
+/// 8: below it a single group's σ is too uncertain to weight by (its
+/// relative standard deviation exceeds 25 %) and the estimated-weight
+/// correction of the covariance ([`estimated_weight_factor`]) exceeds 2.
+pub const POOL_BELOW_DOF: f64 = 8.0;
+
+/// Pools the σ of every group and axis with fewer than [`POOL_BELOW_DOF`]
+/// degrees of freedom: per axis, all such groups get
+/// `σ² = Σ ν σ² / Σ ν` over them and `ν = Σ ν`; when they have fewer than
+/// [`POOL_BELOW_DOF`] together, the pool takes every group of that axis.
+/// Groups without rows (`ν = 0`) are left as they are. Pooled entries are
+/// recognisable by their `dof`, the pool's.
+pub fn pool_small_groups<T: RealField + Copy>(sigma: &mut [Vector3<T>], dof: &mut [Vector3<T>]) {
+    let min: T = nalgebra::convert(POOL_BELOW_DOF);
+    for a in 0..3 {
+        let small = |n: T| n > T::zero() && n < min;
+        let sum = |all: bool| {
+            sigma
+                .iter()
+                .zip(dof.iter())
+                .filter(|(_, n)| if all { n[a] > T::zero() } else { small(n[a]) })
+                .fold((T::zero(), T::zero()), |(s, v), (sg, n)| {
+                    (s + sg[a] * sg[a] * n[a], v + n[a])
+                })
+        };
+        let (s, v) = sum(false);
+        if v == T::zero() {
+            continue;
+        }
+        let (s, v) = if v < min { sum(true) } else { (s, v) };
+        let pooled = (s / v).sqrt();
+        for (sg, n) in sigma.iter_mut().zip(dof.iter_mut()) {
+            if small(n[a]) {
+                sg[a] = pooled;
+                n[a] = v;
+            }
+        }
+    }
+}
+
+/// `c = ν / (ν − 4ε)`: how much the sandwich's middle term of one group
+/// and axis understates its variance when its weight was computed from its
+/// own residual σ̂ (`ν` degrees of freedom). With a weight of elasticity
+/// `ε = −∂ln w/∂ln σ̂` (eq. 14: `ε = λσ̂/(σ0 + λσ̂) = 1 − w`; eq. 12:
+/// `ε = 1`), the middle term estimates `E[w⁴ σ̂²]` where the variance is
+/// `E[w⁴ σ²]`; for `σ̂²/σ² ~ χ²_ν/ν` and `w ∝ σ̂^−ε` their ratio is
+/// `E[u^−2ε] / E[u^(1−2ε)] = ν / (ν − 4ε)` (`u = σ̂²/σ²`). Groups whose
+/// weights are known in advance (OLS: `ε = 0`) need none. Measured on the
+/// KR-270 (docs/numerics.md): without it the IRLS σ are 5–19 % too small.
+/// Capped at 2 (`ν − 4ε ≥ ν/2`; pooling keeps `ν ≥ 8`).
+pub fn estimated_weight_factor<T: RealField + Copy>(dof: T, elasticity: T) -> T {
+    if dof <= T::zero() {
+        return T::one();
+    }
+    let four: T = nalgebra::convert(4.0);
+    let half: T = nalgebra::convert(0.5);
+    let e = elasticity.max(T::zero()).min(T::one());
+    dof / (dof - four * e).max(dof * half)
 }
 
 /// The weights of eq. 14 from a fit's residual σ, per group and axis,
@@ -273,17 +427,18 @@ where
     fn weighted(
         &self,
         weights: &[Vector3<T>],
-        sigma: Option<&[Vector3<T>]>,
+        noise: Option<Noise<'_, T>>,
     ) -> Result<Accumulator<T, D>, Error> {
-        GroupedStats::weighted(self, weights, sigma)
+        GroupedStats::weighted_noise(self, weights, noise)
     }
 
     fn residual_sigma_into(
         &self,
-        x: &OVector<T, D>,
-        parameters: usize,
-        out: &mut [Vector3<T>],
+        fit: &Solution<T, D>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
     ) -> Result<(), Error> {
-        GroupedStats::residual_sigma_into(self, x, parameters, out)
+        GroupedStats::residual_sigma_into(self, fit, weights, sigma, dof)
     }
 }

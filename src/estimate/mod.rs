@@ -63,8 +63,11 @@ pub mod weights;
 pub use accumulator::Accumulator;
 pub use block::Block;
 pub use factor::{pivot_tolerance, std_devs, Factor, Solution};
-pub use grouped::{AxisMoments, GroupMoments, GroupedStats};
-pub use irls::{robust_weights, Fit, IrlsSettings, Iteration, Reweightable};
+pub use grouped::{group_dof, group_sigma, leverage, AxisMoments, GroupMoments, GroupedStats};
+pub use irls::{
+    estimated_weight_factor, pool_small_groups, robust_weights, Fit, IrlsSettings, Iteration,
+    Noise, Reweightable, POOL_BELOW_DOF,
+};
 pub use nested::{nested_test, NestedTest};
 pub use rank::{
     identifiability, independence_tolerance, Absorber, Identifiability, IdentifiabilitySettings,

@@ -100,9 +100,7 @@ impl Param {
     ) -> Result<Vector3<T>, Error> {
         let zero = Vector3::zeros();
         let p = &s.point_m;
-        let twist = |j: u8| -> Result<Vector3<T>, Error> {
-            Ok(s.frames.joint(usize::from(j))?.twist_column(p))
-        };
+        let twist = |j: u8| s.twist(j);
         let tau = |j: u8| -> Result<T, Error> {
             s.tau.get(usize::from(j)).copied().ok_or(Error::Mismatch {
                 what: "joint torques shorter than the chain's dof",
@@ -156,12 +154,12 @@ impl Param {
                 (Some(w), false) => {
                     let dir = s.frames.tip().rotation * Vector3::ith(axis(a, 3)?, T::one());
                     let mut col = zero;
-                    for (jf, &k) in s.frames.joints().iter().zip(s.compliance) {
+                    for (j, (jf, &k)) in s.frames.joints().iter().zip(s.compliance).enumerate() {
                         if k == T::zero() || jf.kind != JointKind::Revolute {
                             continue;
                         }
                         let dtau = jf.axis.dot(&dir.cross(&w.force_n));
-                        col += jf.twist_column(p) * (k * dtau);
+                        col += s.twist(j as u8)? * (k * dtau);
                     }
                     col
                 }
@@ -169,7 +167,13 @@ impl Param {
             },
             Param::Drift { axis: a } => Vector3::ith(axis(a, 3)?, s.dt_s),
             _ if !s.absolute => zero,
-            Param::JointOffset { joint } => twist(joint)?,
+            // Rigid at the (equilibrium) frames, like the frame errors and
+            // the base: a joint offset and the next joint's frame error move
+            // the robot, its weight and its deflection identically, so their
+            // columns must stay exactly dependent; the load's coupling
+            // (`M − I ≈ D T`, a few per cent) is left to the Gauss–Newton
+            // iteration, whose rows are exact.
+            Param::JointOffset { joint } => s.frames.joint(usize::from(joint))?.twist_column(p),
             Param::JointFrame { joint, axis: a } => {
                 joint_frame_columns(s.frames, usize::from(joint), p)?[axis(a, 6)?]
             }

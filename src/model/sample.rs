@@ -19,9 +19,17 @@ use crate::Error;
 ///   not act.
 #[derive(Debug, Clone, Copy)]
 pub struct Sample<'a, T: RealField + Copy, const J: usize> {
-    /// The chain's frames at the measured joint values
-    /// ([`crate::Chain::frames`]), in the frame the point is given in.
+    /// The chain's frames at the pose the point is at — the measured joint
+    /// values, or the deflected pose of the exact model
+    /// ([`crate::robot::equilibrium`]) — in the frame the point is given in.
     pub frames: &'a Frames<T, J>,
+    /// The measured (commanded) joint values \[rad or m\]: what angle bins
+    /// and the gear's cyclic error are functions of.
+    pub q: &'a [T],
+    /// The column of a change of each joint's value that the joint law adds
+    /// ([`crate::robot::Equilibrium::twist_column`]); empty: each joint's own
+    /// `zⱼ × (p − oⱼ)` at `frames` (the first-order model, eq. 2 and 3).
+    pub twists: &'a [Vector3<T>],
     /// The marker's predicted position \[m\], in the same frame.
     pub point_m: Vector3<T>,
     /// Marker index (for [`super::Param::Marker`]).
@@ -52,6 +60,8 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
     ) -> Self {
         Self {
             frames,
+            q: frames.q(),
+            twists: &[],
             point_m,
             marker,
             tau,
@@ -76,16 +86,32 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
         }
     }
 
-    /// Joint `j`'s value \[rad or m\].
+    /// Joint `j`'s measured value \[rad or m\].
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] when the sample has no joint `j`.
+    pub fn q(&self, j: u8) -> Result<T, Error> {
+        self.q
+            .get(usize::from(j))
+            .copied()
+            .ok_or(Error::OutOfRange {
+                what: "joint",
+                index: usize::from(j),
+                len: self.q.len(),
+            })
+    }
+
+    /// The column of a change of joint `j`'s value at the sample's point:
+    /// [`Sample::twists`] when given, else `zⱼ × (p − oⱼ)` (revolute) or
+    /// `zⱼ` (prismatic) at [`Sample::frames`].
     ///
     /// # Errors
     /// [`Error::OutOfRange`] when the frames have no joint `j`.
-    pub fn q(&self, j: u8) -> Result<T, Error> {
-        let q = self.frames.q();
-        q.get(usize::from(j)).copied().ok_or(Error::OutOfRange {
-            what: "joint",
-            index: usize::from(j),
-            len: q.len(),
+    pub fn twist(&self, j: u8) -> Result<Vector3<T>, Error> {
+        let jf = self.frames.joint(usize::from(j))?;
+        Ok(match self.twists.get(usize::from(j)) {
+            Some(t) => *t,
+            None => jf.twist_column(&self.point_m),
         })
     }
 }

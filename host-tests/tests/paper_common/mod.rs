@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use nalgebra::{Const, DMatrix, DVector, Vector3};
-use robcal::calibrate::{self, Method, Report, Settings};
+use robcal::calibrate::{self, DeflectionModel, Method, Report, Settings};
 use robcal::io::{Job, Measurements};
 use robcal::model::{compliance_columns, Marker};
 use robcal::robot::{joint_torques, PointLoad};
@@ -31,14 +31,31 @@ pub fn experiment() -> (Job, Measurements) {
     (job, data)
 }
 
-/// The product's fit of the declared model (no diagnosis, no held-out
-/// error): `method`, λ of the setup unless given.
+/// The product's fit of the declared model with the paper's first-order
+/// deflection model (eq. 3, the rows the batch reference builds): no
+/// diagnosis, no held-out error; `method`, λ of the setup unless given.
 pub fn fit(job: &Job, data: &Measurements, method: Method, lambda: Option<f64>) -> Report {
+    fit_with(job, data, method, lambda, DeflectionModel::Linear)
+}
+
+/// [`fit`] with the exact deflection model (the product's default).
+pub fn fit_exact(job: &Job, data: &Measurements, method: Method, lambda: Option<f64>) -> Report {
+    fit_with(job, data, method, lambda, DeflectionModel::Exact)
+}
+
+fn fit_with(
+    job: &Job,
+    data: &Measurements,
+    method: Method,
+    lambda: Option<f64>,
+    deflection_model: DeflectionModel,
+) -> Report {
     let settings = Settings {
         method,
         lambda,
         diagnose: false,
         heldout: false,
+        deflection_model,
         ..Settings::default()
     };
     let r = calibrate::calibrate(job, data, &settings, &mut |_| {}).unwrap();
@@ -148,17 +165,23 @@ pub struct BatchFit {
     pub x: DVector<f64>,
     /// `(Bᵀ W² B)⁻¹`.
     pub lambda_inv: DMatrix<f64>,
-    /// σ per (group, axis) of the residuals, with the `m/(m − p)` correction.
+    /// σ per (group, axis) of the residuals: `RSS / (n − h)` with `h` the
+    /// group and axis's part of the trace of the hat matrix.
     pub sigma: Vec<[f64; 3]>,
-    /// Sandwich (eq. 8 / 11) with that σ.
+    /// Those degrees of freedom `n − h`.
+    pub dof: Vec<[f64; 3]>,
+    /// Sandwich (eq. 8 / 11) with that σ (times `ν / (ν − 4(1 − w))` per
+    /// row when the weights were estimated from these data, eq. 14).
     pub cov: DMatrix<f64>,
     /// Eq. 7: `RSS/(m − p) · (BᵀB)⁻¹` (meaningful for unit weights).
     pub cov_iid: DMatrix<f64>,
 }
 
-/// Weighted least squares by SVD of `W B`; covariances with explicit
-/// `W` and `Σ` diagonal matrices.
-pub fn batch_fit(s: &Batch, w: &[f64]) -> BatchFit {
+/// Weighted least squares by SVD of `W B`; the hat matrix
+/// `H = W B (BᵀW²B)⁻¹ BᵀW` and the covariances with explicit `W` and `Σ`
+/// diagonal matrices. `estimated`: the weights are eq. 14 of σ estimated
+/// from these data.
+pub fn batch_fit(s: &Batch, w: &[f64], estimated: bool) -> BatchFit {
     let m = s.b.nrows();
     let wm = DMatrix::from_diagonal(&DVector::from_column_slice(w));
     let wb = &wm * &s.b;
@@ -169,22 +192,35 @@ pub fn batch_fit(s: &Batch, w: &[f64]) -> BatchFit {
     let sv = &svd.singular_values;
     let dinv = DMatrix::from_diagonal(&sv.map(|s| 1.0 / (s * s)));
     let lambda_inv = &v * dinv * v.transpose();
+    let hat = &wb * &lambda_inv * wb.transpose();
     let r = &s.y - &s.b * &x;
     let mut rss = vec![[0.0; 3]; G];
+    let mut h = vec![[0.0; 3]; G];
     let mut n = vec![[0usize; 3]; G];
     for i in 0..m {
         rss[s.group[i]][s.axis[i]] += r[i] * r[i];
+        h[s.group[i]][s.axis[i]] += hat[(i, i)];
         n[s.group[i]][s.axis[i]] += 1;
     }
-    let corr = m as f64 / (m - N) as f64;
-    let sigma: Vec<[f64; 3]> = rss
-        .iter()
-        .zip(&n)
-        .map(|(r, n)| [0, 1, 2].map(|a| (r[a] / n[a] as f64 * corr).sqrt()))
+    let dof: Vec<[f64; 3]> = (0..G)
+        .map(|g| [0, 1, 2].map(|a| n[g][a] as f64 - h[g][a]))
+        .collect();
+    // No group of the paper's experiment is small enough to be pooled.
+    assert!(dof.iter().flatten().all(|&v| v >= 8.0), "{dof:?}");
+    let sigma: Vec<[f64; 3]> = (0..G)
+        .map(|g| [0, 1, 2].map(|a| (rss[g][a] / dof[g][a]).sqrt()))
         .collect();
     let sig = DMatrix::from_diagonal(&DVector::from_iterator(
         m,
-        (0..m).map(|i| sigma[s.group[i]][s.axis[i]]),
+        (0..m).map(|i| {
+            let (g, a) = (s.group[i], s.axis[i]);
+            let c = if estimated {
+                dof[g][a] / (dof[g][a] - 4.0 * (1.0 - w[i]))
+            } else {
+                1.0
+            };
+            sigma[g][a] * c.sqrt()
+        }),
     ));
     let w2 = &wm * &wm;
     let middle = s.b.transpose() * &w2 * &sig * &sig * &w2 * &s.b;
@@ -195,6 +231,7 @@ pub fn batch_fit(s: &Batch, w: &[f64]) -> BatchFit {
         x,
         lambda_inv,
         sigma,
+        dof,
         cov,
         cov_iid,
     }

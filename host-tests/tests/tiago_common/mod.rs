@@ -11,7 +11,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3, Vector4};
+use nalgebra::{Matrix3, Vector3};
 use robcal::calibrate::{self, Method, Report, Settings};
 use robcal::io::{GeometryModel, Job, MarkerModel, Measurements, Robot};
 
@@ -165,71 +165,6 @@ pub fn rmse_mm(r: &Report, job: &Job, data: &Measurements) -> (BTreeMap<String, 
 // ---------------------------------------------------------------------------
 // The oracle: forward kinematics from the URDF text and a rigid
 // registration, independent of robcal's chain, kinematics and engine.
-
-/// A homogeneous transform from URDF `xyz` and `rpy` (R = Rz·Ry·Rx).
-fn transform(xyz: [f64; 3], rpy: [f64; 3]) -> Matrix4<f64> {
-    let r = Rotation3::from_euler_angles(rpy[0], rpy[1], rpy[2]);
-    let mut m = Matrix4::identity();
-    m.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
-    m.fixed_view_mut::<3, 1>(0, 3)
-        .copy_from(&Vector3::from(xyz));
-    m
-}
-
-/// A joint's motion: its axis and whether it is prismatic (`None`: fixed).
-type Motion = Option<(Vector3<f64>, bool)>;
-
-/// The chain from `base` to `tip` of the URDF at `path`: each joint's origin
-/// and motion.
-pub struct Fk(Vec<(Matrix4<f64>, Motion)>);
-
-impl Fk {
-    pub fn new(path: &Path, base: &str, tip: &str) -> Self {
-        let urdf = urdf_rs::read_file(path).expect("urdf");
-        let mut chain = Vec::new();
-        let mut link = tip.to_string();
-        while link != base {
-            let j = urdf
-                .joints
-                .iter()
-                .find(|j| j.child.link == link)
-                .expect("a joint into every link of the chain");
-            let o = transform(j.origin.xyz.0, j.origin.rpy.0);
-            let axis = Vector3::from(j.axis.xyz.0);
-            let motion = match j.joint_type {
-                urdf_rs::JointType::Fixed => None,
-                urdf_rs::JointType::Prismatic => Some((axis, true)),
-                _ => Some((axis, false)),
-            };
-            chain.push((o, motion));
-            link = j.parent.link.clone();
-        }
-        chain.reverse();
-        Self(chain)
-    }
-
-    /// Position \[m, base\] of a point `p` \[m, tip frame\] at joint values
-    /// `q` (movable joints in chain order).
-    pub fn point(&self, q: &[f64], p: &Vector3<f64>) -> Vector3<f64> {
-        let mut t = Matrix4::identity();
-        let mut k = 0;
-        for (o, m) in &self.0 {
-            t *= o;
-            if let Some((axis, prismatic)) = m {
-                let mut mj = Matrix4::identity();
-                if *prismatic {
-                    mj.fixed_view_mut::<3, 1>(0, 3).copy_from(&(axis * q[k]));
-                } else {
-                    let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(*axis), q[k]);
-                    mj.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
-                }
-                t *= mj;
-                k += 1;
-            }
-        }
-        (t * Vector4::new(p.x, p.y, p.z, 1.0)).xyz()
-    }
-}
 
 /// The rigid transform `(R, t)` that best maps `a` onto `b` in least
 /// squares (Kabsch, by SVD).

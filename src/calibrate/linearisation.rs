@@ -1,0 +1,213 @@
+//! Where the rows are evaluated: the current value of every parameter that
+//! acts through a joint value (compliances, their angle bins, nonlinear
+//! stiffness, backlash, the gear's cyclic error), and which deflection
+//! model the rows use.
+//!
+//! **Exact** (the default): each row is the robot at its equilibrium
+//! ([`crate::robot::equilibrium`]) — a deflection is the marker at the
+//! loaded equilibrium (the load acting on the deflected robot) minus the
+//! marker at the commanded pose; an absolute position is the marker at the
+//! equilibrium under the robot's own weight. The model is not linear in
+//! its parameters, so the engine solves it by Gauss–Newton: rows and
+//! columns at the current estimate `x₀`, the fit of the linearised rows
+//! (`y = measured − f(x₀) + B(x₀) x₀`, so that the fit returns the
+//! parameters themselves, not a step), repeated until no parameter moves by
+//! more than [`super::Policy::gauss_newton_sigma`] of its σ.
+//!
+//! **Linear**: eq. 3 as the paper wrote it — torques and columns at the
+//! commanded pose, the model linear in the compliances, one fit.
+
+use std::collections::BTreeMap;
+
+use super::names::Names;
+use crate::model::{in_bin, Param};
+use crate::robot::JointLaw;
+
+/// The deflection model of the rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeflectionModel {
+    /// The equilibrium of the deflected robot, by Gauss–Newton.
+    Exact,
+    /// Eq. 3: first order at the commanded pose.
+    Linear,
+}
+
+impl DeflectionModel {
+    /// Its name in the report and the JSON (`deflection_model`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DeflectionModel::Exact => "exact",
+            DeflectionModel::Linear => "linear",
+        }
+    }
+}
+
+/// The point the rows are evaluated at (see the [module docs](self)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Linearisation {
+    /// The deflection model.
+    pub model: DeflectionModel,
+    /// SI value of every parameter that acts through a joint value
+    /// (compliances in rad/(N·m) or m/N, backlash and cyclic error in rad
+    /// or m, nonlinear stiffness in rad/(N·m)²).
+    values: BTreeMap<Param, f64>,
+}
+
+/// Whether `p` acts through a joint value and enters the joint law.
+pub(crate) fn acts_on_joint(p: &Param) -> bool {
+    matches!(
+        p,
+        Param::Compliance { .. }
+            | Param::ComplianceAt { .. }
+            | Param::NonlinearStiffness { .. }
+            | Param::Backlash { .. }
+            | Param::GearCyclic { .. }
+    )
+}
+
+impl Linearisation {
+    /// Whether the linearisation holds the value of `p` (the Gauss–Newton
+    /// iteration follows it until it settles): a parameter acting through
+    /// a joint value. A `load_com` estimate is not one: it is the
+    /// correction itself, its column only depends on the compliances.
+    pub fn tracks(p: &Param) -> bool {
+        acts_on_joint(p)
+    }
+
+    /// The rigid nominal robot: every value zero.
+    pub fn nominal(model: DeflectionModel) -> Self {
+        Self {
+            model,
+            values: BTreeMap::new(),
+        }
+    }
+
+    /// The values of a fit of `params` with estimate `x` (reported units).
+    pub fn of(model: DeflectionModel, params: &[Param], x: &[f64], names: &Names) -> Self {
+        Self {
+            model,
+            values: params
+                .iter()
+                .zip(x)
+                .filter(|(p, _)| acts_on_joint(p))
+                .map(|(p, v)| (*p, v * names.unit(p).si))
+                .collect(),
+        }
+    }
+
+    /// Whether the rows depend on the values: the exact model with a
+    /// parameter acting through a joint value, or a `load_com` column
+    /// (first order about the compliances, in either model).
+    pub fn iterates(&self, params: &[Param]) -> bool {
+        params.iter().any(|p| match p {
+            Param::LoadCom { .. } => true,
+            p => self.model == DeflectionModel::Exact && acts_on_joint(p),
+        })
+    }
+
+    /// The point a fraction `t` of the way from `self` to `to` (a damped
+    /// Gauss–Newton step); `to`'s deflection model.
+    pub fn towards(&self, to: &Self, t: f64) -> Self {
+        let mut values = self.values.clone();
+        for v in values.values_mut() {
+            *v *= 1.0 - t;
+        }
+        for (p, v) in &to.values {
+            *values.entry(*p).or_insert(0.0) += t * v;
+        }
+        Self {
+            model: to.model,
+            values,
+        }
+    }
+
+    /// Value of `p` in its reported unit (0 when absent).
+    pub fn value(&self, p: &Param, names: &Names) -> f64 {
+        self.values.get(p).map_or(0.0, |v| v / names.unit(p).si)
+    }
+
+    /// The effective compliance \[rad/(N·m) or m/N\] of every joint at the
+    /// measured joint values `q`: its constant compliance plus that of the
+    /// angle bin it is in.
+    pub fn compliance_at(&self, q: &[f64]) -> Vec<f64> {
+        let mut k = vec![0.0; q.len()];
+        for (p, &v) in &self.values {
+            match *p {
+                Param::Compliance { joint } => k[usize::from(joint)] += v,
+                Param::ComplianceAt { joint, angle_urad }
+                    if in_bin(angle_urad, q[usize::from(joint)]) =>
+                {
+                    k[usize::from(joint)] += v;
+                }
+                _ => {}
+            }
+        }
+        k
+    }
+
+    /// The joint law at measured joint values `q`, for an absolute
+    /// position (the gear's cyclic error acts) or a deflection (it does
+    /// not: it is the same loaded and unloaded). `None` when every joint is
+    /// rigid (the rows are the first-order ones) or the model is linear.
+    pub fn law(&self, q: &[f64], absolute: bool) -> Option<Law> {
+        if self.model == DeflectionModel::Linear {
+            return None;
+        }
+        let n = q.len();
+        let mut law = Law {
+            compliance: self.compliance_at(q),
+            quadratic: vec![0.0; n],
+            backlash: vec![0.0; n],
+            fixed: vec![0.0; n],
+        };
+        for (p, &v) in &self.values {
+            match *p {
+                Param::NonlinearStiffness { joint } => law.quadratic[usize::from(joint)] += v,
+                Param::Backlash { joint } => law.backlash[usize::from(joint)] += v,
+                Param::GearCyclic { joint, cos } if absolute => {
+                    let qj = q[usize::from(joint)];
+                    law.fixed[usize::from(joint)] += v * if cos { qj.cos() } else { qj.sin() };
+                }
+                _ => {}
+            }
+        }
+        let rigid = [&law.compliance, &law.quadratic, &law.backlash, &law.fixed]
+            .iter()
+            .all(|v| v.iter().all(|&x| x == 0.0));
+        (!rigid).then_some(law)
+    }
+}
+
+/// The joint law of one row: `δⱼ = kⱼ τⱼ + cⱼ τⱼ|τⱼ| + bⱼ sign τⱼ + eⱼ`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Law {
+    /// `kⱼ` \[rad/(N·m) or m/N\]: compliance (constant plus angle bin).
+    pub compliance: Vec<f64>,
+    /// `cⱼ` \[rad/(N·m)²\]: nonlinear stiffness.
+    pub quadratic: Vec<f64>,
+    /// `bⱼ` \[rad or m\]: backlash, in the direction of the torque.
+    pub backlash: Vec<f64>,
+    /// `eⱼ` \[rad or m\]: independent of the torque (gear cyclic error).
+    pub fixed: Vec<f64>,
+}
+
+/// Below this torque \[N·m or N\] a joint's backlash side is undecided and
+/// counts as zero (the `backlash` column uses the same threshold).
+const BACKLASH_DEADBAND: f64 = 1e-9;
+
+impl JointLaw<f64> for Law {
+    fn deflection(&self, j: usize, tau: f64) -> (f64, f64) {
+        let side = if tau.abs() < BACKLASH_DEADBAND {
+            0.0
+        } else {
+            tau.signum()
+        };
+        (
+            self.compliance[j] * tau
+                + self.quadratic[j] * tau * tau.abs()
+                + self.backlash[j] * side
+                + self.fixed[j],
+            self.compliance[j] + 2.0 * self.quadratic[j] * tau.abs(),
+        )
+    }
+}
