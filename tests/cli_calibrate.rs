@@ -57,15 +57,18 @@ fn kr270_naive_model_traces_the_compensator() {
     assert_eq!(
         keys(&v),
         [
+            "converged",
             "deflection_model",
             "effects",
             "heldout_rms_um",
             "iterations",
             "method",
             "parameters",
+            "relinearisations",
             "rms_um",
             "unexplained",
-            "validation"
+            "validation",
+            "warnings"
         ]
     );
     assert_eq!(v["method"], "irls");
@@ -177,7 +180,16 @@ fn validate_reports_per_marker_rmse() {
     args.extend(["--validate", "data/kr270/measurements.csv", "--json"]);
     let v = json(&robcal(&args));
     let val = &v["validation"];
-    assert_eq!(keys(val), ["per_marker_rms_mm", "rms_mm"]);
+    assert_eq!(
+        keys(val),
+        [
+            "per_marker_max_mm",
+            "per_marker_mean_mm",
+            "per_marker_rms_mm",
+            "points",
+            "rms_mm"
+        ]
+    );
     assert_eq!(keys(&val["per_marker_rms_mm"]), ["1", "2", "3"]);
     // The calibration file itself: the validation RMS is the fit's RMS.
     let rms_mm = val["rms_mm"].as_f64().unwrap();

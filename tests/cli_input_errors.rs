@@ -240,3 +240,225 @@ fn two_configurations_are_enough_for_the_paper_model() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+// Plausibility (issue 13, `robcal::calibrate::plausibility`): each wrong
+// answer that once left with exit 0 is an error or a reported warning.
+
+/// A run that failed after the calibration began: progress lines, then
+/// the one error line last; nothing on stdout.
+fn failed(out: &Output) -> String {
+    let err = String::from_utf8(out.stderr.clone()).unwrap();
+    assert!(!out.status.success(), "accepted: {err}");
+    assert!(out.stdout.is_empty());
+    let last = err.lines().last().unwrap_or_default().to_owned();
+    assert!(last.starts_with("robcal: error: "), "{err}");
+    last
+}
+
+/// The KR-270 data as shipped.
+fn shipped(dir: &Path) -> PathBuf {
+    csv(dir, |_, c| Some(c))
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn a_compliance_without_loaded_rows_is_an_error_naming_it() {
+    let (dir, setup) = job("no-load", None, None);
+    let data = csv(&dir, |_, c| (c[3] == "0").then_some(c));
+    let err = rejected(&run(&setup, &data, &["--no-diagnose"]));
+    assert!(
+        err.contains("k_a6 declared, but no row puts a torque"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_load_centre_of_mass_on_a_joint_axis_is_an_error_naming_the_compliance() {
+    let (dir, setup) = job("com-on-axis", None, None);
+    let text = std::fs::read_to_string(&setup).unwrap();
+    std::fs::write(
+        &setup,
+        text.replace("com = [0.25, 0.0, 0.30]", "com = [0.0, 0.0, 0.30]"),
+    )
+    .unwrap();
+    let err = rejected(&run(&setup, &shipped(&dir), &["--no-diagnose"]));
+    assert!(
+        err.contains("k_a6 declared, but no row puts a torque"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_negative_compliance_beyond_three_sigma_is_an_error() {
+    // The centre of mass on the wrong side of the flange: k_a6 comes out
+    // −2.4 ± 0.07 µrad/(N·m) (once reported with exit 0).
+    let (dir, setup) = job("negative", None, None);
+    let text = std::fs::read_to_string(&setup).unwrap();
+    std::fs::write(
+        &setup,
+        text.replace("com = [0.25, 0.0, 0.30]", "com = [-0.25, 0.0, 0.30]"),
+    )
+    .unwrap();
+    let err = failed(&run(&setup, &shipped(&dir), &["--no-diagnose"]));
+    assert!(
+        err.contains("k_a6 = -") && err.contains("is negative by") && err.contains("[load] com"),
+        "{err}"
+    );
+}
+
+#[test]
+fn one_joint_column_in_radians_is_an_error_naming_the_column() {
+    let (dir, setup) = job("a3-rad", None, None);
+    let data = csv(&dir, |_, mut c| {
+        c[6] = format!("{}", c[6].parse::<f64>().unwrap().to_radians());
+        Some(c)
+    });
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("column 'a3': its values fit rad far better"),
+        "{err}"
+    );
+}
+
+#[test]
+fn positions_in_centimetres_are_an_error() {
+    let (dir, setup) = job("cm", None, None);
+    let data = csv(&dir, |_, mut c| {
+        for v in &mut c[COL_X..COL_X + 3] {
+            *v = format!("{}", v.parse::<f64>().unwrap() / 10.0);
+        }
+        Some(c)
+    });
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("spread 0.100 times as far") && err.contains("another unit"),
+        "{err}"
+    );
+}
+
+#[test]
+fn validation_with_no_point_is_an_error() {
+    let (dir, setup) = job("validate-none", None, None);
+    let data = shipped(&dir);
+    let unloaded = dir.join("unloaded.csv");
+    let text = std::fs::read_to_string(&data).unwrap();
+    let keep: Vec<&str> = text
+        .lines()
+        .enumerate()
+        .filter(|(i, l)| *i == 0 || l.split(',').nth(3) == Some("0"))
+        .map(|(_, l)| l)
+        .collect();
+    std::fs::write(&unloaded, keep.join("\n") + "\n").unwrap();
+    let unloaded = unloaded.to_str().unwrap();
+    let err = failed(&run(
+        &setup,
+        &data,
+        &["--no-diagnose", "--validate", unloaded],
+    ));
+    assert!(
+        err.contains("unloaded.csv: no point to validate on"),
+        "{err}"
+    );
+}
+
+#[test]
+fn validation_reports_points_mean_and_max() {
+    let (dir, setup) = job("validate-keys", None, None);
+    let data = shipped(&dir);
+    let v = json(&run(
+        &setup,
+        &data,
+        &[
+            "--no-diagnose",
+            "--json",
+            "--validate",
+            data.to_str().unwrap(),
+        ],
+    ));
+    let val = &v["validation"];
+    assert_eq!(val["points"], 270);
+    for m in ["1", "2", "3"] {
+        let (mean, max, rms) = (
+            val["per_marker_mean_mm"][m].as_f64().unwrap(),
+            val["per_marker_max_mm"][m].as_f64().unwrap(),
+            val["per_marker_rms_mm"][m].as_f64().unwrap(),
+        );
+        assert!(
+            0.0 < mean && mean <= rms && rms <= max,
+            "{mean} {rms} {max}"
+        );
+    }
+}
+
+#[test]
+fn a_fit_stopped_at_max_iter_says_so() {
+    let (dir, setup) = job("max-iter", None, None);
+    let data = shipped(&dir);
+    let v = json(&run(
+        &setup,
+        &data,
+        &["--no-diagnose", "--json", "--max-iter", "1"],
+    ));
+    assert_eq!(v["converged"], false);
+    let w = v["warnings"].as_array().unwrap();
+    assert!(
+        w.iter()
+            .any(|w| w.as_str().unwrap().contains("did not converge")),
+        "{w:?}"
+    );
+    let v = json(&run(&setup, &data, &["--no-diagnose", "--json"]));
+    assert_eq!(v["converged"], true);
+    assert_eq!(v["warnings"], serde_json::json!([]));
+}
+
+#[test]
+fn absurd_numbers_name_the_value_and_where() {
+    let (dir, setup) = job("absurd-load", None, None);
+    let data = csv(&dir, |line, mut c| {
+        if line == 3 {
+            c[3] = "1e308".into();
+        }
+        Some(c)
+    });
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:3: column 'load_kg': load 1e308 kg is more than"),
+        "{err}"
+    );
+    let data = csv(&dir, |line, mut c| {
+        if line == 2 {
+            c[COL_X] = "1e300".into();
+        }
+        Some(c)
+    });
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("data.csv:2: column 'x': 1e297 m is more than"),
+        "{err}"
+    );
+    let text = std::fs::read_to_string(&setup).unwrap();
+    for (from, to, says) in [
+        (
+            "gravity = [0.0, 0.0, -9.80665]",
+            "gravity = [0.0, 0.0, 0.0]",
+            "setup.toml: load.gravity: [0.0, 0.0, 0.0] m/s² has norm 0",
+        ),
+        (
+            "xyz = [0.0, 0.30, 0.20]",
+            "xyz = [1e300, 0.30, 0.20]",
+            "setup.toml: marker[0].xyz: [1e300, 0.3, 0.2] m is more than 100 m",
+        ),
+    ] {
+        std::fs::write(&setup, text.replace(from, to)).unwrap();
+        let err = rejected(&run(&setup, &shipped(&dir), &[]));
+        assert!(err.contains(says), "{err}");
+    }
+}

@@ -18,9 +18,9 @@
 
 mod tiago_common;
 
+use host_tests::exact::Fk;
 use nalgebra::Vector3;
 use robcal::io::{GeometryModel, MarkerModel};
-use host_tests::exact::Fk;
 use tiago_common::*;
 
 /// Rounding tolerance of the pinned RMSE values [mm]: they are pinned to

@@ -211,12 +211,18 @@ fn opt_num(v: Option<f64>) -> Value {
     v.map_or(Value::Null, num)
 }
 
-/// The contract's JSON (§5).
+fn per_marker(m: &std::collections::BTreeMap<String, f64>) -> Value {
+    Value::Object(m.iter().map(|(k, x)| (k.clone(), num(*x))).collect())
+}
+
+/// The contract's JSON (§5, §7.5).
 fn to_json(r: &Report) -> Value {
     let mut v = json!({
         "method": r.method,
         "deflection_model": r.deflection_model,
         "iterations": r.iterations,
+        "converged": r.converged,
+        "relinearisations": r.relinearisations,
         "parameters": r.parameters.iter().map(|p| json!({
             "name": p.name, "value": num(p.value), "std": num(p.std), "unit": p.unit,
         })).collect::<Vec<_>>(),
@@ -242,9 +248,12 @@ fn to_json(r: &Report) -> Value {
         })),
         "validation": r.validation.as_ref().map(|v| json!({
             "rms_mm": num(v.rms_mm),
-            "per_marker_rms_mm": v.per_marker_rms_mm.iter()
-                .map(|(k, x)| (k.clone(), num(*x))).collect::<serde_json::Map<_, _>>(),
+            "per_marker_rms_mm": per_marker(&v.per_marker_rms_mm),
+            "per_marker_mean_mm": per_marker(&v.per_marker_mean_mm),
+            "per_marker_max_mm": per_marker(&v.per_marker_max_mm),
+            "points": v.points,
         })),
+        "warnings": r.warnings,
     });
     // Optional (an extension of the contract's §5): what the run changed on
     // its own, e.g. IRLS → OLS.

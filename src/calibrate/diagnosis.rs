@@ -360,5 +360,6 @@ pub fn run(
         plots,
         model: e.calibrated(&current),
         notes,
+        warnings: Vec::new(),
     })
 }

@@ -56,6 +56,7 @@ pub mod fit;
 pub mod geometry;
 pub mod linearisation;
 pub mod names;
+pub mod plausibility;
 pub mod report;
 pub mod residuals;
 pub mod rows;
@@ -109,6 +110,8 @@ pub fn calibrate(
         &mut names,
         &policy,
     )?;
+    let mut warnings: Vec<String> = data.warnings.iter().map(ToString::to_string).collect();
+    warnings.extend(plausibility::check_units(job, data, &policy)?);
     let model = declared::declared(job, &data.file, &rows, &names)?;
     let weight = RobustWeight::new(
         setup.noise.sigma0_um * 1e-6,
@@ -132,6 +135,7 @@ pub fn calibrate(
         progress,
     };
     e.relinearise()?;
+    plausibility::check_torques(&model, &e.rows, &e.names, &policy, &data.file)?;
 
     // The declared model reduced to what the data can identify.
     let d = e.design(&model)?;
@@ -188,7 +192,10 @@ pub fn calibrate(
         e.fit_settings.method = Method::Ols;
     }
     let dropped = dropped.iter().map(|p| e.names.name(p)).collect();
-    diagnosis::run(e, declared, dropped, &settings, notes)
+    let mut report = diagnosis::run(e, declared, dropped, &settings, notes)?;
+    warnings.extend(plausibility::check_result(&report, &policy)?);
+    report.warnings = warnings;
+    Ok(report)
 }
 
 #[cfg(test)]

@@ -99,6 +99,12 @@ pub struct Validation {
     pub rms_mm: f64,
     /// Per marker id.
     pub per_marker_rms_mm: BTreeMap<String, f64>,
+    /// Mean position error norm per marker id \[mm\].
+    pub per_marker_mean_mm: BTreeMap<String, f64>,
+    /// Largest position error norm per marker id \[mm\].
+    pub per_marker_max_mm: BTreeMap<String, f64>,
+    /// Points evaluated.
+    pub points: usize,
 }
 
 /// Residuals against the variable an effect was traced by, before and after
@@ -176,6 +182,9 @@ pub struct Report {
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
     /// configuration has too few rows to estimate its σ).
     pub notes: Vec<String>,
+    /// Plausibility findings that did not stop the run
+    /// ([`super::plausibility`]), the input readers' warnings included.
+    pub warnings: Vec<String>,
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -199,6 +208,9 @@ impl fmt::Display for Report {
         )?;
         for n in &self.notes {
             writeln!(f, "note: {n}")?;
+        }
+        for w in &self.warnings {
+            writeln!(f, "warning: {w}")?;
         }
         if !self.dropped.is_empty() {
             writeln!(

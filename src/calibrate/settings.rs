@@ -110,6 +110,23 @@ pub struct Policy {
     /// thermal drift of a tracker or of the robot's base is a fraction of a
     /// millimetre per hour; 5 mm/h is not a drift but a moving base.
     pub max_drift_mm_per_h: f64,
+    /// A declared joint-law parameter needs a row with at least this
+    /// torque at its joint \[N·m\]: below it (no load, gravity along the
+    /// axis) the column is zero but for rounding. 1e-3.
+    pub min_torque_nm: f64,
+    /// Measured positions spread more than this many times as far as the
+    /// nominal model predicts, or less than its inverse: another length
+    /// unit (cm for mm is 10). 2.
+    pub max_scale_ratio: f64,
+    /// … more than this many times: a warning (markers' xyz far off?). 1.2.
+    pub warn_scale_ratio: f64,
+    /// A joint column whose values, read in the other angle unit, let the
+    /// nominal model register onto the measured points this many times
+    /// better is in the other unit. 3.
+    pub unit_fit_ratio: f64,
+    /// A compliance or backlash below zero by more than this many σ is an
+    /// error; within it, a warning (consistent with zero). 3.
+    pub negative_sigmas: f64,
 }
 
 impl Default for Policy {
@@ -129,6 +146,11 @@ impl Default for Policy {
             compensator_min_configs: 2,
             max_cyclic_mrad: 10.0,
             max_drift_mm_per_h: 5.0,
+            min_torque_nm: 1e-3,
+            max_scale_ratio: 2.0,
+            warn_scale_ratio: 1.2,
+            unit_fit_ratio: 3.0,
+            negative_sigmas: 3.0,
         }
     }
 }

@@ -67,11 +67,27 @@ pub fn validate(
             .or_default()
             .push(r);
     }
+    if all.is_empty() {
+        return Err(CalibrationError::Data(format!(
+            "{}: no point to validate on (no row of the kinds the calibration used: {})",
+            data.file.display(),
+            match (model.kinds.deflections, model.kinds.absolute) {
+                (true, true) => "deflections and absolute positions",
+                (true, false) => "deflections, i.e. loaded rows with their unloaded rows",
+                _ => "absolute positions",
+            }
+        )));
+    }
+    let per_marker = |f: &dyn Fn(&[Vector3<f64>]) -> f64| -> BTreeMap<String, f64> {
+        per.iter().map(|(m, v)| (m.to_string(), f(v))).collect()
+    };
     Ok(Validation {
         rms_mm: rms_um(&all) * 1e-3,
-        per_marker_rms_mm: per
-            .into_iter()
-            .map(|(m, v)| (m.to_string(), rms_um(&v) * 1e-3))
-            .collect(),
+        per_marker_rms_mm: per_marker(&|v| rms_um(v) * 1e-3),
+        per_marker_mean_mm: per_marker(&|v| {
+            v.iter().map(|r| r.norm()).sum::<f64>() / v.len() as f64 * 1e3
+        }),
+        per_marker_max_mm: per_marker(&|v| v.iter().map(|r| r.norm()).fold(0.0, f64::max) * 1e3),
+        points: all.len(),
     })
 }

@@ -14,7 +14,8 @@
 //! Rejected, with file, line and column: an unreadable file, a missing,
 //! unknown or duplicate column, a row of the wrong length, a cell that is
 //! empty or not a number (integer for `config`, `rep`, `marker`), a
-//! non-finite number, a negative `load_kg`, a loaded row when the setup has
+//! non-finite number, a negative `load_kg` or one above [`MAX_LOAD_KG`], a
+//! position beyond [`MAX_POSITION_M`] in any unit, a loaded row when the setup has
 //! no `[load]`, a marker the setup does not declare, two unloaded rows (or
 //! two loaded rows of the same load) with the same `config`, `rep`,
 //! `marker`, a loaded row without its unloaded row, no data row, and
@@ -39,6 +40,12 @@ use super::{ErrorKind, InputError, InputWarning, WarningKind};
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
 pub const PAIR_Q_TOLERANCE: f64 = 1e-3;
+
+/// Largest `load_kg` \[kg\]: 100 t, beyond any robot's payload.
+pub const MAX_LOAD_KG: f64 = 1e5;
+
+/// Largest position \[m\] in any unit: 10 km, beyond any instrument.
+pub const MAX_POSITION_M: f64 = 1e4;
 
 /// One CSV row, in SI units.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -326,6 +333,16 @@ pub fn parse_measurements<R: std::io::Read>(
                             format!("negative load {} kg", o.load_kg),
                         ));
                     }
+                    if o.load_kg > MAX_LOAD_KG {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "load {:?} kg is more than {MAX_LOAD_KG:?} kg: no robot carries it \
+                                 (another unit, or an overflow?)",
+                                o.load_kg
+                            ),
+                        ));
+                    }
                     if o.load_kg > 0.0 && setup.load.is_none() {
                         return Err(cerr(
                             ErrorKind::InvalidValue,
@@ -373,6 +390,15 @@ pub fn parse_measurements<R: std::io::Read>(
                 Col::Pos(k) => {
                     let v = parse_real(cell, Scale::Length(units.length))
                         .map_err(|(k, m)| cerr(k, m))?;
+                    if v.abs() > MAX_POSITION_M {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{v:?} m is more than {MAX_POSITION_M:?} m from the origin \
+                                 (another unit, or an overflow?)"
+                            ),
+                        ));
+                    }
                     if units.length == LengthUnit::M && v.abs() > 100.0 {
                         return Err(cerr(
                             ErrorKind::Units,

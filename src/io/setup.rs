@@ -39,6 +39,14 @@
 
 use std::path::{Path, PathBuf};
 
+/// Largest marker or load offset from its link \[m\]: a tool is not
+/// 100 m long; larger values are another unit or an overflow.
+pub const MAX_OFFSET_M: f64 = 100.0;
+/// Smallest gravity norm with a `[load]` \[m/s²\] (the Moon's is 1.6).
+pub const MIN_GRAVITY_MPS2: f64 = 0.1;
+/// Largest gravity norm \[m/s²\] (no robot is calibrated at 10 g).
+pub const MAX_GRAVITY_MPS2: f64 = 100.0;
+
 use serde::{Deserialize, Serialize};
 
 use super::urdf::Robot;
@@ -298,6 +306,8 @@ impl Setup {
     }
 
     /// Checks what can be checked without the robot: finite numbers,
+    /// offsets within [`MAX_OFFSET_M`], gravity within
+    /// [`MIN_GRAVITY_MPS2`]..[`MAX_GRAVITY_MPS2`] with a `[load]`,
     /// `sigma0_um > 0`, `lambda ≥ 0`, at least one marker, unique marker
     /// ids, no joint twice in a `[model]` list. `file` names the setup in
     /// errors.
@@ -315,6 +325,15 @@ impl Setup {
                 return err(
                     ErrorKind::NonFinite,
                     format!("marker[{i}].xyz: non-finite {:?}", m.xyz),
+                );
+            }
+            if m.xyz.iter().any(|v| v.abs() > MAX_OFFSET_M) {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "marker[{i}].xyz: {:?} m is more than {MAX_OFFSET_M} m from its link",
+                        m.xyz
+                    ),
                 );
             }
             if let Some(j) = self.markers[..i].iter().position(|o| o.id == m.id) {
@@ -335,6 +354,27 @@ impl Setup {
                 return err(
                     ErrorKind::NonFinite,
                     format!("load.gravity: non-finite {:?}", load.gravity),
+                );
+            }
+            if load.com.iter().any(|v| v.abs() > MAX_OFFSET_M) {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "load.com: {:?} m is more than {MAX_OFFSET_M} m from the tip",
+                        load.com
+                    ),
+                );
+            }
+            let g = load.gravity.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(MIN_GRAVITY_MPS2..=MAX_GRAVITY_MPS2).contains(&g) {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "load.gravity: {:?} m/s² has norm {g} m/s², outside \
+                         [{MIN_GRAVITY_MPS2}, {MAX_GRAVITY_MPS2}] (a load needs gravity to \
+                         deflect the robot; Earth's is 9.81)",
+                        load.gravity
+                    ),
                 );
             }
         }

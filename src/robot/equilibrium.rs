@@ -309,7 +309,7 @@ fn invert_leading<T: RealField + Copy, const J: usize>(
             })
             .unwrap_or(c);
         let pivot = a[(p, c)];
-        if !(pivot.abs() > T::zero()) || !pivot.is_finite() {
+        if pivot.abs() <= T::zero() || !pivot.is_finite() {
             return Err(Error::NotIdentifiable {
                 column: c,
                 rcond: 0.0,

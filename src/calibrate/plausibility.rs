@@ -1,0 +1,245 @@
+//! Plausibility, stated once: what `robcal calibrate` refuses and what it
+//! reports. No implausible result leaves with exit 0 unannounced.
+//!
+//! **The rule.** A finding that makes the result wrong whatever the user
+//! meant is an *error* (the run stops, exit 1, one line naming the file,
+//! column or parameter). A finding that may be right but needs a look is a
+//! *warning*: printed in the report (`warning: …`) and in the JSON's
+//! `warnings` list. The thresholds are [`Policy`] fields.
+//!
+//! | finding | when | outcome |
+//! |---|---|---|
+//! | compliance (any joint-law parameter) with no torque at its joint | declared, `max |τⱼ| <` [`Policy::min_torque_nm`] over the rows | error |
+//! | positions on another scale than the robot | spread of the measured unloaded points over that of the nominal model's prediction beyond [`Policy::max_scale_ratio`] either way | error |
+//! | … | beyond [`Policy::warn_scale_ratio`] | warning |
+//! | one joint column in the other angle unit | the nominal model registers onto the measured points [`Policy::unit_fit_ratio`] times better with that column converted (deg ↔ rad) | error |
+//! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
+//! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
+//! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
+//! | validation with no point | `--validate` | error ([`super::validate`]) |
+//!
+//! Candidates of the diagnosis with an implausible estimate are rejected
+//! there ([`super::effects::inadmissible`]) and named in `notes`; input
+//! files are checked by their readers ([`crate::io`]).
+
+use nalgebra::Vector3;
+
+use super::geometry::Geometry;
+use super::names::Names;
+use super::report::Report;
+use super::rows::Rows;
+use super::settings::{CalibrationError, Policy};
+use crate::io::{AngleUnit, Job, Measurements};
+
+use crate::model::Param;
+
+/// The joint a joint-law parameter acts through (compliances, their bins,
+/// nonlinear stiffness, backlash, link compliance).
+fn loaded_joint(p: &Param) -> Option<u8> {
+    match *p {
+        Param::Compliance { joint }
+        | Param::ComplianceAt { joint, .. }
+        | Param::NonlinearStiffness { joint }
+        | Param::Backlash { joint }
+        | Param::LinkCompliance { joint } => Some(joint),
+        _ => None,
+    }
+}
+
+/// A declared joint-law parameter needs a torque at its joint: a load on
+/// some row, or the robot's own weight on an absolute row.
+///
+/// # Errors
+/// [`CalibrationError::Data`] naming the parameters without torque.
+pub fn check_torques(
+    model: &[Param],
+    rows: &Rows,
+    names: &Names,
+    policy: &Policy,
+    file: &std::path::Path,
+) -> Result<(), CalibrationError> {
+    let unloaded: Vec<String> = model
+        .iter()
+        .filter(|p| {
+            loaded_joint(p).is_some_and(|j| {
+                let j = usize::from(j);
+                rows.rows
+                    .iter()
+                    .map(|r| r.tau.get(j).map_or(0.0, |t| t.abs()))
+                    .fold(0.0, f64::max)
+                    < policy.min_torque_nm
+            })
+        })
+        .map(|p| names.name(p))
+        .collect();
+    if unloaded.is_empty() {
+        return Ok(());
+    }
+    Err(CalibrationError::Data(format!(
+        "{}: {} declared, but no row puts a torque of {} N*m or more on the joint \
+         (no loaded row, and no own weight acting on it): a compliance cannot be \
+         identified without load; measure loaded rows, or remove it from [model]",
+        file.display(),
+        unloaded.join(", "),
+        policy.min_torque_nm
+    )))
+}
+
+/// Nominal predictions \[m\] of the unloaded observations, paired with the
+/// measured points; joint `convert` (if any) with its values scaled by `s`.
+fn pairs(
+    job: &Job,
+    data: &Measurements,
+    convert: Option<(usize, f64)>,
+) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+    let markers = &job.setup.markers;
+    data.unloaded()
+        .filter_map(|o| {
+            let m = markers.iter().find(|m| m.id == o.marker)?;
+            let mut q = o.q.clone();
+            if let Some((j, s)) = convert {
+                q[j] *= s;
+            }
+            let f = job.robot.chain.frames(&q).ok()?;
+            Some((f.point_m(&Vector3::from(m.xyz)), Vector3::from(o.p_m)))
+        })
+        .collect()
+}
+
+/// RMS spread about the centroid of `v` \[m\].
+fn spread(v: impl Iterator<Item = Vector3<f64>> + Clone) -> f64 {
+    let n = v.clone().count().max(1) as f64;
+    let c = v.clone().sum::<Vector3<f64>>() / n;
+    (v.map(|p| (p - c).norm_squared()).sum::<f64>() / n).sqrt()
+}
+
+/// RMS \[m\] of the nominal prediction registered (rigidly) onto the
+/// measured points.
+fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
+    let (pred, meas): (Vec<_>, Vec<_>) = pairs.iter().copied().unzip();
+    let mut g = Geometry::nominal(&job.robot.chain, &[]);
+    g.register(&pred, &meas);
+    let n = pairs.len().max(1) as f64;
+    (pairs
+        .iter()
+        .map(|(p, m)| {
+            (g.base * nalgebra::Point3::from(*p) - nalgebra::Point3::from(*m)).norm_squared()
+        })
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// The scale of the positions and the unit of each angle column against
+/// the nominal robot (unloaded rows; needs 4 points spread over 10 mm).
+///
+/// # Errors
+/// [`CalibrationError::Data`] for a scale beyond
+/// [`Policy::max_scale_ratio`] or a joint column that fits the other
+/// angle unit [`Policy::unit_fit_ratio`] times better.
+pub fn check_units(
+    job: &Job,
+    data: &Measurements,
+    policy: &Policy,
+) -> Result<Vec<String>, CalibrationError> {
+    let mut warnings = Vec::new();
+    let base = pairs(job, data, None);
+    let predicted = spread(base.iter().map(|p| p.0));
+    if base.len() < 4 || predicted < 0.01 {
+        return Ok(warnings);
+    }
+    let measured = spread(base.iter().map(|p| p.1));
+    let ratio = measured / predicted;
+    let file = data.file.display();
+    let length = match job.setup.units.length {
+        crate::io::LengthUnit::Mm => "mm",
+        crate::io::LengthUnit::M => "m",
+    };
+    if !(ratio < policy.max_scale_ratio && ratio > 1.0 / policy.max_scale_ratio) {
+        return Err(CalibrationError::Data(format!(
+            "{file}: the measured positions spread {ratio:.3} times as far as the robot's \
+             nominal model predicts ({:.1} vs {:.1} mm): are x, y, z in another unit than \
+             [units] length = \"{length}\"?",
+            measured * 1e3,
+            predicted * 1e3
+        )));
+    }
+    if !(ratio < policy.warn_scale_ratio && ratio > 1.0 / policy.warn_scale_ratio) {
+        warnings.push(format!(
+            "{file}: the measured positions spread {ratio:.3} times as far as the nominal \
+             model predicts (markers' xyz, or the unit of x, y, z?)"
+        ));
+    }
+    let declared = registered_rms(job, &base);
+    let (factor, other) = match job.setup.units.angle {
+        AngleUnit::Deg => (180.0 / core::f64::consts::PI, "rad"),
+        AngleUnit::Rad => (core::f64::consts::PI / 180.0, "deg"),
+    };
+    for (j, kind) in job
+        .robot
+        .chain
+        .joints()
+        .iter()
+        .map(|jt| jt.kind)
+        .enumerate()
+    {
+        if kind != crate::robot::JointKind::Revolute {
+            continue;
+        }
+        let alt = registered_rms(job, &pairs(job, data, Some((j, factor))));
+        if alt * policy.unit_fit_ratio < declared {
+            return Err(CalibrationError::Data(format!(
+                "{file}: column '{}': its values fit {other} far better than the declared \
+                 [units] angle (the nominal model registers with RMS {:.1} mm read as \
+                 {other}, {:.1} mm as declared)",
+                job.robot.joint_names[j],
+                alt * 1e3,
+                declared * 1e3
+            )));
+        }
+    }
+    Ok(warnings)
+}
+
+/// The final model's findings: negative compliances and backlash
+/// ([`Policy::negative_sigmas`]) and a fit that did not converge.
+///
+/// # Errors
+/// [`CalibrationError::Data`] for a compliance or backlash below zero by
+/// more than [`Policy::negative_sigmas`] σ.
+pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, CalibrationError> {
+    let mut warnings = Vec::new();
+    for (p, par) in report.model.params.iter().zip(&report.parameters) {
+        let sign_bound = matches!(
+            p,
+            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. }
+        );
+        if !sign_bound || par.value >= 0.0 {
+            continue;
+        }
+        let z = -par.value / par.std;
+        let what = format!(
+            "{} = {:.4} ± {:.4} {} is negative",
+            par.name, par.value, par.std, par.unit
+        );
+        if z > policy.negative_sigmas || !z.is_finite() {
+            return Err(CalibrationError::Data(format!(
+                "{what} by {z:.1} sigma: not a physical joint; is the setup's [load] com \
+                 right (a centre of mass wrong, or on the joint's axis), are there enough \
+                 loaded configurations?"
+            )));
+        }
+        warnings.push(format!(
+            "{what}, within {} sigma of 0",
+            policy.negative_sigmas
+        ));
+    }
+    if !report.converged {
+        warnings.push(format!(
+            "the fit did not converge ({} reweighting iterations, {} Gauss-Newton \
+             relinearisations): the estimate and its sigma are those of the last step",
+            report.iterations, report.relinearisations
+        ));
+    }
+    Ok(warnings)
+}
