@@ -9,6 +9,17 @@
 //! that absorb it (the regression of its column on the kept columns,
 //! `Λs_KK β = Λs_Kd`).
 //!
+//! A kept parameter can still be poorly determined: its **variance
+//! inflation** `VIFᵢ = 1/(1 − R²ᵢ) = (Λs_KK⁻¹)ᵢᵢ` (its column regressed on
+//! the other kept ones) is the factor by which its variance exceeds what its
+//! column alone would give. [`Identifiability::inflation`] returns it and
+//! [`Identifiability::explained_by`] the kept parameters its column leans on
+//! (`βₖ = −(Λs_KK⁻¹)ₖᵢ / (Λs_KK⁻¹)ᵢᵢ`), so that a report can flag the values
+//! not to trust. Each pivot exceeds the tolerance when its parameter is
+//! taken, but later parameters can still lean on it, so the VIF of a kept
+//! parameter is not bounded by `1/tolerance` (7e6 was seen with layout-order
+//! pivoting on a random arm).
+//!
 //! The tolerance is `1e-6` in f64: a parameter 99.9999 % explained by the
 //! others is left out. It lies a factor ~64 above the solver's own guard
 //! ([`super::pivot_tolerance`], `√ε`), so that a model reduced here is never
@@ -121,11 +132,12 @@ where
     pub kept: OVector<bool, D>,
     /// `true` for candidates left out.
     left_out: OVector<bool, D>,
-    /// `1 − R²` of each left-out parameter's scaled column regressed on all
-    /// kept ones (0 = fully absorbed; 0 without absorbers: no information).
+    /// `1 − R²` of each parameter's scaled column regressed on the kept ones
+    /// (the *other* kept ones for a kept parameter: `1/VIF`); 0 for a
+    /// left-out one fully absorbed or without information.
     residual: OVector<T, D>,
-    /// Column `d`: the scaled regression coefficients of left-out `d` on
-    /// the kept parameters.
+    /// Column `d`: the scaled regression coefficients of `d` on the (other)
+    /// kept parameters.
     beta: OMatrix<T, D, D>,
     /// `S` (0 for a column without information).
     scale: OVector<T, D>,
@@ -168,16 +180,51 @@ where
         }
     }
 
+    /// Variance inflation `1/(1 − R²)` of a kept parameter's column on the
+    /// other kept ones (1: orthogonal to them);
+    /// `None` for a parameter that is not kept. Infinite only when the kept
+    /// block could not be factored (never with the default tolerance).
+    pub fn inflation(&self, param: usize) -> Option<T> {
+        if !self.kept.get(param).copied().unwrap_or(false) {
+            return None;
+        }
+        let r = self.residual[param];
+        Some(if r > T::zero() {
+            T::one() / r
+        } else {
+            T::one() / T::default_epsilon() / T::default_epsilon()
+        })
+    }
+
     /// The kept parameters that absorb left-out `param`, largest scaled
     /// coefficient first (at most [`MAX_ABSORBERS`]); empty for a kept
     /// parameter or a column without information.
     pub fn absorbed_by(&self, param: usize) -> heapless::Vec<Absorber<T>, MAX_ABSORBERS> {
+        if !self.is_left_out(param) {
+            return heapless::Vec::new();
+        }
+        self.related(param)
+    }
+
+    /// The other kept parameters that a kept `param`'s column leans on (its
+    /// regression on them, as [`Self::absorbed_by`]), largest scaled
+    /// coefficient first; empty for a parameter that is not kept. Read it
+    /// with [`Self::inflation`]: with a large inflation, these are the
+    /// parameters whose values trade against `param`'s.
+    pub fn explained_by(&self, param: usize) -> heapless::Vec<Absorber<T>, MAX_ABSORBERS> {
+        if !self.kept.get(param).copied().unwrap_or(false) {
+            return heapless::Vec::new();
+        }
+        self.related(param)
+    }
+
+    fn related(&self, param: usize) -> heapless::Vec<Absorber<T>, MAX_ABSORBERS> {
         let mut out: heapless::Vec<Absorber<T>, MAX_ABSORBERS> = heapless::Vec::new();
-        if !self.is_left_out(param) || self.scale[param] <= T::zero() {
+        if self.scale[param] <= T::zero() {
             return out;
         }
         let n = self.kept.len();
-        for k in (0..n).filter(|&k| self.kept[k]) {
+        for k in (0..n).filter(|&k| self.kept[k] && k != param) {
             let b = self.beta[(k, param)];
             if b.abs() < self.absorb_threshold {
                 continue;
@@ -320,6 +367,22 @@ where
         }
         residual[d] = (T::one() - dot(&b, &rhs)).max(T::zero());
         beta.set_column(d, &b);
+    }
+    // Variance inflation of each kept parameter: column d of Λs_KK⁻¹.
+    if factored {
+        for d in (0..n).filter(|&d| kept[d]) {
+            let mut x = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+            x[d] = T::one();
+            solve_lower_in_place(&l, &mut x);
+            solve_upper_t_in_place(&l, &mut x);
+            let vif = x[d];
+            if vif > T::zero() {
+                residual[d] = T::one() / vif;
+                for k in (0..n).filter(|&k| kept[k] && k != d) {
+                    beta[(k, d)] = -x[k] / vif;
+                }
+            }
+        }
     }
     Ok(Identifiability {
         kept,
