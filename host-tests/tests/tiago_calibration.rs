@@ -89,9 +89,9 @@ fn figaroh_table_through_the_product() {
         let (t, v) = (only(&train, points), only(&valid, points));
         let r = fit_ols(&j, &t);
         println!(
-            "{what}: {} parameters, dropped {:?}",
+            "{what}: {} parameters, left out {:?}",
             r.parameters.len(),
-            r.dropped
+            r.left_out.iter().map(|l| l.line()).collect::<Vec<_>>()
         );
         assert_eq!(r.parameters.len(), params, "{what}");
         let (ptr, atr) = rmse_mm(&r, &j, &t);

@@ -178,13 +178,6 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
     let mut progress = |m: &str| eprintln!("robcal: {m}");
     let mut report =
         calibrate::calibrate(&job, &data, &settings, &mut progress).map_err(|e| e.to_string())?;
-    if !report.dropped.is_empty() {
-        // The JSON has no place for them: say it on stderr too.
-        eprintln!(
-            "robcal: warning: not identifiable from these data (left out): {}",
-            report.dropped.join(", ")
-        );
-    }
     if let Some(v) = &validation_data {
         report.validation =
             Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
@@ -254,6 +247,17 @@ fn to_json(r: &Report) -> Value {
             "points": v.points,
         })),
         "warnings": r.warnings,
+        "identifiability": r.left_out.iter().map(|l| json!({
+            "left_out": l.name,
+            "absorbed_by": l.absorbed_by.iter().map(|a| a.name.as_str()).collect::<Vec<_>>(),
+            "coefficients": l.absorbed_by.iter().map(|a| num(a.coefficient)).collect::<Vec<_>>(),
+            "coefficient_units": l.absorbed_by.iter().map(|a| a.unit.as_str()).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+        "near_dependent": r.near_dependent.iter().map(|n| json!({
+            "name": n.name,
+            "variance_inflation": num(n.inflation),
+            "with": n.with,
+        })).collect::<Vec<_>>(),
     });
     // Optional (an extension of the contract's §5): what the run changed on
     // its own, e.g. IRLS → OLS.

@@ -5,7 +5,7 @@ use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::linearisation::Linearisation;
 use super::rows::Row;
-use crate::estimate::{Accumulator, Block};
+use crate::estimate::{Accumulator, Block, Identifiability};
 use crate::model::Param;
 use crate::Error;
 
@@ -93,10 +93,31 @@ impl Design {
     /// one column-independence test of robcal
     /// ([`crate::estimate::rank`]), on the unweighted columns, in order.
     pub fn independent(&self, base: &[usize], extra: &[usize]) -> Vec<usize> {
+        let Some(rank) = self.identifiability(base, extra) else {
+            return Vec::new();
+        };
+        extra
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| rank.kept[base.len() + k])
+            .map(|(_, &c)| c)
+            .collect()
+    }
+
+    /// The one column-independence test ([`crate::estimate::rank`]) of the
+    /// columns `base` then `extra`, in that order (index `k` of the result is
+    /// the `k`-th of them): what is kept, what absorbs what is left out,
+    /// each kept parameter's variance inflation. `None` when there is no
+    /// column (or the columns are not finite).
+    pub fn identifiability(
+        &self,
+        base: &[usize],
+        extra: &[usize],
+    ) -> Option<Identifiability<f64, Dyn>> {
         let cols: Vec<usize> = base.iter().chain(extra).copied().collect();
         let n = cols.len();
         if n == 0 {
-            return Vec::new();
+            return None;
         }
         let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(n));
         let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
@@ -109,14 +130,6 @@ impl Design {
             // Finite by construction (the columns were checked when built).
             let _ = acc.update(&block);
         }
-        let Ok(rank) = acc.identifiable() else {
-            return Vec::new();
-        };
-        extra
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| rank.kept[base.len() + k])
-            .map(|(_, &c)| c)
-            .collect()
+        acc.identifiable().ok()
     }
 }

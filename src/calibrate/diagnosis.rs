@@ -5,7 +5,9 @@
 use super::effects::{candidates, inadmissible, Candidate};
 use super::engine::{Engine, Fitted};
 use super::fit::{self, Method};
-use super::report::{ConfigNoise, EffectStep, PlotSeries, Report, Tested, Unexplained};
+use super::report::{
+    ConfigNoise, EffectStep, LeftOut, NearDependent, PlotSeries, Report, Tested, Unexplained,
+};
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
 use super::settings::{CalibrationError, Settings};
 use crate::model::Param;
@@ -53,6 +55,94 @@ fn extended(
     let d = e.design(&new)?;
     let all: Vec<usize> = (0..new.len()).collect();
     Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
+}
+
+/// The declared model fitted. A parameter that a Gauss–Newton step makes
+/// dependent on the others (at the geometry the step reached) is left out
+/// with the parameters that absorb it there, and the fit goes on from there
+/// without it; a declared compliance that becomes dependent is an error, as
+/// at the nominal robot.
+///
+/// # Errors
+/// [`CalibrationError::Data`] when a compliance or every parameter is
+/// left out; as [`Engine::fit`].
+fn first_fit(
+    e: &mut Engine<'_>,
+    mut params: Vec<Param>,
+    left_out: &mut Vec<LeftOut>,
+) -> Result<Fitted, CalibrationError> {
+    loop {
+        match e.fit(&params) {
+            Err(CalibrationError::Dependent(_)) => {}
+            other => return other,
+        }
+        let now = e.left_out(&params)?;
+        let out: Vec<Param> = params
+            .iter()
+            .filter(|p| now.iter().any(|l| l.name == e.names.name(p)))
+            .copied()
+            .collect();
+        if let Some(p) = out.iter().find(|p| p.is_compliance()) {
+            return Err(CalibrationError::Data(format!(
+                "{} cannot be identified: at the fitted geometry its column is a \
+                 combination of the other parameters'; measure more configurations, or \
+                 remove it from [model]",
+                e.names.name(p)
+            )));
+        }
+        if out.is_empty() {
+            return Err(CalibrationError::Data(
+                "the declared model could not be fitted: a parameter became dependent on \
+                 the others during the fit"
+                    .into(),
+            ));
+        }
+        for l in now {
+            (e.progress)(&format!(
+                "{} left out: dependent on the others at the fitted geometry",
+                l.name
+            ));
+            left_out.push(l);
+        }
+        params.retain(|p| !out.contains(p));
+        if params.is_empty() {
+            return Err(CalibrationError::Data(
+                "the declared model has no parameter these data can identify".into(),
+            ));
+        }
+    }
+}
+
+/// The kept parameters of `f` that the data determine poorly: variance
+/// inflation of their unweighted columns above
+/// [`super::Policy::max_variance_inflation`], largest first.
+///
+/// # Errors
+/// As [`Engine::design`].
+fn near_dependent(e: &Engine<'_>, f: &Fitted) -> Result<Vec<NearDependent>, CalibrationError> {
+    let d = e.design(&f.params)?;
+    let all: Vec<usize> = (0..f.params.len()).collect();
+    let Some(rank) = d.identifiability(&[], &all) else {
+        return Ok(Vec::new());
+    };
+    let mut out: Vec<NearDependent> = all
+        .iter()
+        .filter_map(|&i| {
+            let inflation = rank.inflation(i)?;
+            (inflation >= e.policy.max_variance_inflation).then(|| NearDependent {
+                name: e.names.name(&f.params[i]),
+                inflation,
+                with: rank
+                    .explained_by(i)
+                    .iter()
+                    .take(3)
+                    .map(|a| e.names.name(&f.params[a.param]))
+                    .collect(),
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| b.inflation.total_cmp(&a.inflation));
+    Ok(out)
 }
 
 /// The candidates of one round and the tests of those that could be
@@ -132,14 +222,13 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
 pub fn run(
     mut e: Engine<'_>,
     declared: Vec<Param>,
-    dropped: Vec<String>,
+    mut left_out: Vec<LeftOut>,
     settings: &Settings,
     mut notes: Vec<String>,
 ) -> Result<Report, CalibrationError> {
     let alpha = e.policy.alpha;
-    e.register_base(&declared)?;
     (e.progress)("fitting the declared model");
-    let first = e.fit(&declared)?;
+    let first = first_fit(&mut e, declared, &mut left_out)?;
     let mut current = e.with_heldout(first)?;
     let declared_rms = (current.rms_um, current.heldout_rms_um);
     let declared_structure = lack_of_fit(
@@ -210,6 +299,10 @@ pub fn run(
                     Err(CalibrationError::NoEquilibrium(why)) => Err(format!(
                         "rejected: with its estimate the robot has no equilibrium ({why})"
                     )),
+                    Err(CalibrationError::Dependent(_)) => Err(
+                        "rejected: at its fitted geometry a column is a combination of the others"
+                            .to_string(),
+                    ),
                     Err(CalibrationError::Core(
                         _,
                         err @ (Error::NotIdentifiable { .. }
@@ -354,7 +447,8 @@ pub fn run(
         lack_of_fit: final_lof,
         validation: None,
         last_round,
-        dropped,
+        left_out,
+        near_dependent: near_dependent(&e, &current)?,
         rows: e.rows.rows.len(),
         configurations: e.rows.configs.len(),
         plots,

@@ -10,7 +10,7 @@ use super::fit::{fit, FitOut, FitSettings};
 use super::geometry::Geometry;
 use super::linearisation::Linearisation;
 use super::names::Names;
-use super::report::Parameter;
+use super::report::{Absorbed, LeftOut, Parameter};
 use super::residuals::rms_um;
 use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy, Progress};
@@ -118,6 +118,8 @@ impl Engine<'_> {
     /// most [`Policy::max_steps`] relinearisations).
     ///
     /// # Errors
+    /// [`CalibrationError::Dependent`] when at some linearisation a
+    /// parameter is a combination of the others (the engine stays there);
     /// [`CalibrationError::Core`] from the estimator.
     pub fn fit(&mut self, params: &[Param]) -> Result<Fitted, CalibrationError> {
         let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
@@ -127,6 +129,15 @@ impl Engine<'_> {
         let cols: Vec<usize> = (0..params.len()).collect();
         loop {
             let d = self.design(params)?;
+            // The one independence test at every linearisation: a step can
+            // turn a kept parameter into a combination of the others (the
+            // columns move with the geometry); the solver never sees it.
+            if let Some(rank) = d.identifiability(&[], &cols) {
+                let left: Vec<usize> = rank.left_out().collect();
+                if !left.is_empty() {
+                    return Err(CalibrationError::Dependent(left));
+                }
+            }
             let out = fit(&d, &cols, None, &self.fit_settings)
                 .map_err(|e| CalibrationError::Core("fit", e))?;
             let step = params
@@ -252,6 +263,36 @@ impl Engine<'_> {
     pub fn with_heldout(&mut self, mut f: Fitted) -> Result<Fitted, CalibrationError> {
         f.heldout_rms_um = self.heldout(&f)?;
         Ok(f)
+    }
+
+    /// The identifiability report of `params` at the current linearisation
+    /// ([`Design::identifiability`]): each parameter the one independence
+    /// test leaves out, with the kept parameters that absorb it.
+    ///
+    /// # Errors
+    /// As [`Engine::design`].
+    pub fn left_out(&self, params: &[Param]) -> Result<Vec<LeftOut>, CalibrationError> {
+        let d = self.design(params)?;
+        let all: Vec<usize> = (0..params.len()).collect();
+        let Some(rank) = d.identifiability(&[], &all) else {
+            return Ok(Vec::new());
+        };
+        let unit = |p: &Param| self.names.unit(p).name;
+        Ok(rank
+            .left_out()
+            .map(|i| LeftOut {
+                name: self.names.name(&params[i]),
+                absorbed_by: rank
+                    .absorbed_by(i)
+                    .iter()
+                    .map(|a| Absorbed {
+                        name: self.names.name(&params[a.param]),
+                        coefficient: a.coefficient,
+                        unit: format!("{}/{}", unit(&params[a.param]), unit(&params[i])),
+                    })
+                    .collect(),
+            })
+            .collect())
     }
 
     /// The report's parameters of `f`: geometric ones as their values in

@@ -71,7 +71,10 @@ pub use fit::Step;
 pub use geometry::Geometry;
 pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
-pub use report::{ConfigNoise, EffectStep, Parameter, PlotSeries, Report, Unexplained, Validation};
+pub use report::{
+    Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Parameter, PlotSeries, Report,
+    Unexplained, Validation,
+};
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
 pub use validate::validate;
@@ -137,16 +140,23 @@ pub fn calibrate(
     e.relinearise()?;
     plausibility::check_torques(&model, &e.rows, &e.names, &policy, &data.file)?;
 
-    // The declared model reduced to what the data can identify.
-    let d = e.design(&model)?;
-    let all: Vec<usize> = (0..model.len()).collect();
-    let kept = d.independent(&[], &all);
-    let dropped: Vec<Param> = all
+    // The declared model reduced to what the data can identify, at the
+    // nominal robot (its dependences are structural, and read in the robot's
+    // own axes: a1's offset is the base's turn about z). A Gauss–Newton
+    // step that makes another one dependent leaves it out there
+    // (`diagnosis::run`).
+    let left_out = e.left_out(&model)?;
+    let dropped: Vec<Param> = model
         .iter()
-        .filter(|i| !kept.contains(i))
-        .map(|&i| model[i])
+        .filter(|p| left_out.iter().any(|l| l.name == e.names.name(p)))
+        .copied()
+        .collect();
+    let kept: Vec<usize> = (0..model.len())
+        .filter(|&i| !dropped.contains(&model[i]))
         .collect();
     let declared: Vec<Param> = kept.iter().map(|&i| model[i]).collect();
+    // Then the tracker frame (when declared), by a rigid registration.
+    e.register_base(&declared)?;
     // A declared compliance the data cannot identify is too few
     // configurations (or markers, or a load that does not load the joint)
     // for the declared model: an error naming the parameters, not a fit that
@@ -191,8 +201,7 @@ pub fn calibrate(
         settings.method = Method::Ols;
         e.fit_settings.method = Method::Ols;
     }
-    let dropped = dropped.iter().map(|p| e.names.name(p)).collect();
-    let mut report = diagnosis::run(e, declared, dropped, &settings, notes)?;
+    let mut report = diagnosis::run(e, declared, left_out, &settings, notes)?;
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     Ok(report)

@@ -12,9 +12,11 @@
 //! | compliance (any joint-law parameter) with no torque at its joint | declared, `max |τⱼ| <` [`Policy::min_torque_nm`] over the rows | error |
 //! | positions on another scale than the robot | spread of the measured unloaded points over that of the nominal model's prediction beyond [`Policy::max_scale_ratio`] either way | error |
 //! | … | beyond [`Policy::warn_scale_ratio`] | warning |
+//! | poses that barely move the markers | spread of the nominal model's predicted unloaded points below [`Policy::min_spread_m`] (then no scale or unit check) | warning |
 //! | one joint column in the other angle unit | the nominal model registers onto the measured points [`Policy::unit_fit_ratio`] times better with that column converted (deg ↔ rad) | error |
 //! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
+//! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
 //! | validation with no point | `--validate` | error ([`super::validate`]) |
 //!
@@ -131,7 +133,8 @@ fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
 }
 
 /// The scale of the positions and the unit of each angle column against
-/// the nominal robot (unloaded rows; needs 4 points spread over 10 mm).
+/// the nominal robot (unloaded rows; needs 4 points spread over
+/// [`Policy::min_spread_m`]).
 ///
 /// # Errors
 /// [`CalibrationError::Data`] for a scale beyond
@@ -145,7 +148,17 @@ pub fn check_units(
     let mut warnings = Vec::new();
     let base = pairs(job, data, None);
     let predicted = spread(base.iter().map(|p| p.0));
-    if base.len() < 4 || predicted < 0.01 {
+    if base.len() < 4 {
+        return Ok(warnings);
+    }
+    if predicted < policy.min_spread_m {
+        warnings.push(format!(
+            "{}: the nominal model moves the markers over only {:.3} mm across the \
+             configurations: the poses barely move them, and what is left out as dependent \
+             at the nominal robot may matter at the true one",
+            data.file.display(),
+            predicted * 1e3
+        ));
         return Ok(warnings);
     }
     let measured = spread(base.iter().map(|p| p.1));
@@ -233,6 +246,20 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
             "{what}, within {} sigma of 0",
             policy.negative_sigmas
         ));
+    }
+    for l in &report.left_out {
+        let far = l.absorbed_by.iter().find(|a| {
+            let mut u = a.unit.split('/');
+            u.next() == u.next() && a.coefficient.abs() > policy.max_absorption
+        });
+        if let Some(a) = far {
+            warnings.push(format!(
+                "{} is left out and absorbed by {} with a coefficient of {:.1} {}: the kept \
+                 parameters reproduce it only to first order; declare fewer parameters \
+                 if the residuals exceed the noise",
+                l.name, a.name, a.coefficient, a.unit
+            ));
+        }
     }
     if !report.converged {
         warnings.push(format!(

@@ -92,6 +92,45 @@ pub struct ConfigNoise {
     pub weight: [f64; 3],
 }
 
+/// A kept parameter that absorbs a left-out one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Absorbed {
+    /// The kept parameter's name.
+    pub name: String,
+    /// A true value `x` of the left-out parameter shows up as
+    /// `coefficient · x` in this one (in `unit`).
+    pub coefficient: f64,
+    /// Unit of the coefficient: the kept parameter's unit per the left-out
+    /// one's (`mrad/mrad`, `mm/mrad`, …).
+    pub unit: String,
+}
+
+/// A declared parameter the data cannot identify, left out of the fit
+/// ([`crate::estimate::rank`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeftOut {
+    /// Its name.
+    pub name: String,
+    /// The kept parameters its column is a combination of, largest share
+    /// first; empty when its column carries no information at all (e.g. a
+    /// rotation about an axis through every marker).
+    pub absorbed_by: Vec<Absorbed>,
+}
+
+/// A kept parameter of the final model that the data determine poorly: its
+/// column is nearly a combination of the others'.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearDependent {
+    /// Its name.
+    pub name: String,
+    /// Variance inflation `1/(1 − R²)` of its (unweighted) column on the
+    /// other parameters' ([`crate::estimate::Identifiability::inflation`]),
+    /// at least [`super::Policy::max_variance_inflation`].
+    pub inflation: f64,
+    /// The parameters its value trades against, largest share first.
+    pub with: Vec<String>,
+}
+
 /// `--validate`: the final model on another file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Validation {
@@ -169,8 +208,13 @@ pub struct Report {
     pub validation: Option<Validation>,
     /// The tests of the last diagnosis round, most significant first.
     pub last_round: Vec<Tested>,
-    /// Declared parameters the data cannot identify (left out).
-    pub dropped: Vec<String>,
+    /// Declared parameters the data cannot identify (left out), with what
+    /// absorbed them.
+    pub left_out: Vec<LeftOut>,
+    /// Parameters of the final model that are identifiable but poorly
+    /// (variance inflation at least
+    /// [`super::Policy::max_variance_inflation`]), largest first.
+    pub near_dependent: Vec<NearDependent>,
     /// Rows (3 equations each).
     pub rows: usize,
     /// Configurations.
@@ -185,6 +229,39 @@ pub struct Report {
     /// Plausibility findings that did not stop the run
     /// ([`super::plausibility`]), the input readers' warnings included.
     pub warnings: Vec<String>,
+}
+
+impl LeftOut {
+    /// `a3.offset left out: absorbed by base.rz (1 mrad/mrad), …` or
+    /// `… left out: no information in these data`.
+    pub fn line(&self) -> String {
+        if self.absorbed_by.is_empty() {
+            return format!("{} left out: no information in these data", self.name);
+        }
+        let by: Vec<String> = self
+            .absorbed_by
+            .iter()
+            .map(|a| format!("{} ({:.3} {})", a.name, a.coefficient, a.unit))
+            .collect();
+        format!("{} left out: absorbed by {}", self.name, by.join(", "))
+    }
+}
+
+impl NearDependent {
+    /// `elbow.ty: variance inflation 2.3e3, with a2.rz, …`.
+    pub fn line(&self) -> String {
+        // The three largest shares (JSON has them all).
+        let with = if self.with.is_empty() {
+            String::new()
+        } else {
+            let top: Vec<&str> = self.with.iter().take(3).map(String::as_str).collect();
+            format!(", with {}", top.join(", "))
+        };
+        format!(
+            "{}: variance inflation {:.3e}{with}",
+            self.name, self.inflation
+        )
+    }
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -212,12 +289,26 @@ impl fmt::Display for Report {
         for w in &self.warnings {
             writeln!(f, "warning: {w}")?;
         }
-        if !self.dropped.is_empty() {
+        if !self.left_out.is_empty() {
             writeln!(
                 f,
-                "not identifiable from these data (left out): {}",
-                self.dropped.join(", ")
+                "identifiability: {} declared parameter(s) left out, dependent on kept ones",
+                self.left_out.len()
             )?;
+            for l in &self.left_out {
+                writeln!(f, "  {}", l.line())?;
+            }
+        }
+        if !self.near_dependent.is_empty() {
+            writeln!(
+                f,
+                "identifiability: {} parameter(s) poorly determined (variance inflation; \
+                 their values trade against the ones named)",
+                self.near_dependent.len()
+            )?;
+            for n in &self.near_dependent {
+                writeln!(f, "  {}", n.line())?;
+            }
         }
         writeln!(f)?;
         writeln!(

@@ -91,6 +91,24 @@ pub struct Policy {
     pub gauss_newton_sigma: f64,
     /// Gauss–Newton relinearisations at most. 50.
     pub max_steps: usize,
+    /// A kept parameter whose variance inflation `1/(1 − R²)` (its
+    /// unweighted column regressed on the other parameters' columns,
+    /// [`crate::estimate::Identifiability::inflation`]) reaches this is
+    /// reported as poorly determined, with the parameters it trades
+    /// against. 1000: its column is 99.9 % explained by the others and its
+    /// σ is ≥ 32× what its column alone would give; such a value and its
+    /// partners' are determined mostly together (the sum is sharp, each
+    /// term is not) and should not be read one by one. A parameter whose
+    /// column is more than `1 − 1e-6` explained by the ones kept before it
+    /// is left out instead ([`crate::estimate::rank`]).
+    pub max_variance_inflation: f64,
+    /// A declared parameter left out and absorbed by a kept one of the same
+    /// unit with a coefficient beyond this (in magnitude) is reported in a
+    /// warning: the kept parameters reproduce its effect only to first
+    /// order, and a left-out error of δ moves them by the coefficient
+    /// times δ, far enough for the second order to show in the residuals.
+    /// 10.
+    pub max_absorption: f64,
     /// Halvings of a Gauss–Newton step whose joint law leaves a loaded
     /// robot without equilibrium, at most. 10 (a step of 1/1024).
     pub max_halvings: usize,
@@ -124,6 +142,12 @@ pub struct Policy {
     /// nominal model register onto the measured points this many times
     /// better is in the other unit. 3.
     pub unit_fit_ratio: f64,
+    /// The nominal model moves the markers over less than this \[m\] (RMS
+    /// about their centroid) across the configurations: the data excite
+    /// the geometry only by its errors, so parameters that are left out at
+    /// the nominal robot may matter at the true one; a warning (and no
+    /// scale or unit check). 0.01.
+    pub min_spread_m: f64,
     /// A compliance or backlash below zero by more than this many σ is an
     /// error; within it, a warning (consistent with zero). 3.
     pub negative_sigmas: f64,
@@ -139,6 +163,8 @@ impl Default for Policy {
             irls_tolerance: 1e-3,
             step_tolerance: 1e-6,
             gauss_newton_sigma: 0.01,
+            max_variance_inflation: 1000.0,
+            max_absorption: 10.0,
             max_steps: 50,
             max_halvings: 10,
             max_bins: 32,
@@ -150,6 +176,7 @@ impl Default for Policy {
             max_scale_ratio: 2.0,
             warn_scale_ratio: 1.2,
             unit_fit_ratio: 3.0,
+            min_spread_m: 0.01,
             negative_sigmas: 3.0,
         }
     }
@@ -177,6 +204,12 @@ pub enum CalibrationError {
     /// With the current joint law a loaded robot has no (stable)
     /// equilibrium near a measured pose (one line naming the row).
     NoEquilibrium(String),
+    /// At the linearisation a Gauss–Newton step reached, these parameters
+    /// (indices into the fitted list) are combinations of the others by the
+    /// one independence test ([`crate::estimate::rank`]): the caller leaves
+    /// them out (a declared parameter) or rejects the model (a candidate).
+    /// The engine is left at that linearisation.
+    Dependent(Vec<usize>),
 }
 
 impl core::fmt::Display for CalibrationError {
@@ -184,6 +217,9 @@ impl core::fmt::Display for CalibrationError {
         match self {
             CalibrationError::Data(s) | CalibrationError::NoEquilibrium(s) => write!(f, "{s}"),
             CalibrationError::Core(what, e) => write!(f, "{what}: {e}"),
+            CalibrationError::Dependent(i) => {
+                write!(f, "parameters {i:?} are combinations of the others")
+            }
         }
     }
 }
