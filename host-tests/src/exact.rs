@@ -39,6 +39,7 @@ type Motion = Option<(Vector3<f64>, bool)>;
 
 /// The chain from `base` to `tip` of a URDF: each joint's origin and
 /// motion, fixed joints included.
+#[derive(Debug, Clone)]
 pub struct Fk(Vec<(Matrix4<f64>, Motion)>);
 
 /// A posed chain: every movable joint's origin and unit axis \[base frame\]
@@ -78,7 +79,18 @@ impl Fk {
     /// # Panics
     /// When the file cannot be read or has no chain from `base` to `tip`.
     pub fn new(path: &Path, base: &str, tip: &str) -> Self {
-        let urdf = urdf_rs::read_file(path).expect("urdf");
+        Self::from_urdf(&urdf_rs::read_file(path).expect("urdf"), base, tip)
+    }
+
+    /// The chain from `base` to `tip` of URDF text.
+    ///
+    /// # Panics
+    /// When the text is not a URDF or has no chain from `base` to `tip`.
+    pub fn parse(text: &str, base: &str, tip: &str) -> Self {
+        Self::from_urdf(&urdf_rs::read_from_string(text).expect("urdf"), base, tip)
+    }
+
+    fn from_urdf(urdf: &urdf_rs::Robot, base: &str, tip: &str) -> Self {
         let mut chain = Vec::new();
         let mut link = tip.to_string();
         while link != base {

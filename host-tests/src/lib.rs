@@ -16,7 +16,9 @@
 //!
 //! [`exact`] is an independent model of a loaded robot (forward kinematics
 //! from the URDF text, the equilibrium of the deflected robot) that makes
-//! the KR-270 data and the Monte Carlo jobs.
+//! the KR-270 data and the Monte Carlo jobs; [`arms`] builds random serial
+//! chains and the UR10 of `shared/repro` with their measured data for the
+//! identifiability tests.
 //!
 //! Also: a small deterministic generator of random problems ([`Rng`],
 //! [`random_blocks`]), comparison helpers and the fuzz-script interpreter
@@ -37,6 +39,7 @@ use robcal::{Accumulator, Block};
 /// report.
 pub use robcal_paper::rng::SplitMix64 as Rng;
 
+pub mod arms;
 pub mod coverage;
 pub mod exact;
 pub mod fuzz_io;
