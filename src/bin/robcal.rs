@@ -98,6 +98,10 @@ struct CalibrateArgs {
     /// Print the contract's JSON on stdout.
     #[arg(long)]
     json: bool,
+    /// Largest measurement file (`--data`, `--validate`) read, in MiB
+    /// (1 MiB = 1,048,576 bytes).
+    #[arg(long = "max-data-mib", default_value_t = 1024)]
+    max_data_mib: u64,
 }
 
 fn main() -> ExitCode {
@@ -134,7 +138,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let line = e.replace('\n', " ");
+            // One line, and short: inputs are echoed cut by their readers,
+            // this is the last guard.
+            let line = robcal::io::input::shorten(&e.replace('\n', " "));
             eprintln!("robcal: error: {line}");
             ExitCode::FAILURE
         }
@@ -151,12 +157,18 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         return Err("--max-iter must be at least 1".into());
     }
     let job = Job::load(&a.setup).map_err(|e| e.to_string())?;
-    let data = job.read_measurements(&a.data).map_err(|e| e.to_string())?;
+    let max_bytes = a.max_data_mib.saturating_mul(1 << 20);
+    let data = job
+        .read_measurements_limited(&a.data, max_bytes)
+        .map_err(|e| e.to_string())?;
     for w in &data.warnings {
         eprintln!("robcal: warning: {w}");
     }
     let validation_data = match &a.validate {
-        Some(v) => Some(job.read_measurements(v).map_err(|e| e.to_string())?),
+        Some(v) => Some(
+            job.read_measurements_limited(v, max_bytes)
+                .map_err(|e| e.to_string())?,
+        ),
         None => None,
     };
     let settings = Settings {
@@ -183,7 +195,11 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
             Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
     }
     if let Some(dir) = &a.plots {
-        write_plots(dir, &report)?;
+        let mut inputs = vec![a.setup.as_path(), a.data.as_path()];
+        let robot = job.setup.robot_path(&job.setup_path);
+        inputs.push(&robot);
+        inputs.extend(a.validate.as_deref());
+        write_plots(dir, &report, &inputs)?;
     }
     let out = if a.json {
         serde_json::to_string_pretty(&to_json(&report)).map_err(|e| e.to_string())? + "\n"
@@ -277,8 +293,10 @@ fn slug(s: &str) -> String {
 
 /// One SVG per plot series: the three residual components against the
 /// traced variable, before (top) and after (bottom).
-fn write_plots(dir: &Path, r: &Report) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+/// All or nothing: every SVG is made before any is written, and written by
+/// one [`robcal::io::write_all_atomic`]; a directory this call created is
+/// removed again when the writing fails.
+fn write_plots(dir: &Path, r: &Report, inputs: &[&Path]) -> Result<(), String> {
     let mut svgs = Vec::new();
     for (i, s) in r.plots.iter().enumerate() {
         let svg = plot_svg(s).map_err(|e| format!("plot '{}': {e}", s.title))?;
@@ -287,11 +305,16 @@ fn write_plots(dir: &Path, r: &Report) -> Result<(), String> {
             svg,
         ));
     }
-    for (path, svg) in svgs {
-        robcal::io::write_atomic(&path, svg.as_bytes())
-            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
-    }
-    Ok(())
+    let created = !dir.exists();
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let files: Vec<(PathBuf, Vec<u8>)> =
+        svgs.into_iter().map(|(p, s)| (p, s.into_bytes())).collect();
+    robcal::io::write_all_atomic(&files, inputs).map_err(|e| {
+        if created {
+            let _ = std::fs::remove_dir(dir);
+        }
+        format!("plots in {}: cannot write: {e}", dir.display())
+    })
 }
 
 fn plot_svg(s: &PlotSeries) -> Result<String, Box<dyn std::error::Error>> {

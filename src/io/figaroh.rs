@@ -151,13 +151,7 @@ impl MocapFile {
 /// See the module docs; the error names `path`, the line and the column.
 pub fn read_mocap(path: impl AsRef<Path>) -> Result<MocapFile, InputError> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        InputError::new(
-            path,
-            ErrorKind::Io,
-            format!("cannot read the mocap file: {e}"),
-        )
-    })?;
+    let text = super::input::read_text(path, "the mocap file", super::input::MAX_DATA_BYTES)?;
     parse_mocap(&text, path)
 }
 
@@ -321,9 +315,11 @@ pub fn import_mocap(
     out_csv: impl AsRef<Path>,
     robot: Option<&Robot>,
 ) -> Result<Imported, InputError> {
+    let out = out_csv.as_ref();
+    super::atomic::check_target(out, &[in_csv.as_ref()])
+        .map_err(|e| InputError::new(out, ErrorKind::Io, format!("cannot write: {e}")))?;
     let mocap = read_mocap(in_csv)?;
     let rows = mocap.observations(robot.map(|r| r.joint_names.as_slice()))?;
-    let out = out_csv.as_ref();
     match robot {
         Some(robot) => write_measurements(out, robot, Units::SI, &rows)?,
         None => write_plain(out, &mocap.joint_names, &rows)?,

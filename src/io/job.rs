@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::measurements::{read_measurements, Measurements, Observation};
+use super::measurements::{
+    read_measurements, read_measurements_limited, Measurements, Observation,
+};
 use super::setup::Setup;
 use super::urdf::Robot;
 use super::writer::write_measurements;
@@ -47,6 +49,19 @@ impl Job {
     /// See [`read_measurements`].
     pub fn read_measurements(&self, path: impl AsRef<Path>) -> Result<Measurements, InputError> {
         read_measurements(path, &self.robot, &self.setup)
+    }
+
+    /// As [`Job::read_measurements`], refusing a file larger than
+    /// `max_bytes` ([`read_measurements_limited`]).
+    ///
+    /// # Errors
+    /// See [`read_measurements_limited`].
+    pub fn read_measurements_limited(
+        &self,
+        path: impl AsRef<Path>,
+        max_bytes: u64,
+    ) -> Result<Measurements, InputError> {
+        read_measurements_limited(path, &self.robot, &self.setup, max_bytes)
     }
 
     /// Writes a measurement file in this job's units ([`write_measurements`]).

@@ -15,7 +15,8 @@
 //! unknown or duplicate column, a row of the wrong length, a cell that is
 //! empty or not a number (integer for `config`, `rep`, `marker`), a
 //! non-finite number, a negative `load_kg` or one above [`MAX_LOAD_KG`], a
-//! position beyond [`MAX_POSITION_M`] in any unit, a loaded row when the setup has
+//! position beyond [`MAX_POSITION_M`] in any unit, a time beyond
+//! [`MAX_TIME_S`], a loaded row when the setup has
 //! no `[load]`, a marker the setup does not declare, two unloaded rows (or
 //! two loaded rows of the same load) with the same `config`, `rep`,
 //! `marker`, a loaded row without its unloaded row, no data row, and
@@ -46,6 +47,11 @@ pub const MAX_LOAD_KG: f64 = 1e5;
 
 /// Largest position \[m\] in any unit: 10 km, beyond any instrument.
 pub const MAX_POSITION_M: f64 = 1e4;
+
+/// Largest `|t|` \[s\]: 10¹⁰ s (317 years; Unix time in seconds is
+/// 1.8·10⁹). Larger is another unit (ms since 1970 is 1.8·10¹²) or an
+/// overflow, and differences of such times lose the seconds.
+pub const MAX_TIME_S: f64 = 1e10;
 
 /// One CSV row, in SI units.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -148,15 +154,23 @@ pub fn read_measurements(
     robot: &Robot,
     setup: &Setup,
 ) -> Result<Measurements, InputError> {
+    read_measurements_limited(path, robot, setup, super::input::MAX_DATA_BYTES)
+}
+
+/// As [`read_measurements`], refusing a file larger than `max_bytes`.
+///
+/// # Errors
+/// See [`read_measurements`]; [`ErrorKind::Io`] for a file larger than
+/// `max_bytes` or one that is not a regular file ([`super::input`]).
+pub fn read_measurements_limited(
+    path: impl AsRef<Path>,
+    robot: &Robot,
+    setup: &Setup,
+    max_bytes: u64,
+) -> Result<Measurements, InputError> {
     let path = path.as_ref();
-    let file = std::fs::File::open(path).map_err(|e| {
-        InputError::new(
-            path,
-            ErrorKind::Io,
-            format!("cannot read the measurements: {e}"),
-        )
-    })?;
-    parse_measurements(std::io::BufReader::new(file), path, robot, setup)
+    let bytes = super::input::read_limited(path, "the measurements", max_bytes)?;
+    parse_measurements(bytes.as_slice(), path, robot, setup)
 }
 
 /// As [`read_measurements`], from any reader; `file` names it in errors.
@@ -412,7 +426,17 @@ pub fn parse_measurements<R: std::io::Read>(
                     o.p_m[k] = v;
                 }
                 Col::Time => {
-                    o.t_s = Some(parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?);
+                    let t = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
+                    if t.abs() > MAX_TIME_S {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{t:?} s is more than {MAX_TIME_S:?} s from 0 (milliseconds, \
+                                 or an overflow?)"
+                            ),
+                        ));
+                    }
+                    o.t_s = Some(t);
                 }
             }
         }

@@ -11,6 +11,11 @@
 //! Everything is converted to SI on reading (rad, m, kg, s); the CSV's
 //! `[units]` apply only to its joint and position columns.
 //!
+//! Every file is read through [`input`] (regular files only, a size limit
+//! checked before reading) and written through [`atomic`] (all or nothing,
+//! never onto an input, a link or a device); the limits are in
+//! `docs/inputs.md`.
+//!
 //! Every rejected input is one [`InputError`] naming the file, and where
 //! known the line (1-based; the CSV header is line 1) and the CSV column.
 //! Suspicious but usable input (a joint value far outside its URDF limits,
@@ -58,16 +63,18 @@ use std::path::PathBuf;
 pub mod atomic;
 mod cells;
 pub mod figaroh;
+pub mod input;
 pub mod job;
 pub mod measurements;
 pub mod setup;
 pub mod urdf;
 pub mod writer;
 
-pub use atomic::write_atomic;
+pub use atomic::{write_all_atomic, write_atomic};
 pub use job::Job;
 pub use measurements::{
-    parse_measurements, read_measurements, Deflection, Measurements, Observation,
+    parse_measurements, read_measurements, read_measurements_limited, Deflection, Measurements,
+    Observation,
 };
 pub use setup::{
     AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,
@@ -183,9 +190,9 @@ impl<K> fmt::Display for Located<K> {
             write!(f, ":{line}")?;
         }
         if let Some(column) = &self.column {
-            write!(f, ": column '{column}'")?;
+            write!(f, ": column {}", input::quote(column))?;
         }
-        write!(f, ": {}", self.message)
+        write!(f, ": {}", input::shorten(&self.message))
     }
 }
 

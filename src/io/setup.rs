@@ -267,9 +267,7 @@ impl Setup {
     /// errors, the line.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, InputError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            InputError::new(path, ErrorKind::Io, format!("cannot read the setup: {e}"))
-        })?;
+        let text = super::input::read_text(path, "the setup", super::input::MAX_SETUP_BYTES)?;
         Self::parse(&text, path)
     }
 

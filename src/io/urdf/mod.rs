@@ -39,6 +39,82 @@ use crate::robot::{Chain, JointKind};
 /// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
 pub const MAX_JOINTS: usize = 16;
 
+/// XML elements nested deeper than this are refused before the URDF parser
+/// sees the text (it recurses once per level; a URDF needs 4 or 5).
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// More XML elements than this are refused before the URDF parser sees the
+/// text (its tree takes ~50 bytes of memory per byte of such a file; a
+/// 100-link robot with visuals and collisions has ~2,000).
+pub const MAX_XML_ELEMENTS: usize = 100_000;
+
+/// The 1-based line where the nesting of elements in `text` first exceeds
+/// [`MAX_XML_DEPTH`] or their number [`MAX_XML_ELEMENTS`], and which, by
+/// one linear scan: start tags deepen, end tags and `/>` return; comments,
+/// `<?…?>`, `<!…>` and quoted attribute values are skipped. Malformed XML
+/// is left to the parser.
+fn too_large(text: &str) -> Option<(usize, String)> {
+    let b = text.as_bytes();
+    let (mut i, mut depth, mut line, mut elements) = (0usize, 0usize, 1usize, 0usize);
+    let skip_to = |from: usize, pat: &[u8]| -> usize {
+        b[from..]
+            .windows(pat.len())
+            .position(|w| w == pat)
+            .map_or(b.len(), |p| from + p + pat.len())
+    };
+    while i < b.len() {
+        match b[i] {
+            b'\n' => line += 1,
+            b'<' if b[i..].starts_with(b"<!--") => {
+                let end = skip_to(i + 4, b"-->");
+                line += b[i..end].iter().filter(|&&c| c == b'\n').count();
+                i = end;
+                continue;
+            }
+            b'<' if matches!(b.get(i + 1), Some(b'?' | b'!')) => {
+                let end = skip_to(i + 1, b">");
+                line += b[i..end].iter().filter(|&&c| c == b'\n').count();
+                i = end;
+                continue;
+            }
+            b'<' if b.get(i + 1) == Some(&b'/') => depth = depth.saturating_sub(1),
+            b'<' => {
+                // A start tag: to its '>', past quoted values.
+                let mut j = i + 1;
+                let mut quote = None;
+                while j < b.len() {
+                    match (quote, b[j]) {
+                        (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                        (Some(q), c) if c == q => quote = None,
+                        (None, b'>') => break,
+                        (_, b'\n') => line += 1,
+                        _ => {}
+                    }
+                    j += 1;
+                }
+                elements += 1;
+                if elements > MAX_XML_ELEMENTS {
+                    return Some((line, format!("more than {MAX_XML_ELEMENTS} XML elements")));
+                }
+                if b.get(j.wrapping_sub(1)) != Some(&b'/') {
+                    depth += 1;
+                    if depth > MAX_XML_DEPTH {
+                        return Some((
+                            line,
+                            format!("XML elements nested more than {MAX_XML_DEPTH} deep"),
+                        ));
+                    }
+                }
+                i = j + 1;
+                continue;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
 /// How a chain joint moves, as the URDF says (the core's [`JointKind`] does
 /// not tell revolute from continuous).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -129,9 +205,7 @@ impl Robot {
         tip_link: Option<&str>,
     ) -> Result<Self, InputError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            InputError::new(path, ErrorKind::Io, format!("cannot read the URDF: {e}"))
-        })?;
+        let text = crate::io::input::read_text(path, "the URDF", crate::io::input::MAX_URDF_BYTES)?;
         Self::parse(&text, path, base_link, tip_link)
     }
 
@@ -149,6 +223,9 @@ impl Robot {
             file: file.into(),
             text,
         };
+        if let Some((line, what)) = too_large(text) {
+            return Err(ctx.err(ErrorKind::Syntax, what).at_line(line));
+        }
         let urdf = urdf_rs::read_from_string(text)
             .map_err(|e| ctx.err(ErrorKind::Syntax, format!("not a valid URDF: {e}")))?;
         Tree::new(&urdf, &ctx)?.robot(&urdf, &ctx, base_link, tip_link)

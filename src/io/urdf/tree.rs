@@ -35,10 +35,11 @@ impl<'u> Tree<'u> {
         }
         let mut parent_joint = HashMap::new();
         let mut child_joints: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
-        for (i, joint) in urdf.joints.iter().enumerate() {
+        let mut joint_names = std::collections::HashSet::new();
+        for joint in &urdf.joints {
             // The CSV has one column per joint name: a second joint of the
             // same name could never be given a value.
-            if urdf.joints[..i].iter().any(|j| j.name == joint.name) {
+            if !joint_names.insert(joint.name.as_str()) {
                 let e = ctx.err(
                     ErrorKind::Robot,
                     format!("joint '{}': defined twice", joint.name),
@@ -76,16 +77,29 @@ impl<'u> Tree<'u> {
         }
         // Every link has at most one parent joint, so a loop is a link that
         // is its own ancestor: walking up from it never reaches a root.
-        // (Left in, the walks down the tree would never end.)
+        // (Left in, the walks down the tree would never end.) Each walk
+        // stops at a link already known to reach a root: linear in links.
+        let mut reaches_root: std::collections::HashSet<&str> = std::collections::HashSet::new();
         for link in &urdf.links {
             let mut at = link.name.as_str();
-            for _ in 0..=urdf.joints.len() {
+            let mut walked = Vec::new();
+            let mut on_walk = std::collections::HashSet::new();
+            let mut looped = None;
+            while !reaches_root.contains(at) {
+                if !on_walk.insert(at) {
+                    looped = parent_joint.get(at);
+                    break;
+                }
+                walked.push(at);
                 match parent_joint.get(at) {
                     Some(j) => at = j.parent.link.as_str(),
                     None => break,
                 }
             }
-            if let Some(joint) = parent_joint.get(at) {
+            if looped.is_none() {
+                reaches_root.extend(walked);
+            }
+            if let Some(joint) = looped {
                 return Err(ctx.err_at(
                     "joint",
                     &joint.name,

@@ -1,0 +1,171 @@
+//! Reading an input file safely: regular files only, a size limit checked
+//! before reading, and offending text quoted short.
+//!
+//! | input | limit |
+//! |---|---|
+//! | setup (TOML) | [`MAX_SETUP_BYTES`] = 1 MiB |
+//! | robot (URDF) | [`MAX_URDF_BYTES`] = 16 MiB; at most [`super::urdf::MAX_XML_ELEMENTS`] = 100,000 elements, nested at most [`super::urdf::MAX_XML_DEPTH`] = 64 deep (checked in one pass before the parser) |
+//! | measurements (CSV), FIGAROH mocap export | [`MAX_DATA_BYTES`] = 1 GiB by default (`robcal calibrate --max-data-mib`) |
+//!
+//! A FIFO, a device (`/dev/zero`), a socket or a directory is refused from
+//! its metadata, before it is opened: nothing blocks and nothing is read
+//! without bound. A symbolic link is followed to what it names, which must
+//! be a regular file.
+
+use std::io::Read;
+use std::path::Path;
+
+use super::{ErrorKind, InputError};
+
+/// Largest setup file \[bytes\].
+pub const MAX_SETUP_BYTES: u64 = 1 << 20;
+/// Largest URDF file \[bytes\].
+pub const MAX_URDF_BYTES: u64 = 16 << 20;
+/// Largest measurement or mocap file by default \[bytes\].
+pub const MAX_DATA_BYTES: u64 = 1 << 30;
+/// Characters of offending text an error quotes at most.
+pub const MAX_QUOTE_CHARS: usize = 80;
+
+/// What a path is, for an error.
+fn kind_of(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// The bytes of the regular file `path`, at most `limit` of them; `what`
+/// names the input in errors ("the URDF").
+///
+/// # Errors
+/// [`ErrorKind::Io`]: the path does not exist or cannot be read, is not a
+/// regular file, or is larger than `limit`.
+pub fn read_limited(path: &Path, what: &str, limit: u64) -> Result<Vec<u8>, InputError> {
+    let io = |m: String| InputError::new(path, ErrorKind::Io, m);
+    let meta = std::fs::metadata(path).map_err(|e| io(format!("cannot read {what}: {e}")))?;
+    if !meta.is_file() {
+        return Err(io(format!(
+            "cannot read {what}: it is {}, not a regular file",
+            kind_of(&meta)
+        )));
+    }
+    let too_large = |n: u64| {
+        io(format!(
+            "{what} is {} bytes, more than the limit of {limit} bytes",
+            n
+        ))
+    };
+    if meta.len() > limit {
+        return Err(too_large(meta.len()));
+    }
+    let file = std::fs::File::open(path).map_err(|e| io(format!("cannot read {what}: {e}")))?;
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    // The file may grow between the check and the read.
+    file.take(limit.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io(format!("cannot read {what}: {e}")))?;
+    if bytes.len() as u64 > limit {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// As [`read_limited`], as UTF-8 text.
+///
+/// # Errors
+/// As [`read_limited`]; [`ErrorKind::Syntax`] for text that is not UTF-8.
+pub fn read_text(path: &Path, what: &str, limit: u64) -> Result<String, InputError> {
+    String::from_utf8(read_limited(path, what, limit)?).map_err(|e| {
+        InputError::new(
+            path,
+            ErrorKind::Syntax,
+            format!(
+                "{what} is not UTF-8 text (byte {})",
+                e.utf8_error().valid_up_to()
+            ),
+        )
+    })
+}
+
+/// `text` in single quotes, cut to [`MAX_QUOTE_CHARS`] characters (`…`
+/// and the full length when cut): what an error echoes of the input.
+pub fn quote(text: &str) -> String {
+    let mut chars = text.char_indices();
+    match chars.nth(MAX_QUOTE_CHARS) {
+        None => format!("'{text}'"),
+        Some((end, _)) => format!("'{}…' ({} bytes)", &text[..end], text.len()),
+    }
+}
+
+/// Most characters of one error message.
+pub const MAX_MESSAGE_CHARS: usize = 600;
+
+/// `message` with every quoted text (between two `'`) cut to
+/// [`MAX_QUOTE_CHARS`] characters, and the whole cut to
+/// [`MAX_MESSAGE_CHARS`]: what [`super::Located`] displays, so that no
+/// error echoes a megabyte cell, name or line.
+pub fn shorten(message: &str) -> String {
+    let mut out = String::with_capacity(message.len().min(MAX_MESSAGE_CHARS + 8));
+    for (i, part) in message.split('\'').enumerate() {
+        if i > 0 {
+            out.push('\'');
+        }
+        // Odd parts are inside quotes.
+        match part.char_indices().nth(MAX_QUOTE_CHARS) {
+            Some((end, _)) if i % 2 == 1 => {
+                out.push_str(&part[..end]);
+                out.push('…');
+            }
+            _ => out.push_str(part),
+        }
+        if out.len() > 4 * MAX_MESSAGE_CHARS {
+            break;
+        }
+    }
+    match out.char_indices().nth(MAX_MESSAGE_CHARS) {
+        Some((end, _)) => format!("{}…", &out[..end]),
+        None => out,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quotes_are_short() {
+        assert_eq!(quote("abc"), "'abc'");
+        let long = "x".repeat(1_000_000);
+        let q = quote(&long);
+        assert!(q.chars().count() < 120, "{q}");
+        assert!(q.ends_with("(1000000 bytes)"));
+        // Cut on a character boundary.
+        let q = quote(&"é".repeat(100));
+        assert!(q.starts_with("'éé"));
+    }
+
+    #[test]
+    fn messages_are_short() {
+        let cell = "1".repeat(1_000_000);
+        let m = shorten(&format!("column 'x': '{cell}' is not a number"));
+        assert!(m.chars().count() < 200, "{m}");
+        assert!(m.ends_with("' is not a number"), "{m}");
+        assert!(shorten(&"word ".repeat(1000)).chars().count() <= MAX_MESSAGE_CHARS + 1);
+        assert_eq!(shorten("joint 'a1': zero axis"), "joint 'a1': zero axis");
+    }
+}
