@@ -325,3 +325,49 @@ fn wls_one_step_also_finds_the_compensator() {
     assert_eq!(effects[0]["effect"], "compensator");
     assert_eq!(effects[0]["joint"], "a2");
 }
+
+/// `--output DIR` (data contract 7.4): the calibrated URDF and model.json,
+/// all or nothing.
+#[test]
+fn output_dir_holds_the_calibrated_urdf_and_the_model_all_or_nothing() {
+    let dir = std::env::temp_dir().join(format!("robcal-output-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = |out: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_robcal"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args([
+                "calibrate",
+                "--setup",
+                "data/kr270/setup.toml",
+                "--data",
+                "data/kr270/measurements.csv",
+                "--no-diagnose",
+                "--output",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .expect("run robcal")
+    };
+    let o = run(&dir);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let urdf = std::fs::read_to_string(dir.join("robot.urdf")).expect("robot.urdf");
+    let robot = urdf_rs::read_from_string(&urdf).expect("the calibrated URDF parses");
+    for link in ["measurement_frame", "marker_1", "marker_2", "marker_3"] {
+        assert!(robot.links.iter().any(|l| l.name == link), "{link}");
+    }
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap();
+    let n = model["parameters"].as_array().unwrap().len();
+    let c = &model["covariance"];
+    assert_eq!(c["parameters"].as_array().unwrap().len(), n);
+    assert_eq!(c["matrix"].as_array().unwrap().len(), n);
+    assert!(c["matrix"][0][0].as_f64().unwrap() > 0.0);
+
+    // A directory where robot.urdf goes: nothing is written.
+    let blocked = dir.join("blocked");
+    std::fs::create_dir_all(blocked.join("robot.urdf")).unwrap();
+    let o = run(&blocked);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(!blocked.join("model.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -98,6 +98,12 @@ struct CalibrateArgs {
     /// Print the contract's JSON on stdout.
     #[arg(long)]
     json: bool,
+    /// Write the calibrated robot here, all or nothing: `robot.urdf` (the
+    /// input URDF with the geometry folded in, a `measurement_frame` root
+    /// and `marker_<id>` links) and `model.json` (the report's JSON with
+    /// the full covariance).
+    #[arg(long)]
+    output: Option<PathBuf>,
     /// Largest measurement file (`--data`, `--validate`) read, in MiB
     /// (1 MiB = 1,048,576 bytes).
     #[arg(long = "max-data-mib", default_value_t = 1024)]
@@ -200,6 +206,32 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         inputs.push(&robot);
         inputs.extend(a.validate.as_deref());
         write_plots(dir, &report, &inputs)?;
+    }
+    if let Some(dir) = &a.output {
+        let urdf =
+            calibrate::export::calibrated_urdf(&report.model, &job).map_err(|e| e.to_string())?;
+        let mut model = to_json(&report);
+        let names: Vec<&str> = report.parameters.iter().map(|p| p.name.as_str()).collect();
+        let c = &report.covariance;
+        model["covariance"] = json!({
+            "parameters": names,
+            "unit": "product of the two parameters' units",
+            "matrix": (0..c.nrows())
+                .map(|i| (0..c.ncols()).map(|k| num(c[(i, k)])).collect::<Vec<_>>())
+                .collect::<Vec<_>>(),
+        });
+        let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
+        let robot = job.setup.robot_path(&job.setup_path);
+        let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot.as_path()];
+        inputs.extend(a.validate.as_deref());
+        write_dir(
+            dir,
+            vec![
+                (dir.join("robot.urdf"), urdf.into_bytes()),
+                (dir.join("model.json"), model.into_bytes()),
+            ],
+            &inputs,
+        )?;
     }
     let out = if a.json {
         serde_json::to_string_pretty(&to_json(&report)).map_err(|e| e.to_string())? + "\n"
@@ -305,15 +337,21 @@ fn write_plots(dir: &Path, r: &Report, inputs: &[&Path]) -> Result<(), String> {
             svg,
         ));
     }
-    let created = !dir.exists();
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let files: Vec<(PathBuf, Vec<u8>)> =
         svgs.into_iter().map(|(p, s)| (p, s.into_bytes())).collect();
+    write_dir(dir, files, inputs)
+}
+
+/// `files` into `dir` by one [`robcal::io::write_all_atomic`]; `dir` is
+/// created when missing and removed again when the writing fails.
+fn write_dir(dir: &Path, files: Vec<(PathBuf, Vec<u8>)>, inputs: &[&Path]) -> Result<(), String> {
+    let created = !dir.exists();
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     robcal::io::write_all_atomic(&files, inputs).map_err(|e| {
         if created {
             let _ = std::fs::remove_dir(dir);
         }
-        format!("plots in {}: cannot write: {e}", dir.display())
+        format!("{}: cannot write: {e}", dir.display())
     })
 }
 

@@ -37,6 +37,7 @@
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
 //! | [`report`], [`calibrated`], [`validate`] | what comes out |
+//! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
 //! user sets (method, λ, iterations, diagnose) is [`Settings`].
@@ -54,6 +55,7 @@ pub mod design;
 pub mod diagnosis;
 pub mod effects;
 pub mod engine;
+pub mod export;
 pub mod fit;
 pub mod geometry;
 pub mod heldout;

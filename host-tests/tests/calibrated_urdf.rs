@@ -1,0 +1,165 @@
+//! The calibrated URDF (`robcal calibrate --output DIR`, issue 14): forward
+//! kinematics of `DIR/robot.urdf` by an independent implementation
+//! (`host_tests::exact::Fk`: 4 × 4 matrices from the URDF text by urdf-rs,
+//! no robcal code) reproduce robcal's geometric prediction of every marker,
+//! and the file read back as the nominal robot of a new calibration needs
+//! no joint correction.
+
+use std::path::{Path, PathBuf};
+
+use host_tests::exact::Fk;
+use nalgebra::Vector3;
+use robcal::calibrate::{self, export, Report, Settings};
+use robcal::io::{read_measurements, Job, Measurements};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn shared() -> Option<PathBuf> {
+    let s = root().join("../shared");
+    s.is_dir().then_some(s)
+}
+
+fn quick() -> Settings {
+    Settings {
+        method: calibrate::Method::Ols,
+        diagnose: false,
+        heldout: false,
+        ..Settings::default()
+    }
+}
+
+/// Largest distance \[m\] between the independent FK of `urdf` and robcal's
+/// geometric prediction, over every row of `data`.
+fn largest_gap(urdf: &str, job: &Job, r: &Report, data: &Measurements) -> f64 {
+    let g = export::final_geometry(&r.model);
+    let chain = g.placed_chain();
+    let mut worst: f64 = 0.0;
+    let parsed = urdf_rs::read_from_string(urdf).expect("the calibrated URDF parses");
+    for (m, (id, _)) in r.model.names.markers.iter().enumerate() {
+        // Named against the input URDF (which may have its own marker_<id>).
+        let name = if parsed
+            .links
+            .iter()
+            .any(|l| l.name == format!("marker_{id}_calibrated"))
+        {
+            format!("marker_{id}_calibrated")
+        } else {
+            format!("marker_{id}")
+        };
+        let fk = Fk::parse(urdf, export::MEASUREMENT_FRAME, &name);
+        for o in data.observations.iter().filter(|o| o.marker == *id) {
+            let robcal = chain.frames(&o.q).expect("frames").point_m(&g.markers[m]);
+            let independent = fk.point(&o.q, &Vector3::zeros());
+            worst = worst.max((robcal - independent).norm());
+        }
+    }
+    assert!(job.robot.dof() > 0);
+    worst
+}
+
+fn calibrate_and_check(job: &Job, train: &Path, check: &Path) -> (String, Report) {
+    let data = read_measurements(train, &job.robot, &job.setup).expect("data");
+    let r = calibrate::calibrate(job, &data, &quick(), &mut |_| {}).expect("calibrate");
+    let urdf = export::calibrated_urdf(&r.model, job).expect("urdf");
+    let other = read_measurements(check, &job.robot, &job.setup).expect("check data");
+    let gap = largest_gap(&urdf, job, &r, &other);
+    eprintln!(
+        "{}: independent FK of the calibrated URDF vs robcal, largest gap {:.2e} um over {} rows",
+        check.display(),
+        gap * 1e6,
+        other.observations.len()
+    );
+    assert!(
+        gap < 1e-6,
+        "FK of the calibrated URDF off by {} um",
+        gap * 1e6
+    );
+    (urdf, r)
+}
+
+#[test]
+fn ur10_calibrated_urdf_reproduces_the_model_and_reads_back_without_correction() {
+    let Some(shared) = shared() else {
+        eprintln!("skipped: shared/repro is not beside the repository");
+        return;
+    };
+    let dir = shared.join("repro/ur10-offsets");
+    let data = dir.join("measurements.csv");
+    let job = Job::load(dir.join("setup-joint_offsets.toml")).expect("setup");
+    let (urdf, r) = calibrate_and_check(&job, &data, &data);
+
+    // Read back: the calibrated URDF as the nominal robot, the calibrated
+    // markers as the nominal ones, the same declared model.
+    let out = std::env::temp_dir().join(format!("robcal-urdf-ur10-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("robot.urdf"), &urdf).unwrap();
+    let g = export::final_geometry(&r.model);
+    let mut setup = job.setup.clone();
+    setup.robot = out.join("robot.urdf");
+    for (m, mk) in setup.markers.iter_mut().enumerate() {
+        mk.xyz = g.markers[m].into();
+    }
+    let again = Job {
+        setup_path: out.join("setup.toml"),
+        robot: robcal::io::Robot::load(
+            &setup.robot,
+            Some(&job.robot.base_link),
+            Some(&job.robot.tip_link),
+        )
+        .expect("calibrated URDF reads"),
+        setup,
+    };
+    let m = read_measurements(&data, &again.robot, &again.setup).expect("data");
+    let r2 = calibrate::calibrate(&again, &m, &quick(), &mut |_| {}).expect("recalibrate");
+    for p in r2.parameters.iter().filter(|p| p.name.ends_with(".offset")) {
+        eprintln!(
+            "round trip: {} = {:.2e} {} ({:.2e} sigma)",
+            p.name,
+            p.value,
+            p.unit,
+            p.value / p.std
+        );
+        assert!(
+            p.value.abs() < 0.1 * p.std,
+            "{} = {} ± {} {} after the round trip",
+            p.name,
+            p.value,
+            p.std,
+            p.unit
+        );
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn tiago_calibrated_urdf_reproduces_the_model_on_the_validation_postures() {
+    let Some(shared) = shared() else {
+        eprintln!("skipped: shared/datasets is not beside the repository");
+        return;
+    };
+    let job = Job::load(root().join("data/tiago/setup.toml")).expect("setup");
+    let tmp = std::env::temp_dir();
+    let pid = std::process::id();
+    let (train, check) = (
+        tmp.join(format!("robcal-urdf-d30-{pid}.csv")),
+        tmp.join(format!("robcal-urdf-d26-{pid}.csv")),
+    );
+    let sets = shared.join("datasets/tiago-mocap");
+    robcal::io::figaroh::import_mocap(
+        sets.join("qualisys_2021-11-30_static_postures.csv"),
+        &train,
+        Some(&job.robot),
+    )
+    .expect("import training day");
+    robcal::io::figaroh::import_mocap(
+        sets.join("qualisys_2021-11-26_static_postures.csv"),
+        &check,
+        Some(&job.robot),
+    )
+    .expect("import validation day");
+    calibrate_and_check(&job, &train, &check);
+    let _ = std::fs::remove_file(&train);
+    let _ = std::fs::remove_file(&check);
+}
