@@ -207,3 +207,29 @@ pub fn run_csv(robot: &Robot, data: &[u8]) {
         Err(e) => check_err(&e, CSV_FILE, Some(csv)),
     }
 }
+
+/// The file name the `figaroh_mocap` target's errors must carry.
+pub const MOCAP_FILE: &str = "fuzz-mocap.csv";
+
+/// The `figaroh_mocap` target (`robcal import figaroh-mocap`'s reader):
+/// `data` is the FIGAROH mocap CSV text. A success gives four finite rows
+/// per posture with one value per joint column.
+pub fn run_mocap(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    match robcal::io::figaroh::parse_mocap(text, MOCAP_FILE) {
+        Ok(m) => match m.observations(None) {
+            Ok(rows) => {
+                assert_eq!(rows.len(), 4 * m.postures.len());
+                for o in &rows {
+                    assert_eq!(o.q.len(), m.joint_names.len());
+                    assert!(all_finite(&o.q) && all_finite(&o.p_m), "{o:?}");
+                    assert!(o.t_s.is_none_or(f64::is_finite));
+                }
+            }
+            Err(e) => check_err(&e, MOCAP_FILE, Some(data)),
+        },
+        Err(e) => check_err(&e, MOCAP_FILE, Some(data)),
+    }
+}

@@ -1,5 +1,5 @@
 //! Regression tests of the parser fuzz findings (issue 8), and a replay of
-//! the kept parser corpora (`fuzz/corpus/{csv_measurements,setup_toml,urdf}`)
+//! the kept parser corpora (`fuzz/corpus/{csv_measurements,setup_toml,urdf,figaroh_mocap}`)
 //! on stable. The invariants are `host_tests::fuzz_io`'s: no panic, an
 //! error names the file (and a line inside it), a success is finite and
 //! its shapes agree.
@@ -10,7 +10,7 @@
 
 use std::time::{Duration, Instant};
 
-use host_tests::fuzz_io::{csv_robot, run_csv, run_setup, run_urdf, URDF_FILE};
+use host_tests::fuzz_io::{csv_robot, run_csv, run_mocap, run_setup, run_urdf, URDF_FILE};
 use robcal::io::{parse_measurements, ErrorKind, Robot};
 
 /// Runs `f` on a thread and fails if it takes longer than `limit` (the
@@ -122,11 +122,12 @@ fn replay_parser_corpora() {
             "csv_measurements" | "csv" => run_csv(&robot, bytes),
             "setup_toml" | "toml" => run_setup(bytes),
             "urdf" => run_urdf(bytes),
+            "figaroh_mocap" | "mocap" => run_mocap(bytes),
             _ => return,
         }
         n += 1;
     };
-    for target in ["csv_measurements", "setup_toml", "urdf"] {
+    for target in ["csv_measurements", "setup_toml", "urdf", "figaroh_mocap"] {
         let Ok(dir) = std::fs::read_dir(format!("{root}/fuzz/corpus/{target}")) else {
             continue;
         };
