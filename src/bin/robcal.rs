@@ -293,6 +293,7 @@ fn to_json(r: &Report) -> Value {
             "per_marker_mean_mm": per_marker(&v.per_marker_mean_mm),
             "per_marker_max_mm": per_marker(&v.per_marker_max_mm),
             "points": v.points,
+            "interpolated_points": v.interpolated_points,
         })),
         "warnings": r.warnings,
         "identifiability": r.left_out.iter().map(|l| json!({

@@ -29,4 +29,6 @@ pub struct CalibratedModel {
     pub kinds: DataKinds,
     /// The decision constants of the run.
     pub policy: Policy,
+    /// The covariance of `x` (sandwich, eq. 8 / 11), reported units.
+    pub covariance: nalgebra::DMatrix<f64>,
 }

@@ -345,6 +345,11 @@ impl Engine<'_> {
             ),
             kinds: self.rows.kinds,
             policy: self.policy,
+            covariance: nalgebra::DMatrix::from_iterator(
+                f.params.len(),
+                f.params.len(),
+                f.fit.covariance.iter().copied(),
+            ),
         }
     }
 }

@@ -127,22 +127,65 @@ impl Linearisation {
     }
 
     /// The effective compliance \[rad/(N·m) or m/N\] of every joint at the
-    /// measured joint values `q`: its constant compliance plus that of the
-    /// angle bin it is in.
+    /// joint values `q`: its constant compliance plus that of its
+    /// compensator table (angle bins, [`Param::ComplianceAt`]) at `qⱼ`.
+    ///
+    /// The table answers for any angle: within
+    /// [`crate::model::param::BIN_TOLERANCE_RAD`] of a calibrated angle it is
+    /// that bin's value (as the fit used it); between two calibrated angles
+    /// it is linear in the angle between the two bins' values; beyond the
+    /// first or last calibrated angle it is the nearest bin's value (no
+    /// extrapolation). [`Self::interpolated`] says whether a joint needed it.
     pub fn compliance_at(&self, q: &[f64]) -> Vec<f64> {
         let mut k = vec![0.0; q.len()];
         for (p, &v) in &self.values {
-            match *p {
-                Param::Compliance { joint } => k[usize::from(joint)] += v,
-                Param::ComplianceAt { joint, angle_urad }
-                    if in_bin(angle_urad, q[usize::from(joint)]) =>
-                {
-                    k[usize::from(joint)] += v;
-                }
-                _ => {}
+            if let Param::Compliance { joint } = *p {
+                k[usize::from(joint)] += v;
             }
         }
+        for (j, kj) in k.iter_mut().enumerate() {
+            *kj += self.table(j, q[j]).0;
+        }
         k
+    }
+
+    /// Joint `j`'s compensator-table compliance at `qj` \[rad\] and whether
+    /// it was interpolated (no bin within the tolerance): see
+    /// [`Self::compliance_at`]. 0 without a table.
+    fn table(&self, j: usize, qj: f64) -> (f64, bool) {
+        let bins = self.values.iter().filter_map(|(p, &v)| match *p {
+            Param::ComplianceAt { joint, angle_urad } if usize::from(joint) == j => {
+                Some((angle_urad, v))
+            }
+            _ => None,
+        });
+        // The nearest calibrated angle below and above `qj`: (angle, value).
+        let mut below = (f64::NEG_INFINITY, None);
+        let mut above = (f64::INFINITY, None);
+        for (angle_urad, v) in bins {
+            if in_bin(angle_urad, qj) {
+                return (v, false);
+            }
+            let a = f64::from(angle_urad) * 1e-6;
+            if a < qj && a > below.0 {
+                below = (a, Some(v));
+            }
+            if a > qj && a < above.0 {
+                above = (a, Some(v));
+            }
+        }
+        let (below, above) = (below.1.map(|v| (below.0, v)), above.1.map(|v| (above.0, v)));
+        match (below, above) {
+            (Some((a0, v0)), Some((a1, v1))) => (v0 + (v1 - v0) * (qj - a0) / (a1 - a0), true),
+            (Some((_, v)), None) | (None, Some((_, v))) => (v, true),
+            (None, None) => (0.0, false),
+        }
+    }
+
+    /// The joints whose compensator table is interpolated (or held at its
+    /// end) at `q`: no calibrated angle within the bin tolerance.
+    pub fn interpolated(&self, q: &[f64]) -> Vec<usize> {
+        (0..q.len()).filter(|&j| self.table(j, q[j]).1).collect()
     }
 
     /// The joint law at measured joint values `q`, for an absolute
@@ -153,6 +196,18 @@ impl Linearisation {
         if self.model == DeflectionModel::Linear {
             return None;
         }
+        let law = self.joint_law(q, absolute);
+        let rigid = [&law.compliance, &law.quadratic, &law.backlash, &law.fixed]
+            .iter()
+            .all(|v| v.iter().all(|&x| x == 0.0));
+        (!rigid).then_some(law)
+    }
+
+    /// The joint law at joint values `q` in either deflection model (a
+    /// prediction or a compensation solves the exact equilibrium with the
+    /// calibrated values whichever model fitted them); `absolute` as
+    /// [`Self::law`].
+    pub fn joint_law(&self, q: &[f64], absolute: bool) -> Law {
         let n = q.len();
         let mut law = Law {
             compliance: self.compliance_at(q),
@@ -171,10 +226,7 @@ impl Linearisation {
                 _ => {}
             }
         }
-        let rigid = [&law.compliance, &law.quadratic, &law.backlash, &law.fixed]
-            .iter()
-            .all(|v| v.iter().all(|&x| x == 0.0));
-        (!rigid).then_some(law)
+        law
     }
 }
 

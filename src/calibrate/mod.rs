@@ -38,6 +38,7 @@
 //! | [`diagnosis`] | the closed loop |
 //! | [`report`], [`calibrated`], [`validate`] | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
+//! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point) |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
 //! user sets (method, λ, iterations, diagnose) is [`Settings`].
@@ -62,6 +63,7 @@ pub mod heldout;
 pub mod linearisation;
 pub mod names;
 pub mod plausibility;
+pub mod predict;
 pub mod report;
 pub mod residuals;
 pub mod rows;

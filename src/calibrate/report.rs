@@ -144,6 +144,9 @@ pub struct Validation {
     pub per_marker_max_mm: BTreeMap<String, f64>,
     /// Points evaluated.
     pub points: usize,
+    /// Points at which a compensator table was interpolated between its
+    /// calibrated angles (or held at its first or last one).
+    pub interpolated_points: usize,
 }
 
 /// Residuals against the variable an effect was traced by, before and after
@@ -443,6 +446,14 @@ impl fmt::Display for Report {
                 write!(f, ", marker {m} {r:.4} mm")?;
             }
             writeln!(f)?;
+            if v.interpolated_points > 0 {
+                writeln!(
+                    f,
+                    "validation: {} of {} points at angles between the calibrated ones \
+                     (compensator table interpolated linearly, held at its ends)",
+                    v.interpolated_points, v.points
+                )?;
+            }
         }
         Ok(())
     }

@@ -13,15 +13,18 @@ use super::residuals::rms_um;
 use super::rows::{RowKind, Rows};
 use super::settings::CalibrationError;
 use crate::io::{Job, Measurements};
-use crate::model::{in_some_bin, Param};
 
 /// Evaluates `model` on `data` (rows of the kinds the calibration used,
 /// predicted by the calibrated geometry and the estimate): the norm RMSE of
 /// each marker's position error \[mm\].
 ///
+/// A joint with a compensator table at an angle the calibration did not
+/// measure gets the table's linear interpolation (held at its ends), and
+/// the point is counted in [`Validation::interpolated_points`].
+///
 /// # Errors
-/// [`CalibrationError::Data`] when a row cannot be predicted (an angle
-/// outside every compensator bin of the calibration).
+/// [`CalibrationError::Data`] when the file has no row of the kinds the
+/// calibration used.
 pub fn validate(
     model: &CalibratedModel,
     job: &Job,
@@ -34,21 +37,13 @@ pub fn validate(
         RowKind::Deflection => model.kinds.deflections,
         RowKind::Absolute => model.kinds.absolute,
     });
-    for row in &rows.rows {
-        for p in &model.params {
-            if let Param::ComplianceAt { joint, .. } = *p {
-                let j = usize::from(joint);
-                if !in_some_bin(&model.params, joint, row.q[j]) {
-                    return Err(CalibrationError::Data(format!(
-                        "{}:{}: joint '{}' is at an angle the calibration has no compliance for",
-                        data.file.display(),
-                        row.line,
-                        names.joints[j]
-                    )));
-                }
-            }
-        }
-    }
+    // A compensator table answers between its calibrated angles by linear
+    // interpolation (Linearisation::compliance_at); count those points.
+    let interpolated_points = rows
+        .rows
+        .iter()
+        .filter(|r| !model.linearisation.interpolated(&r.q).is_empty())
+        .count();
     let d = Design::new(
         &rows.rows,
         &model.params,
@@ -89,5 +84,6 @@ pub fn validate(
         }),
         per_marker_max_mm: per_marker(&|v| v.iter().map(|r| r.norm()).fold(0.0, f64::max) * 1e3),
         points: all.len(),
+        interpolated_points,
     })
 }

@@ -7,16 +7,19 @@
 //! | [`kinematics`] | [`Frames`]: joint frames, axes and origins, marker positions |
 //! | [`load`] | [`Wrench`], [`PointLoad`], the joint torques of a load and of the robot's own weight |
 //! | [`equilibrium`] | the deflected pose of a loaded chain whose joints yield (eq. 3 solved exactly) and its sensitivity |
+//! | [`compensate`] | the joint command whose loaded, deflected robot reaches a desired point (Newton on the exact model) |
 //!
 //! All lengths in metres, revolute joint values in radians, prismatic ones
 //! in metres, torques in N·m (N for a prismatic joint).
 
 pub mod chain;
+pub mod compensate;
 pub mod equilibrium;
 pub mod kinematics;
 pub mod load;
 
 pub use chain::{Chain, Joint, JointKind, LinkInertia};
+pub use compensate::{compensate, CompensateSettings, Compensation, Compliances};
 pub use equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
 pub use kinematics::{Frames, JointFrame};
 pub use load::{gravity_torques, joint_torques, PointLoad, Wrench};

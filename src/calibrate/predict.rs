@@ -1,0 +1,293 @@
+//! The calibrated model applied: where a marker (or any tool point) is for
+//! given joint values and payload, and the joint command that puts it at a
+//! desired point ([`crate::robot::compensate`]).
+//!
+//! A [`Predictor`] holds the final geometry of a calibration (its last
+//! Gauss–Newton step applied, as in the calibrated URDF), the base placed
+//! in the measurement frame, and the calibrated joint law. A prediction is
+//! the exact static equilibrium ([`crate::robot::equilibrium`]) of the
+//! robot commanded to `q` under its own weight (the URDF's link masses) and
+//! the payload, whichever deflection model fitted the compliances, with
+//! every joint-law term the calibration found (compliances, compensator
+//! tables interpolated between their angles, nonlinear stiffness,
+//! backlash, the gear's cyclic error) and, to first order as it was
+//! fitted, a link's bending under the payload
+//! ([`crate::model::Param::LinkCompliance`]). Not applied: the drift of the
+//! measurement system and the calibration tool's centre-of-mass estimate
+//! (properties of the calibration, not of the robot). All positions are in
+//! metres in the measurement frame; joint values in rad (or m).
+//!
+//! [`Predictor::predict_covariance`] propagates the calibration's
+//! covariance (eq. 8 / 11) to a prediction, `Σₚ = B Σ Bᵀ` with `B = ∂p/∂x`
+//! by central differences of the predictor itself (steps of 1 % of each
+//! parameter's σ): the error floor a compensation cannot go below.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::calibrated::CalibratedModel;
+use super::geometry::J;
+use super::linearisation::Linearisation;
+use super::settings::CalibrationError;
+use crate::io::Job;
+use crate::model::{Param, Sample};
+use crate::robot::{
+    compensate, equilibrium, Chain, CompensateSettings, Compensation, EquilibriumSettings, Loading,
+    PointLoad,
+};
+use crate::Error;
+
+/// A mass carried by the tool.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Payload {
+    /// Mass \[kg\], ≥ 0.
+    pub mass_kg: f64,
+    /// Centre of mass \[m, tip frame\].
+    pub com_m: Vector3<f64>,
+}
+
+/// The calibrated robot, ready to predict and compensate (see the
+/// [module docs](self)).
+#[derive(Debug, Clone)]
+pub struct Predictor {
+    chain: Chain<f64, J>,
+    markers: Vec<Vector3<f64>>,
+    marker_ids: Vec<u32>,
+    gravity_mps2: Vector3<f64>,
+    lin: Linearisation,
+    /// `(Param::LinkCompliance, estimate)`: applied to first order.
+    bending: Vec<(Param, f64)>,
+    model: CalibratedModel,
+    job_gravity_mps2: Vector3<f64>,
+}
+
+/// The equilibrium settings of a prediction (the rows' own).
+const EQUILIBRIUM: EquilibriumSettings<f64> = EquilibriumSettings {
+    tolerance: 1e-13,
+    max_iterations: 50,
+};
+
+impl Predictor {
+    /// The calibrated robot of `model`, for the robot and setup of `job`
+    /// (its gravity, given in the robot's base frame).
+    pub fn new(model: &CalibratedModel, job: &Job) -> Self {
+        let gravity = job
+            .setup
+            .load
+            .map_or(Vector3::new(0.0, 0.0, -9.80665), |l| {
+                Vector3::from(l.gravity)
+            });
+        Self::at(model, gravity, &model.x)
+    }
+
+    /// The predictor of `model` with estimate `x` instead of its own.
+    fn at(model: &CalibratedModel, gravity_mps2: Vector3<f64>, x: &[f64]) -> Self {
+        let mut g = model.geometry.clone();
+        g.apply(&model.params, x);
+        Self {
+            chain: g.placed_chain(),
+            markers: g.markers.clone(),
+            marker_ids: (0..g.markers.len())
+                .map(|m| model.names.marker_id(m as u8))
+                .collect(),
+            gravity_mps2: g.base.rotation * gravity_mps2,
+            lin: Linearisation::of(model.linearisation.model, &model.params, x, &model.names),
+            bending: model
+                .params
+                .iter()
+                .zip(x)
+                .filter(|(p, _)| matches!(p, Param::LinkCompliance { .. }))
+                .map(|(p, v)| (*p, *v))
+                .collect(),
+            model: model.clone(),
+            job_gravity_mps2: gravity_mps2,
+        }
+    }
+
+    /// The chain's number of joints.
+    pub fn dof(&self) -> usize {
+        self.chain.dof()
+    }
+
+    /// The calibrated position of marker `id` \[m, tip frame\].
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when the setup has no marker `id`.
+    pub fn marker_m(&self, id: u32) -> Result<Vector3<f64>, CalibrationError> {
+        self.marker_ids
+            .iter()
+            .position(|&m| m == id)
+            .map(|i| self.markers[i])
+            .ok_or_else(|| {
+                CalibrationError::Data(format!(
+                    "no marker {id} in the calibration (markers {:?})",
+                    self.marker_ids
+                ))
+            })
+    }
+
+    fn loading(&self, payload: Option<&Payload>) -> Result<Loading<f64>, Error> {
+        if let Some(p) = payload {
+            if !(p.mass_kg.is_finite() && p.com_m.iter().all(|v| v.is_finite())) {
+                return Err(Error::NonFinite { what: "payload" });
+            }
+            if p.mass_kg < 0.0 {
+                return Err(Error::NotPositive {
+                    what: "payload mass",
+                });
+            }
+        }
+        Ok(Loading {
+            load: payload.map(|p| PointLoad {
+                mass_kg: p.mass_kg,
+                com_m: p.com_m,
+                gravity_mps2: self.gravity_mps2,
+            }),
+            own_weight_mps2: Some(self.gravity_mps2),
+        })
+    }
+
+    fn check_q(&self, q: &[f64]) -> Result<(), Error> {
+        if q.len() != self.dof() {
+            return Err(Error::Mismatch {
+                what: "joint values: one per joint of the chain",
+            });
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "joint values",
+            });
+        }
+        Ok(())
+    }
+
+    /// Where the point `tool_m` \[m, tip frame\] settles \[m, measurement
+    /// frame\] when the robot is commanded to `q` carrying `payload`.
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] / [`Error::NonFinite`] for bad joint values or
+    /// payload; the errors of [`equilibrium`].
+    pub fn predict(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<Vector3<f64>, Error> {
+        self.check_q(q)?;
+        let loading = self.loading(payload)?;
+        let law = self.lin.joint_law(q, true);
+        let eq = equilibrium(&self.chain, q, q, &loading, &law, &EQUILIBRIUM)?;
+        let p = eq.frames.point_m(tool_m);
+        Ok(p + self.bending_m(&eq.frames, &p, &loading)?)
+    }
+
+    /// The links' bending under the payload at `frames` (first order, the
+    /// fitted `LinkCompliance` columns times their estimates) \[m\].
+    fn bending_m(
+        &self,
+        frames: &crate::robot::Frames<f64, J>,
+        p: &Vector3<f64>,
+        loading: &Loading<f64>,
+    ) -> Result<Vector3<f64>, Error> {
+        let Some(load) = loading.load.filter(|_| !self.bending.is_empty()) else {
+            return Ok(Vector3::zeros());
+        };
+        let sample = Sample::deflection(frames, *p, 0, &[], Some(load.wrench(frames)));
+        self.bending
+            .iter()
+            .try_fold(Vector3::zeros(), |s, (param, x)| {
+                Ok(s + param.column(&sample)? * *x)
+            })
+    }
+
+    /// [`Self::predict`] and its covariance \[m²\] from the calibration's
+    /// parameter covariance (see the [module docs](self)).
+    ///
+    /// # Errors
+    /// As [`Self::predict`].
+    pub fn predict_covariance(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<(Vector3<f64>, Matrix3<f64>), Error> {
+        let p = self.predict(tool_m, q, payload)?;
+        let n = self.model.params.len();
+        let cov = &self.model.covariance;
+        let mut b = nalgebra::DMatrix::<f64>::zeros(3, n);
+        for k in 0..n {
+            let sigma = cov[(k, k)].max(0.0).sqrt();
+            if sigma == 0.0 || !sigma.is_finite() {
+                continue;
+            }
+            let h = 0.01 * sigma;
+            let mut x = self.model.x.clone();
+            x[k] += h;
+            let plus =
+                Self::at(&self.model, self.job_gravity_mps2, &x).predict(tool_m, q, payload)?;
+            x[k] -= 2.0 * h;
+            let minus =
+                Self::at(&self.model, self.job_gravity_mps2, &x).predict(tool_m, q, payload)?;
+            b.set_column(k, &((plus - minus) / (2.0 * h)));
+        }
+        let c = &b * cov * b.transpose();
+        Ok((p, Matrix3::from_fn(|i, j| c[(i, j)])))
+    }
+
+    /// The joint command that puts `tool_m` \[m, tip frame\] at `target_m`
+    /// \[m, measurement frame\] with `payload`, by Newton's method from
+    /// `q_start` ([`compensate`]; the compensator tables at each step's
+    /// command).
+    ///
+    /// # Errors
+    /// As [`Self::predict`] and [`compensate`] (`NotConverged` for a target
+    /// the robot cannot reach near `q_start`).
+    pub fn compensate(
+        &self,
+        tool_m: &Vector3<f64>,
+        target_m: &Vector3<f64>,
+        q_start: &[f64],
+        payload: Option<&Payload>,
+        settings: &CompensateSettings<f64>,
+    ) -> Result<Compensation<f64, J>, Error> {
+        self.check_q(q_start)?;
+        let loading = self.loading(payload)?;
+        let lin = &self.lin;
+        let solve = |target: &Vector3<f64>, start: &[f64]| {
+            compensate(
+                &self.chain,
+                tool_m,
+                target,
+                start,
+                &loading,
+                |q: &[f64]| lin.joint_law(q, true),
+                settings,
+            )
+        };
+        let mut c = solve(target_m, q_start)?;
+        if self.bending.is_empty() || loading.load.is_none() {
+            return Ok(c);
+        }
+        // The links' bending is not a joint law: aim the rigid-link
+        // solution at the target minus the bending there, until the bending
+        // stops changing (it is microns on a robot, a few passes).
+        let dof = self.dof();
+        for _ in 0..settings.max_iterations {
+            let bend = self.bending_m(&c.equilibrium.frames, &c.reached_m, &loading)?;
+            let reached = c.reached_m + bend;
+            if (target_m - reached).norm() <= settings.tolerance_m {
+                c.error_m = (target_m - reached).norm();
+                c.reached_m = reached;
+                return Ok(c);
+            }
+            let aim = target_m - bend;
+            let next = solve(&aim, &c.q[..dof])?;
+            c = Compensation {
+                iterations: c.iterations + next.iterations,
+                ..next
+            };
+        }
+        Err(Error::NotConverged {
+            iterations: c.iterations,
+        })
+    }
+}
