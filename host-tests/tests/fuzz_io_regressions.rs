@@ -93,6 +93,24 @@ fn urdf_duplicate_joint_name_is_rejected() {
     assert!(e.to_string().contains("defined twice"), "{e}");
 }
 
+/// `<t xmlns="i" :=""/>` (found by the 30-minute `urdf` run of issue 18):
+/// an attribute with an empty namespace prefix under a default namespace
+/// made RustyXML 0.3 (urdf-rs's XML parser) panic ("No namespace prefix
+/// bound"): `robcal calibrate` aborted with a backtrace. Now refused by the
+/// pre-scan with its line; a panic of the parser is an error in any case.
+#[test]
+fn urdf_empty_namespace_prefix_is_an_error_not_a_panic() {
+    let bytes: &[u8] = include_bytes!("fuzz_regressions/urdf-empty-prefix-panic.bin");
+    run_urdf(bytes);
+    let e = urdf_err(bytes);
+    assert_eq!(e.kind, ErrorKind::Syntax);
+    assert_eq!(e.line, Some(1));
+    assert!(e.to_string().contains("empty namespace prefix"), "{e}");
+    // Spread over lines and inside a real tag.
+    let e = urdf_err(b"\0\0<robot name=\"r\" xmlns=\"u\">\n<link name=\"a\"\n  :x=\"1\"/></robot>");
+    assert_eq!(e.line, Some(3), "{e}");
+}
+
 /// A CSV with old-Mac `\r` line ends: the csv crate splits records at `\r`,
 /// but lines were counted at `\n` only, so every row and every error said
 /// line 1.

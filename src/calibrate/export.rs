@@ -81,8 +81,7 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
     let data = |m: String| CalibrationError::Data(format!("{}: {m}", path.display()));
     let text = crate::io::input::read_text(&path, "the URDF", crate::io::input::MAX_URDF_BYTES)
         .map_err(|e| CalibrationError::Data(e.to_string()))?;
-    let mut urdf =
-        urdf_rs::read_from_string(&text).map_err(|e| data(format!("not a valid URDF: {e}")))?;
+    let mut urdf = crate::io::urdf::read_urdf(&text).map_err(data)?;
     let g = final_geometry(model);
     let robot = &job.robot;
     let nominal = robot.chain.joints();

@@ -49,8 +49,8 @@ pub const MAX_XML_DEPTH: usize = 64;
 pub const MAX_XML_ELEMENTS: usize = 100_000;
 
 /// The 1-based line where the nesting of elements in `text` first exceeds
-/// [`MAX_XML_DEPTH`] or their number [`MAX_XML_ELEMENTS`], and which, by
-/// one linear scan: start tags deepen, end tags and `/>` return; comments,
+/// [`MAX_XML_DEPTH`] or their number [`MAX_XML_ELEMENTS`], or where a
+/// name has an empty namespace prefix, and which, by one linear scan: start tags deepen, end tags and `/>` return; comments,
 /// `<?…?>`, `<!…>` and quoted attribute values are skipped. Malformed XML
 /// is left to the parser.
 fn too_large(text: &str) -> Option<(usize, String)> {
@@ -87,6 +87,18 @@ fn too_large(text: &str) -> Option<(usize, String)> {
                         (None, q @ (b'"' | b'\'')) => quote = Some(q),
                         (Some(q), c) if c == q => quote = None,
                         (None, b'>') => break,
+                        // A name with an empty namespace prefix (`:a`): not
+                        // namespace-well-formed, and RustyXML 0.3 panics on
+                        // it when a default namespace is declared.
+                        (None, b':')
+                            if matches!(b[j - 1], b'<' | b'"' | b'\'')
+                                || b[j - 1].is_ascii_whitespace() =>
+                        {
+                            return Some((
+                                line,
+                                "an XML name with an empty namespace prefix (':')".into(),
+                            ));
+                        }
                         (_, b'\n') => line += 1,
                         _ => {}
                     }
@@ -113,6 +125,29 @@ fn too_large(text: &str) -> Option<(usize, String)> {
         i += 1;
     }
     None
+}
+
+/// `urdf_rs::read_from_string`, with its XML parser's panics (RustyXML
+/// 0.3 `expect`s a namespace prefix for every namespaced attribute, e.g.
+/// `<t xmlns="i" :a=""/>`, found by fuzzing) turned into an error: a
+/// hostile file is an error, never an abort. The caller scans the text
+/// with [`too_large`] first (its recursion is bounded there).
+///
+/// # Errors
+/// "not a valid URDF: …", one line.
+pub(crate) fn read_urdf(text: &str) -> Result<urdf_rs::Robot, String> {
+    match std::panic::catch_unwind(|| urdf_rs::read_from_string(text)) {
+        Ok(Ok(urdf)) => Ok(urdf),
+        Ok(Err(e)) => Err(format!("not a valid URDF: {e}")),
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            Err(format!("not a valid URDF: its XML parser failed ({why})"))
+        }
+    }
 }
 
 /// How a chain joint moves, as the URDF says (the core's [`JointKind`] does
@@ -226,8 +261,7 @@ impl Robot {
         if let Some((line, what)) = too_large(text) {
             return Err(ctx.err(ErrorKind::Syntax, what).at_line(line));
         }
-        let urdf = urdf_rs::read_from_string(text)
-            .map_err(|e| ctx.err(ErrorKind::Syntax, format!("not a valid URDF: {e}")))?;
+        let urdf = read_urdf(text).map_err(|e| ctx.err(ErrorKind::Syntax, e))?;
         Tree::new(&urdf, &ctx)?.robot(&urdf, &ctx, base_link, tip_link)
     }
 
@@ -310,3 +344,14 @@ pub(super) fn finite(values: &[f64]) -> bool {
 
 mod tree;
 use tree::Tree;
+
+#[cfg(test)]
+mod tests {
+    /// The parser's panic on an empty prefix (which the pre-scan refuses
+    /// before it gets here) is an error, not an abort.
+    #[test]
+    fn a_panic_of_the_xml_parser_is_an_error() {
+        let e = super::read_urdf("<t xmlns=\"i\" :=\"\"/>").unwrap_err();
+        assert!(e.contains("XML parser failed"), "{e}");
+    }
+}
