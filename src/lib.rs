@@ -22,14 +22,16 @@
 //!                              │
 //!  calibrate  the closed loop: fit the declared model (Gauss–Newton),           (std)
 //!             diagnose the residuals, add the effect that explains them,
-//!             refit, report before/after; validate on another file
+//!             refit, report before/after; validate on another file;
+//!             predict: the calibrated robot applied — a point for joints
+//!             and payload, the compensated command (robot::compensate)
 //!                              │
-//!  bin/robcal  `robcal calibrate`, `robcal import` (data contract)              (cli)
+//!  bin/robcal  `robcal calibrate`, `import`, `predict`, `compensate`             (cli)
 //! ```
 //!
 //! | module | what | needs |
 //! |---|---|---|
-//! | [`robot`] | the serial chain, forward kinematics, loads and joint torques | — |
+//! | [`robot`] | the serial chain, forward kinematics, loads and joint torques, the deflected equilibrium, compensation | — |
 //! | [`model`] | [`model::Param`] (every parameter and effect, with units), [`model::Sample`], the columns, the device's [`model::Layout`] | — |
 //! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests | — |
 //! | [`Error`] | the core's one error type | — |

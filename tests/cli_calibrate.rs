@@ -185,6 +185,7 @@ fn validate_reports_per_marker_rmse() {
     assert_eq!(
         keys(val),
         [
+            "interpolated_points",
             "per_marker_max_mm",
             "per_marker_mean_mm",
             "per_marker_rms_mm",

@@ -29,6 +29,7 @@ use std::path::PathBuf;
 use host_tests::arms::tracker_frame;
 use host_tests::exact::Fk;
 use nalgebra::{Isometry3, Point3, Vector3};
+use robcal::calibrate::model_file::ModelFile;
 use robcal::calibrate::predict::{Payload, Predictor};
 use robcal::calibrate::{self, Method, Settings};
 use robcal::io::Job;
@@ -166,6 +167,12 @@ fn run(seed: u64) -> [Vec<f64>; 4] {
         com_m: Vector3::from(COM),
     };
     let m1 = Vector3::from(MARKERS[0]);
+    // model.json's `predictor`, written and read back: the same robot.
+    let file = ModelFile::of(&robot);
+    let text = serde_json::to_string_pretty(&file).expect("json");
+    let back: ModelFile = serde_json::from_str(&text).expect("reads");
+    assert_eq!(back, file);
+    let read = back.predictor().expect("a predictor");
     let (mut before, mut geometric, mut after, mut floor) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for _ in 0..100 {
@@ -186,6 +193,10 @@ fn run(seed: u64) -> [Vec<f64>; 4] {
             .predict_covariance(&tool, q, Some(&payload))
             .expect("predicts");
         assert!((p - target).norm() < 1e-7, "the model reaches the target");
+        let again = read
+            .predict(&read.marker_m(1).expect("marker 1"), q, Some(&payload))
+            .expect("predicts");
+        assert!((again - p).norm() < 1e-12, "model file: {again} vs {p}");
         before.push((truth.point(&q0, 200.0, &m1) - target).norm() * 1e6);
         let g = robot
             .compensate(&tool, &target, &q0, None, &CompensateSettings::new())

@@ -82,6 +82,23 @@ impl Linearisation {
         }
     }
 
+    /// The joint law of the given SI values (every key a parameter that
+    /// acts through a joint value; others are ignored): a model file's.
+    pub fn from_values(model: DeflectionModel, values: BTreeMap<Param, f64>) -> Self {
+        Self {
+            model,
+            values: values
+                .into_iter()
+                .filter(|(p, _)| acts_on_joint(p))
+                .collect(),
+        }
+    }
+
+    /// The SI value of every parameter of the joint law.
+    pub fn values(&self) -> &BTreeMap<Param, f64> {
+        &self.values
+    }
+
     /// The values of a fit of `params` with estimate `x` (reported units).
     pub fn of(model: DeflectionModel, params: &[Param], x: &[f64], names: &Names) -> Self {
         Self {

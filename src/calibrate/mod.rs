@@ -38,6 +38,7 @@
 //! | [`diagnosis`] | the closed loop |
 //! | [`report`], [`calibrated`], [`validate`] | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
+//! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
 //! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point) |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
@@ -61,6 +62,7 @@ pub mod fit;
 pub mod geometry;
 pub mod heldout;
 pub mod linearisation;
+pub mod model_file;
 pub mod names;
 pub mod plausibility;
 pub mod predict;

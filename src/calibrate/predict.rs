@@ -56,8 +56,13 @@ pub struct Predictor {
     lin: Linearisation,
     /// `(Param::LinkCompliance, estimate)`: applied to first order.
     bending: Vec<(Param, f64)>,
-    model: CalibratedModel,
-    job_gravity_mps2: Vector3<f64>,
+    /// The fitted shift of the calibration load's centre of mass \[m, tip
+    /// frame\].
+    load_com_shift_m: Vector3<f64>,
+    joint_names: Vec<String>,
+    /// The calibration and its gravity \[m/s², robot base frame\], for
+    /// [`Self::predict_covariance`] (absent when read from a model file).
+    calibration: Option<(Box<CalibratedModel>, Vector3<f64>)>,
 }
 
 /// The equilibrium settings of a prediction (the rows' own).
@@ -98,9 +103,81 @@ impl Predictor {
                 .filter(|(p, _)| matches!(p, Param::LinkCompliance { .. }))
                 .map(|(p, v)| (*p, *v))
                 .collect(),
-            model: model.clone(),
-            job_gravity_mps2: gravity_mps2,
+            load_com_shift_m: model
+                .params
+                .iter()
+                .zip(x)
+                .filter_map(|(p, v)| match *p {
+                    Param::LoadCom { axis } => {
+                        Some(Vector3::ith(usize::from(axis), v * model.names.unit(p).si))
+                    }
+                    _ => None,
+                })
+                .sum(),
+            joint_names: model.names.joints.clone(),
+            calibration: Some((Box::new(model.clone()), gravity_mps2)),
         }
+    }
+
+    /// A predictor from its parts (a model file): the chain placed in the
+    /// measurement frame, marker ids and positions \[m, tip frame\], gravity
+    /// \[m/s², measurement frame\], the joint law, the link bending
+    /// parameters with their estimates (reported units), the load's
+    /// centre-of-mass shift \[m\] and the joint names.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_parts(
+        chain: Chain<f64, J>,
+        markers: Vec<(u32, Vector3<f64>)>,
+        gravity_mps2: Vector3<f64>,
+        lin: Linearisation,
+        bending: Vec<(Param, f64)>,
+        load_com_shift_m: Vector3<f64>,
+        joint_names: Vec<String>,
+    ) -> Self {
+        Self {
+            chain,
+            marker_ids: markers.iter().map(|m| m.0).collect(),
+            markers: markers.iter().map(|m| m.1).collect(),
+            gravity_mps2,
+            lin,
+            bending,
+            load_com_shift_m,
+            joint_names,
+            calibration: None,
+        }
+    }
+
+    /// The chain, placed in the measurement frame.
+    pub fn chain(&self) -> &Chain<f64, J> {
+        &self.chain
+    }
+
+    /// Marker ids and calibrated positions \[m, tip frame\].
+    pub fn markers(&self) -> impl Iterator<Item = (u32, Vector3<f64>)> + '_ {
+        self.marker_ids
+            .iter()
+            .copied()
+            .zip(self.markers.iter().copied())
+    }
+
+    /// Gravity \[m/s², measurement frame\].
+    pub fn gravity_mps2(&self) -> Vector3<f64> {
+        self.gravity_mps2
+    }
+
+    /// The calibrated joint law.
+    pub fn joint_law(&self) -> &Linearisation {
+        &self.lin
+    }
+
+    /// The links' bending parameters and their estimates (reported units).
+    pub fn bending(&self) -> &[(Param, f64)] {
+        &self.bending
+    }
+
+    /// The movable joints' names, chain order.
+    pub fn joint_names(&self) -> &[String] {
+        &self.joint_names
     }
 
     /// The chain's number of joints.
@@ -123,6 +200,18 @@ impl Predictor {
                     self.marker_ids
                 ))
             })
+    }
+
+    /// Marker index `m`'s calibrated position \[m, tip frame\] (the origin
+    /// for an index past the setup's markers).
+    pub fn marker_at(&self, m: usize) -> Vector3<f64> {
+        self.markers.get(m).copied().unwrap_or_default()
+    }
+
+    /// The fitted shift of the calibration load's centre of mass \[m, tip
+    /// frame\] (`load_com_x/y/z`; zero without them).
+    pub fn load_com_shift_m(&self) -> Vector3<f64> {
+        self.load_com_shift_m
     }
 
     fn loading(&self, payload: Option<&Payload>) -> Result<Loading<f64>, Error> {
@@ -161,7 +250,8 @@ impl Predictor {
     }
 
     /// Where the point `tool_m` \[m, tip frame\] settles \[m, measurement
-    /// frame\] when the robot is commanded to `q` carrying `payload`.
+    /// frame\] when the robot is commanded to `q` carrying `payload`, under
+    /// its own weight.
     ///
     /// # Errors
     /// [`Error::Mismatch`] / [`Error::NonFinite`] for bad joint values or
@@ -172,8 +262,39 @@ impl Predictor {
         q: &[f64],
         payload: Option<&Payload>,
     ) -> Result<Vector3<f64>, Error> {
+        self.predict_with(tool_m, q, payload, true)
+    }
+
+    /// The payload's deflection of the point `tool_m` at command `q`: the
+    /// point with the payload minus without it, the robot's own weight left
+    /// out of both (the same loaded and unloaded) — what a calibration's
+    /// deflection rows model, so that `--validate` evaluates the fitted
+    /// model on them exactly \[m\].
+    ///
+    /// # Errors
+    /// As [`Self::predict`].
+    pub fn predict_deflection(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: &Payload,
+    ) -> Result<Vector3<f64>, Error> {
+        Ok(self.predict_with(tool_m, q, Some(payload), false)?
+            - self.predict_with(tool_m, q, None, false)?)
+    }
+
+    fn predict_with(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+        own_weight: bool,
+    ) -> Result<Vector3<f64>, Error> {
         self.check_q(q)?;
-        let loading = self.loading(payload)?;
+        let mut loading = self.loading(payload)?;
+        if !own_weight {
+            loading.own_weight_mps2 = None;
+        }
         let law = self.lin.joint_law(q, true);
         let eq = equilibrium(&self.chain, q, q, &loading, &law, &EQUILIBRIUM)?;
         let p = eq.frames.point_m(tool_m);
@@ -203,7 +324,9 @@ impl Predictor {
     /// parameter covariance (see the [module docs](self)).
     ///
     /// # Errors
-    /// As [`Self::predict`].
+    /// As [`Self::predict`]; [`Error::Mismatch`] for a predictor read from
+    /// a model file (the covariance is in the file, the calibration's
+    /// geometry before folding is not).
     pub fn predict_covariance(
         &self,
         tool_m: &Vector3<f64>,
@@ -211,8 +334,13 @@ impl Predictor {
         payload: Option<&Payload>,
     ) -> Result<(Vector3<f64>, Matrix3<f64>), Error> {
         let p = self.predict(tool_m, q, payload)?;
-        let n = self.model.params.len();
-        let cov = &self.model.covariance;
+        let Some((model, gravity)) = &self.calibration else {
+            return Err(Error::Mismatch {
+                what: "a prediction's covariance needs the calibration, not a model file",
+            });
+        };
+        let n = model.params.len();
+        let cov = &model.covariance;
         let mut b = nalgebra::DMatrix::<f64>::zeros(3, n);
         for k in 0..n {
             let sigma = cov[(k, k)].max(0.0).sqrt();
@@ -220,13 +348,11 @@ impl Predictor {
                 continue;
             }
             let h = 0.01 * sigma;
-            let mut x = self.model.x.clone();
+            let mut x = model.x.clone();
             x[k] += h;
-            let plus =
-                Self::at(&self.model, self.job_gravity_mps2, &x).predict(tool_m, q, payload)?;
+            let plus = Self::at(model, *gravity, &x).predict(tool_m, q, payload)?;
             x[k] -= 2.0 * h;
-            let minus =
-                Self::at(&self.model, self.job_gravity_mps2, &x).predict(tool_m, q, payload)?;
+            let minus = Self::at(model, *gravity, &x).predict(tool_m, q, payload)?;
             b.set_column(k, &((plus - minus) / (2.0 * h)));
         }
         let c = &b * cov * b.transpose();

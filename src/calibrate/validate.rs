@@ -1,5 +1,15 @@
 //! `--validate`: the calibrated model on another measurement file of the
 //! same job, nothing re-estimated.
+//!
+//! Every point is predicted by [`Predictor`], the code path of
+//! compensation: an absolute position is the marker at the robot's
+//! equilibrium under its own weight; a deflection is the marker under the
+//! load (the setup's `[load] com`, plus the fitted `load_com` shift when
+//! the model has one) minus the marker without it, the own weight left out
+//! of both as the calibration's deflection rows leave it out
+//! ([`Predictor::predict_deflection`]). The drift of the
+//! measurement system is a property of the calibration session and is not
+//! carried over to another file.
 
 use std::collections::BTreeMap;
 
@@ -7,16 +17,17 @@ use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
 use super::declared::needs_absolute;
-use super::design::Design;
+use super::predict::{Payload, Predictor};
 use super::report::Validation;
 use super::residuals::rms_um;
 use super::rows::{RowKind, Rows};
 use super::settings::CalibrationError;
 use crate::io::{Job, Measurements};
+use crate::Error;
 
 /// Evaluates `model` on `data` (rows of the kinds the calibration used,
-/// predicted by the calibrated geometry and the estimate): the norm RMSE of
-/// each marker's position error \[mm\].
+/// predicted by [`Predictor`]): the norm RMSE of each marker's position
+/// error \[mm\].
 ///
 /// A joint with a compensator table at an angle the calibration did not
 /// measure gets the table's linear interpolation (held at its ends), and
@@ -24,7 +35,8 @@ use crate::io::{Job, Measurements};
 ///
 /// # Errors
 /// [`CalibrationError::Data`] when the file has no row of the kinds the
-/// calibration used.
+/// calibration used; [`CalibrationError::NoEquilibrium`] at a row where
+/// the loaded robot has no equilibrium under the calibrated joint law.
 pub fn validate(
     model: &CalibratedModel,
     job: &Job,
@@ -32,7 +44,6 @@ pub fn validate(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
-    rows.relinearise(&model.geometry, &model.linearisation)?;
     rows.rows.retain(|r| match r.kind {
         RowKind::Deflection => model.kinds.deflections,
         RowKind::Absolute => model.kinds.absolute,
@@ -44,23 +55,33 @@ pub fn validate(
         .iter()
         .filter(|r| !model.linearisation.interpolated(&r.q).is_empty())
         .count();
-    let d = Design::new(
-        &rows.rows,
-        &model.params,
-        &model.linearisation,
-        &model.names,
-        rows.configs.len(),
-    )
-    .map_err(|e| CalibrationError::Core("columns", e))?;
-    let cols: Vec<usize> = (0..model.params.len()).collect();
+    let robot = Predictor::new(model, job);
+    let payload_com = rows.com + robot.load_com_shift_m();
     let mut all = Vec::new();
     let mut per: BTreeMap<u32, Vec<Vector3<f64>>> = BTreeMap::new();
-    for i in 0..d.rows() {
-        let r = d.residual(&cols, &model.x, i);
+    for row in &rows.rows {
+        let at = |e: Error| {
+            CalibrationError::NoEquilibrium(format!(
+                "{}:{}: the calibrated model cannot predict this point ({e})",
+                data.file.display(),
+                row.line
+            ))
+        };
+        let m = robot.marker_at(usize::from(row.marker));
+        let predicted = match row.kind {
+            RowKind::Absolute => robot.predict(&m, &row.q, None),
+            RowKind::Deflection => {
+                let payload = Payload {
+                    mass_kg: row.load_kg,
+                    com_m: payload_com,
+                };
+                robot.predict_deflection(&m, &row.q, &payload)
+            }
+        }
+        .map_err(at)?;
+        let r = row.measured - predicted;
         all.push(r);
-        per.entry(names.marker_id(rows.rows[i].marker))
-            .or_default()
-            .push(r);
+        per.entry(names.marker_id(row.marker)).or_default().push(r);
     }
     if all.is_empty() {
         return Err(CalibrationError::Data(format!(

@@ -6,6 +6,7 @@
 //!   robot.urdf ──Robot::load──► Robot ─┴─► Job ──read_measurements──► Measurements
 //!                                                 (Observation, Deflection)
 //!   FIGAROH mocap CSV ──figaroh::import_mocap──► measurement CSV (write_atomic)
+//!   points CSV ──points::parse_points──► PointRow (robcal predict / compensate)
 //! ```
 //!
 //! Everything is converted to SI on reading (rad, m, kg, s); the CSV's
@@ -66,6 +67,7 @@ pub mod figaroh;
 pub mod input;
 pub mod job;
 pub mod measurements;
+pub mod points;
 pub mod setup;
 pub mod urdf;
 pub mod writer;

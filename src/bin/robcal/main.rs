@@ -5,6 +5,8 @@
 //!                  [--method irls|wls|ols] [--lambda L] [--max-iter N]
 //!                  [--no-diagnose] [--validate V.csv] [--plots DIR] [--json]
 //! robcal import figaroh-mocap IN.csv OUT.csv
+//! robcal predict --model DIR/model.json --poses P.csv [--output OUT.csv]
+//! robcal compensate --model DIR/model.json --targets T.csv [--output OUT.csv]
 //! ```
 //!
 //! Exit status 0 on success; otherwise one line on stderr saying why, and
@@ -19,6 +21,8 @@ use serde_json::{json, Value};
 
 use robcal::calibrate::{self, DeflectionModel, Method, PlotSeries, Report, Settings};
 use robcal::io::Job;
+
+mod apply;
 
 #[derive(Parser)]
 #[command(
@@ -40,6 +44,12 @@ enum Command {
     /// Convert another tool's recording into the data contract's CSV.
     #[command(subcommand)]
     Import(ImportCommand),
+    /// Where the calibrated robot (a model file of `calibrate --output`)
+    /// puts a marker for given joint values and payload.
+    Predict(apply::PredictArgs),
+    /// The joint commands whose loaded, deflected calibrated robot puts a
+    /// marker on each target (geometric and deflection compensation).
+    Compensate(apply::CompensateArgs),
 }
 
 /// `robcal import <format> IN OUT`.
@@ -101,7 +111,8 @@ struct CalibrateArgs {
     /// Write the calibrated robot here, all or nothing: `robot.urdf` (the
     /// input URDF with the geometry folded in, a `measurement_frame` root
     /// and `marker_<id>` links) and `model.json` (the report's JSON with
-    /// the full covariance).
+    /// the full covariance, and the `predictor` that `robcal predict` and
+    /// `robcal compensate` read).
     #[arg(long)]
     output: Option<PathBuf>,
     /// Largest measurement file (`--data`, `--validate`) read, in MiB
@@ -128,6 +139,8 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Calibrate(args) => run_calibrate(&args),
+        Command::Predict(args) => apply::run_predict(&args),
+        Command::Compensate(args) => apply::run_compensate(&args),
         Command::Import(ImportCommand::FigarohMocap { input, output }) => {
             robcal::io::figaroh::import_mocap(&input, &output, None)
                 .map(|n| {
@@ -220,6 +233,9 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
                 .map(|i| (0..c.ncols()).map(|k| num(c[(i, k)])).collect::<Vec<_>>())
                 .collect::<Vec<_>>(),
         });
+        let robot = calibrate::predict::Predictor::new(&report.model, &job);
+        model["predictor"] = serde_json::to_value(calibrate::model_file::ModelFile::of(&robot))
+            .map_err(|e| e.to_string())?;
         let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
         let robot = job.setup.robot_path(&job.setup_path);
         let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot.as_path()];

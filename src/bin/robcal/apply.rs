@@ -1,0 +1,240 @@
+//! `robcal predict` and `robcal compensate`: the model file that
+//! `robcal calibrate --output DIR` writes, applied to a points CSV
+//! (`robcal::io::points`). Output: the same rows with the predicted
+//! position, or with the compensated joint command, on stdout or, all or
+//! nothing, in `--output FILE`. A row that cannot be predicted or
+//! compensated fails the run with its line; nothing is written.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use robcal::calibrate::model_file::ModelFile;
+use robcal::calibrate::predict::{Payload, Predictor};
+use robcal::io::points::{joint_column, parse_points, PointRow};
+use robcal::robot::CompensateSettings;
+
+/// `robcal predict`.
+#[derive(clap::Args)]
+pub struct PredictArgs {
+    /// The model file (`DIR/model.json` of `robcal calibrate --output DIR`).
+    #[arg(long)]
+    model: PathBuf,
+    /// Poses: `marker`, `load_kg`, `com_x_m..`, `<joint>_rad` per joint.
+    #[arg(long)]
+    poses: PathBuf,
+    /// Write the CSV here (all or nothing) instead of stdout.
+    #[arg(long)]
+    output: Option<PathBuf>,
+}
+
+/// `robcal compensate`.
+#[derive(clap::Args)]
+pub struct CompensateArgs {
+    /// The model file (`DIR/model.json` of `robcal calibrate --output DIR`).
+    #[arg(long)]
+    model: PathBuf,
+    /// Targets: `x_m, y_m, z_m` (measurement frame), `marker`, `load_kg`,
+    /// `com_x_m..`, and the start `<joint>_rad` per joint (e.g. the nominal
+    /// inverse kinematics of the target).
+    #[arg(long)]
+    targets: PathBuf,
+    /// Write the CSV here (all or nothing) instead of stdout.
+    #[arg(long)]
+    output: Option<PathBuf>,
+    /// Stop when the model puts the point within this of the target [µm].
+    #[arg(long = "tolerance-um", default_value_t = 0.1)]
+    tolerance_um: f64,
+    /// Newton steps at most per target.
+    #[arg(long = "max-iter", default_value_t = 20)]
+    max_iter: usize,
+}
+
+/// Largest model file read [bytes].
+const MAX_MODEL_BYTES: u64 = 64 << 20;
+
+/// The predictor of a model file's `predictor` section.
+fn load_model(path: &Path) -> Result<Predictor, String> {
+    let text = robcal::io::input::read_text(path, "the model file", MAX_MODEL_BYTES)
+        .map_err(|e| e.to_string())?;
+    let at = |m: String| format!("{}: {m}", path.display());
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| at(format!("not JSON: {e}")))?;
+    let section = value.get("predictor").ok_or_else(|| {
+        at("no 'predictor' section (written by robcal calibrate --output DIR)".into())
+    })?;
+    let file: ModelFile =
+        serde_json::from_value(section.clone()).map_err(|e| at(format!("predictor: {e}")))?;
+    file.predictor().map_err(|e| at(format!("predictor: {e}")))
+}
+
+fn read_points(robot: &Predictor, path: &Path, target: bool) -> Result<Vec<PointRow>, String> {
+    let text = robcal::io::input::read_text(path, "the points", robcal::io::input::MAX_DATA_BYTES)
+        .map_err(|e| e.to_string())?;
+    let joints: Vec<_> = robot
+        .joint_names()
+        .iter()
+        .cloned()
+        .zip(robot.chain().joints().iter().map(|j| j.kind))
+        .collect();
+    parse_points(&text, path, &joints, target).map_err(|e| e.to_string())
+}
+
+/// The tool point and payload of a row.
+fn tool_and_payload(
+    robot: &Predictor,
+    row: &PointRow,
+    file: &Path,
+) -> Result<(u32, Vector3<f64>, Option<Payload>), String> {
+    let ids: Vec<u32> = robot.markers().map(|m| m.0).collect();
+    let id = match (row.marker, ids.as_slice()) {
+        (Some(id), _) => id,
+        (None, [one]) => *one,
+        (None, _) => {
+            return Err(format!(
+                "{}:{}: which marker? the model has markers {ids:?}: add a 'marker' column",
+                file.display(),
+                row.line
+            ))
+        }
+    };
+    let tool = robot
+        .marker_m(id)
+        .map_err(|e| format!("{}:{}: {e}", file.display(), row.line))?;
+    let payload = (row.load_kg > 0.0).then(|| Payload {
+        mass_kg: row.load_kg,
+        com_m: Vector3::from(row.com_m.unwrap_or_default()),
+    });
+    Ok((id, tool, payload))
+}
+
+fn header(robot: &Predictor, row: &PointRow, target: bool) -> String {
+    let mut h: Vec<String> = Vec::new();
+    if row.id.is_some() {
+        h.push("id".into());
+    }
+    h.extend(["marker", "load_kg", "com_x_m", "com_y_m", "com_z_m"].map(String::from));
+    if target {
+        h.extend(["x_m", "y_m", "z_m"].map(String::from));
+    }
+    h.extend(
+        robot
+            .joint_names()
+            .iter()
+            .zip(robot.chain().joints())
+            .map(|(n, j)| joint_column(n, j.kind)),
+    );
+    if target {
+        h.extend(["error_um", "iterations"].map(String::from));
+    } else {
+        h.extend(["x_m", "y_m", "z_m"].map(String::from));
+    }
+    h.join(",")
+}
+
+fn csv_cell(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}
+
+fn lead(row: &PointRow, id: u32) -> String {
+    let com = row.com_m.unwrap_or_default();
+    let mut s = String::new();
+    if let Some(i) = &row.id {
+        s += &csv_cell(i);
+        s.push(',');
+    }
+    let _ = write!(s, "{id},{},{},{},{}", row.load_kg, com[0], com[1], com[2]);
+    s
+}
+
+fn join(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+fn emit(out: &str, output: Option<&Path>, inputs: &[&Path]) -> Result<(), String> {
+    match output {
+        Some(path) => {
+            robcal::io::write_all_atomic(&[(path.to_path_buf(), out.as_bytes().to_vec())], inputs)
+                .map_err(|e| format!("{}: {e}", path.display()))
+        }
+        None => {
+            use std::io::Write as _;
+            std::io::stdout()
+                .write_all(out.as_bytes())
+                .map_err(|e| format!("stdout: {e}"))
+        }
+    }
+}
+
+/// `robcal predict`.
+pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
+    let robot = load_model(&a.model)?;
+    let rows = read_points(&robot, &a.poses, false)?;
+    let mut out = header(&robot, &rows[0], false) + "\n";
+    for row in &rows {
+        let (id, tool, payload) = tool_and_payload(&robot, row, &a.poses)?;
+        let p = robot
+            .predict(&tool, &row.q, payload.as_ref())
+            .map_err(|e| format!("{}:{}: cannot predict: {e}", a.poses.display(), row.line))?;
+        let _ = writeln!(
+            out,
+            "{},{},{}",
+            lead(row, id),
+            join(&row.q),
+            join(p.as_slice())
+        );
+    }
+    emit(&out, a.output.as_deref(), &[&a.model, &a.poses])
+}
+
+/// `robcal compensate`.
+pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
+    if !(a.tolerance_um.is_finite() && a.tolerance_um > 0.0) {
+        return Err(format!(
+            "--tolerance-um {}: must be a finite number > 0",
+            a.tolerance_um
+        ));
+    }
+    if a.max_iter == 0 {
+        return Err("--max-iter must be at least 1".into());
+    }
+    let robot = load_model(&a.model)?;
+    let rows = read_points(&robot, &a.targets, true)?;
+    let settings = CompensateSettings {
+        tolerance_m: a.tolerance_um * 1e-6,
+        max_iterations: a.max_iter,
+        ..CompensateSettings::new()
+    };
+    let mut out = header(&robot, &rows[0], true) + "\n";
+    let dof = robot.dof();
+    for row in &rows {
+        let (id, tool, payload) = tool_and_payload(&robot, row, &a.targets)?;
+        let target = Vector3::from(row.target_m.unwrap_or_default());
+        let c = robot
+            .compensate(&tool, &target, &row.q, payload.as_ref(), &settings)
+            .map_err(|e| {
+                format!(
+                    "{}:{}: cannot reach the target from the given joint values: {e}",
+                    a.targets.display(),
+                    row.line
+                )
+            })?;
+        let _ = writeln!(
+            out,
+            "{},{},{},{:.6},{}",
+            lead(row, id),
+            join(target.as_slice()),
+            join(&c.q[..dof]),
+            c.error_m * 1e6,
+            c.iterations
+        );
+    }
+    emit(&out, a.output.as_deref(), &[&a.model, &a.targets])
+}

@@ -1,0 +1,236 @@
+//! `robcal predict` and `robcal compensate` (issue 14) end to end: the
+//! model file of `robcal calibrate --output DIR` on the bundled KR-270
+//! (the paper's compliances with the A2 compensator table), applied.
+//!
+//! - `compensate` then `predict` at the compensated commands: the model
+//!   puts each marker on its target (within the 0.1 µm tolerance), and the
+//!   compensated command differs from the start by the deflection;
+//! - a target between the compensator's calibrated A2 angles is answered
+//!   (the table is interpolated);
+//! - bad files: one line, exit 1, nothing written.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn robcal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .expect("run robcal")
+}
+
+fn ok(o: &Output) -> String {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8(o.stdout.clone()).expect("utf-8")
+}
+
+fn rejected(o: &Output, expect: &str) {
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains(expect), "{err} (expected '{expect}')");
+    assert!(o.stdout.is_empty());
+}
+
+/// The CSV text as rows of cells, with the header.
+fn table(text: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut lines = text.lines();
+    let head = lines.next().unwrap().split(',').map(String::from).collect();
+    (
+        head,
+        lines
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect(),
+    )
+}
+
+fn col(head: &[String], name: &str) -> usize {
+    head.iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("{name} in {head:?}"))
+}
+
+fn model(dir: &Path) -> PathBuf {
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup.toml",
+        "--data",
+        "data/kr270/measurements.csv",
+        "--no-diagnose",
+        "--output",
+        dir.to_str().unwrap(),
+    ]);
+    ok(&o);
+    dir.join("model.json")
+}
+
+#[test]
+fn compensated_commands_put_the_markers_on_their_targets() {
+    let dir = std::env::temp_dir().join(format!("robcal-apply-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let m = model(&dir);
+    let m = m.to_str().unwrap();
+    // Targets: the paper's first configurations' poses with A2 at its
+    // calibrated angles and between them, shifted by a few mm.
+    let joints = "a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad";
+    let mut poses = format!("id,marker,load_kg,com_x_m,com_y_m,com_z_m,{joints}\n");
+    let a2_deg = [-0.01, -20.0, -35.0, -50.0, -72.0, -90.0];
+    for (i, a2) in a2_deg.iter().enumerate() {
+        let q = [79.2, *a2, -5.57, 51.0, -97.52, -91.67].map(|d: f64| d.to_radians());
+        let q: Vec<String> = q.iter().map(|v| v.to_string()).collect();
+        let _ = writeln!(poses, "p{i},{},250,0.25,0,0.3,{}", 1 + i % 3, q.join(","));
+    }
+    let poses_path = dir.join("poses.csv");
+    std::fs::write(&poses_path, &poses).unwrap();
+    let predicted = ok(&robcal(&[
+        "predict",
+        "--model",
+        m,
+        "--poses",
+        poses_path.to_str().unwrap(),
+    ]));
+    let (head, rows) = table(&predicted);
+    assert_eq!(rows.len(), a2_deg.len());
+    // The targets: 5 mm from the predicted points.
+    let mut targets = format!("id,marker,load_kg,com_x_m,com_y_m,com_z_m,x_m,y_m,z_m,{joints}\n");
+    for r in &rows {
+        let x: Vec<f64> = ["x_m", "y_m", "z_m"]
+            .iter()
+            .map(|c| r[col(&head, c)].parse::<f64>().unwrap() + 0.005)
+            .collect();
+        let _ = writeln!(
+            targets,
+            "{},{},{},{},{},{},{},{},{},{}",
+            r[0],
+            r[1],
+            r[2],
+            r[3],
+            r[4],
+            r[5],
+            x[0],
+            x[1],
+            x[2],
+            r[6..12].join(",")
+        );
+    }
+    let targets_path = dir.join("targets.csv");
+    std::fs::write(&targets_path, &targets).unwrap();
+    let out_path = dir.join("commands.csv");
+    let o = robcal(&[
+        "compensate",
+        "--model",
+        m,
+        "--targets",
+        targets_path.to_str().unwrap(),
+        "--output",
+        out_path.to_str().unwrap(),
+    ]);
+    ok(&o);
+    let (chead, commands) = table(&std::fs::read_to_string(&out_path).unwrap());
+    assert_eq!(commands.len(), rows.len());
+    // Predict at the compensated commands: the markers are on the targets.
+    let mut again = format!("id,marker,load_kg,com_x_m,com_y_m,com_z_m,{joints}\n");
+    for c in &commands {
+        assert!(c[col(&chead, "error_um")].parse::<f64>().unwrap() <= 0.1);
+        let q: Vec<&str> = (1..=6)
+            .map(|j| c[col(&chead, &format!("a{j}_rad"))].as_str())
+            .collect();
+        let _ = writeln!(again, "{},{}", c[..6].join(","), q.join(","));
+    }
+    let again_path = dir.join("again.csv");
+    std::fs::write(&again_path, &again).unwrap();
+    let reached = ok(&robcal(&[
+        "predict",
+        "--model",
+        m,
+        "--poses",
+        again_path.to_str().unwrap(),
+    ]));
+    let (rhead, reached) = table(&reached);
+    for ((t, r), c) in table(&targets).1.iter().zip(&reached).zip(&commands) {
+        let d: f64 = ["x_m", "y_m", "z_m"]
+            .iter()
+            .enumerate()
+            .map(|(k, a)| {
+                r[col(&rhead, a)].parse::<f64>().unwrap() - t[6 + k].parse::<f64>().unwrap()
+            })
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        assert!(d <= 0.1e-6, "{}: {d} m from the target", c[0]);
+        // The command moved: 5 mm of target plus the deflection undone.
+        let moved: f64 = (0..6)
+            .map(|j| {
+                c[col(&chead, &format!("a{}_rad", j + 1))]
+                    .parse::<f64>()
+                    .unwrap()
+                    - t[9 + j].parse::<f64>().unwrap()
+            })
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        assert!(moved > 1e-3, "{}: moved {moved} rad", c[0]);
+    }
+
+    // Bad files: one line, exit 1, nothing written.
+    let bad = dir.join("bad.csv");
+    let out2 = dir.join("out2.csv");
+    std::fs::write(&bad, targets.replacen(",x_m,", ",x_mm,", 1)).unwrap();
+    let o = robcal(&[
+        "compensate",
+        "--model",
+        m,
+        "--targets",
+        bad.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+    ]);
+    rejected(&o, "bad.csv:1: column 'x_mm'");
+    std::fs::write(&bad, targets.replacen(",250,", ",-1,", 1)).unwrap();
+    let o = robcal(&[
+        "compensate",
+        "--model",
+        m,
+        "--targets",
+        bad.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+    ]);
+    rejected(&o, "bad.csv:2: column 'load_kg': negative mass");
+    // A target 10 m away cannot be reached.
+    let far: Vec<&str> = targets.lines().collect();
+    let mut cells: Vec<String> = far[1].split(',').map(String::from).collect();
+    cells[6] = "10".into();
+    std::fs::write(&bad, format!("{}\n{}\n", far[0], cells.join(","))).unwrap();
+    let o = robcal(&[
+        "compensate",
+        "--model",
+        m,
+        "--targets",
+        bad.to_str().unwrap(),
+        "--output",
+        out2.to_str().unwrap(),
+    ]);
+    rejected(&o, "bad.csv:2: cannot reach the target");
+    assert!(!out2.exists());
+    // A report JSON is not a model file.
+    let report = dir.join("report.json");
+    std::fs::write(&report, "{\"rms_um\": 1}").unwrap();
+    let o = robcal(&[
+        "predict",
+        "--model",
+        report.to_str().unwrap(),
+        "--poses",
+        poses_path.to_str().unwrap(),
+    ]);
+    rejected(&o, "no 'predictor' section");
+    let _ = std::fs::remove_dir_all(&dir);
+}
