@@ -137,7 +137,39 @@ fn kr270_fit(k: &mut usize, fault: SelfTest) -> bool {
     );
     kr270_parts(k, &src, &settings);
     let fit = kr270_irls(k, &src, &settings);
-    kr270_report(&fit, fault)
+    kr270_report(&fit, fault) && kr270_compensate(k, &fit)
+}
+
+/// Compensation on the device (issue 14) with the calibrated compliances:
+/// the taught point of configuration 1 reached under a 270 kg payload. A
+/// bench phase; checked by a separate equilibrium at the command.
+#[inline(never)]
+fn kr270_compensate(k: &mut usize, fit: &kr270::Estimate<f32>) -> bool {
+    let settings = kr270::compensate_settings::<f32>();
+    let problem = kr270::Compensation::new(&fit.x).unwrap_or_else(|e| fail("compensation", e));
+    let problem = black_box(&problem);
+    let c = phase(
+        k,
+        "kr270 compensate f32 (payload 270 kg, Newton on the equilibrium)",
+        || problem.solve(&settings),
+    )
+    .unwrap_or_else(|e| fail("compensate", e));
+    let check = problem
+        .miss_m(&c.q, &settings.equilibrium)
+        .unwrap_or_else(|e| fail("check", e));
+    let sag = problem
+        .miss_m(&problem.q, &settings.equilibrium)
+        .unwrap_or_else(|e| fail("sag", e));
+    let q = &c.q;
+    info!(
+        "compensation: sag {=f32} mm uncompensated -> {=f32} um in {=usize} steps (check {=f32} um); command [rad] {=f32} {=f32} {=f32} {=f32} {=f32} {=f32}",
+        sag * 1e3,
+        c.error_m * 1e6,
+        c.iterations,
+        check * 1e6,
+        q[0], q[1], q[2], q[3], q[4], q[5]
+    );
+    c.iterations <= kr270::COMPENSATE_MAX_STEPS && check <= 2e-6
 }
 
 /// Checks the estimate against the host's and logs it.

@@ -367,3 +367,119 @@ pub fn grouped<T: RealField + Copy>(
     source.stream(|g, b, dp| stats.update(g as i32, b, dp))?;
     Ok(stats)
 }
+
+/// The configuration whose taught point the device compensates for (the
+/// paper's configuration 1).
+pub const COMPENSATE_CONFIG: usize = 0;
+/// The payload of the compensation \[kg\] (at the tool's centre of mass).
+pub const COMPENSATE_LOAD_KG: f64 = 270.0;
+
+/// The device's compensation problem (issue 14): the point marker 1 has
+/// at configuration [`COMPENSATE_CONFIG`] without load (taught) is the
+/// target; with [`COMPENSATE_LOAD_KG`] on the tool the robot sags; the
+/// compensated command puts the marker back on it. The joint law: A2's
+/// compliance of the configuration's q2 group (k21…k25), then k3…k6, of a
+/// calibrated estimate.
+pub struct Compensation<T: RealField + Copy> {
+    chain: Chain<T, J>,
+    tool: Vector3<T>,
+    /// The target \[m, base frame\].
+    pub target: Vector3<T>,
+    /// The taught command \[rad\].
+    pub q: [T; J],
+    loading: robcal::robot::Loading<T>,
+    law: robcal::robot::Compliances<T, J>,
+}
+
+impl<T: RealField + Copy> Compensation<T> {
+    /// The problem for the estimate `x` (µrad/(N·m)).
+    ///
+    /// # Errors
+    /// From the chain and the forward kinematics.
+    #[inline(never)]
+    pub fn new(x: &SVector<T, N>) -> Result<Self, Error> {
+        let chain = chain::<T>()?;
+        let v = |a: [f64; 3]| Vector3::new(c(a[0]), c(a[1]), c(a[2]));
+        let tool = v(robcal_paper::kr270::MARKERS_M[0]);
+        let g = COMPENSATE_CONFIG;
+        let q = q_rad::<T>(g);
+        let target = chain.frames(&q)?.point_m(&tool);
+        let group = robcal_paper::kr270::q2_group(robcal_paper::kr270::CONFIGURATIONS_DEG[g][1])
+            .ok_or(Error::Mismatch {
+                what: "configuration not in a q2 group",
+            })?;
+        let micro: T = c(1e-6);
+        Ok(Self {
+            chain,
+            tool,
+            target,
+            q,
+            loading: robcal::robot::Loading {
+                load: Some(PointLoad {
+                    mass_kg: c(COMPENSATE_LOAD_KG),
+                    com_m: v(robcal_paper::kr270::LOAD_COM_M),
+                    gravity_mps2: v([0.0, 0.0, -9.80665]),
+                }),
+                own_weight_mps2: None,
+            },
+            law: robcal::robot::Compliances {
+                k: [T::zero(), x[group], x[5], x[6], x[7], x[8]].map(|k| k * micro),
+            },
+        })
+    }
+
+    /// The compensated command, from the taught one.
+    ///
+    /// # Errors
+    /// From [`robcal::robot::compensate`].
+    #[inline(never)]
+    pub fn solve(
+        &self,
+        settings: &robcal::robot::CompensateSettings<T>,
+    ) -> Result<robcal::robot::Compensation<T, J>, Error> {
+        let law = self.law;
+        robcal::robot::compensate(
+            &self.chain,
+            &self.tool,
+            &self.target,
+            &self.q,
+            &self.loading,
+            |_| law,
+            settings,
+        )
+    }
+
+    /// How far the loaded robot commanded to `q` misses the target \[m\],
+    /// by its own equilibrium solve.
+    ///
+    /// # Errors
+    /// From the equilibrium.
+    #[inline(never)]
+    pub fn miss_m(
+        &self,
+        q: &[T],
+        settings: &robcal::robot::EquilibriumSettings<T>,
+    ) -> Result<T, Error> {
+        let eq = robcal::robot::equilibrium(&self.chain, q, q, &self.loading, &self.law, settings)?;
+        Ok((eq.frames.point_m(&self.tool) - self.target).norm())
+    }
+}
+
+/// The compensation settings of the device (f32): stop within 2 µm, the
+/// equilibrium to 1e-6 rad (f32 rounds a joint value at ~2e-7 rad).
+pub fn compensate_settings<T: RealField + Copy>() -> robcal::robot::CompensateSettings<T> {
+    robcal::robot::CompensateSettings {
+        tolerance_m: c(2e-6),
+        max_iterations: 10,
+        max_step: c(0.1),
+        equilibrium: robcal::robot::EquilibriumSettings {
+            tolerance: c(1e-6),
+            max_iterations: 20,
+        },
+    }
+}
+
+/// The device's compensation must end within [`compensate_settings`]'
+/// tolerance, confirmed by a separate equilibrium at the command, in at most
+/// this many steps.
+pub const COMPENSATE_MAX_STEPS: usize = 5;

@@ -27,6 +27,12 @@
 //!   convergence; the estimates ± 3σ are logged and checked against the
 //!   host's f64 result carried in the table (tolerances in `kr270.rs`).
 //!   RAM does not grow with the number of measurements.
+//! - **Compensation** (issue 14, `kr270::Compensation`): with the
+//!   compliances just identified, the joint command whose robot, loaded
+//!   with 270 kg and deflected, puts marker 1 on the point it had without
+//!   load at configuration 1 (`robcal::robot::compensate`, f32, Newton on
+//!   the exact equilibrium), checked by a separate equilibrium solve (and
+//!   on the host against the same in f64).
 //! - **A synthetic check** (`problem.rs`): 60 three-row measurements
 //!   (`N = 9`) streamed into an f32 and an f64 accumulator, solved, and
 //!   checked against the known truth; a non-finite block must be refused.
@@ -187,7 +193,43 @@ fn host_kr270(fault: SelfTest) -> bool {
         );
     }
     println!("streaming f64 vs GroupedStats f64: max |dx|/sigma = {agree:.2e}");
-    ok32 && ok64 && agree < 1e-9
+    let ok_comp = host_compensate(&e32.x, &f64fit.solution.x);
+    ok32 && ok64 && agree < 1e-9 && ok_comp
+}
+
+/// The device's compensation (f32, on the f32 estimate) against the same in
+/// f64: the commands agree within 2e-5 rad, both reach the target.
+#[cfg(not(target_os = "none"))]
+fn host_compensate(
+    x32: &nalgebra::SVector<f32, { kr270::N }>,
+    x64: &nalgebra::SVector<f64, { kr270::N }>,
+) -> bool {
+    let p32 = kr270::Compensation::new(x32).expect("f32 problem");
+    let p64 = kr270::Compensation::new(x64).expect("f64 problem");
+    let (s32, s64) = (
+        kr270::compensate_settings(),
+        robcal::robot::CompensateSettings::new(),
+    );
+    let c32 = p32.solve(&s32).expect("f32 compensation");
+    let c64 = p64.solve(&s64).expect("f64 compensation");
+    let check32 = p32.miss_m(&c32.q, &s32.equilibrium).expect("f32 check");
+    let check64 = p64.miss_m(&c64.q, &s64.equilibrium).expect("f64 check");
+    let sag = p64.miss_m(&p64.q, &s64.equilibrium).expect("sag");
+    let dq = (0..kr270::J)
+        .map(|j| (f64::from(c32.q[j]) - c64.q[j]).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "compensation ({} kg, configuration {}): sag {:.3} mm uncompensated; f32 {} steps, {:.2} um off (check {:.2} um); f64 {} steps, {:.1e} um; max |q32 - q64| = {dq:.1e} rad",
+        kr270::COMPENSATE_LOAD_KG,
+        kr270::COMPENSATE_CONFIG + 1,
+        sag * 1e3,
+        c32.iterations,
+        c32.error_m * 1e6,
+        check32 * 1e6,
+        c64.iterations,
+        check64 * 1e6,
+    );
+    c32.iterations <= kr270::COMPENSATE_MAX_STEPS && check32 <= 2e-6 && check64 <= 1e-7 && dq < 2e-5
 }
 
 /// The host's estimate as the KR-270 check sees it: with
