@@ -65,6 +65,7 @@ fn kr270_naive_model_traces_the_compensator() {
             "iterations",
             "method",
             "near_dependent",
+            "nominal",
             "parameters",
             "relinearisations",
             "rms_um",
@@ -73,6 +74,32 @@ fn kr270_naive_model_traces_the_compensator() {
             "warnings"
         ]
     );
+    // The nominal error (data contract 7.5) of a deflection-only job is the
+    // measured deflections themselves: computed here from the CSV.
+    let csv = std::fs::read_to_string(root().join("data/kr270/measurements.csv")).unwrap();
+    let mut unloaded = std::collections::BTreeMap::new();
+    let mut norms = Vec::new();
+    for line in csv.lines().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        let key = (c[0].to_string(), c[1].to_string(), c[2].to_string());
+        let p: Vec<f64> = c[10..13].iter().map(|x| x.parse().unwrap()).collect();
+        if c[3] == "0" {
+            unloaded.insert(key, p);
+        } else {
+            let u = &unloaded[&key];
+            let d2: f64 = (0..3).map(|a| (p[a] - u[a]).powi(2)).sum();
+            norms.push(d2.sqrt() * 1e3); // mm -> um
+        }
+    }
+    let n = norms.len() as f64;
+    let rms = (norms.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    let mean = norms.iter().sum::<f64>() / n;
+    let max = norms.iter().copied().fold(0.0, f64::max);
+    let nominal = &v["nominal"];
+    for (key, want) in [("rms_um", rms), ("mean_um", mean), ("max_um", max)] {
+        let got = nominal[key].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6 * want, "nominal {key}: {got} vs {want}");
+    }
     assert_eq!(v["method"], "irls");
     assert_eq!(v["deflection_model"], "exact");
     assert!(v["iterations"].as_u64().unwrap() >= 1);

@@ -415,6 +415,7 @@ pub fn run(
     e.restore(&current)?;
     Ok(Report {
         method: e.fit_settings.method.name(),
+        nominal: Default::default(),
         iterations: current.fit.iterations,
         relinearisations: current.relinearisations,
         converged: current.converged,

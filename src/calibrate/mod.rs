@@ -81,8 +81,8 @@ pub use geometry::Geometry;
 pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
 pub use report::{
-    Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Parameter, PlotSeries, Report,
-    Unexplained, Validation,
+    Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Nominal, Parameter, PlotSeries,
+    Report, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
@@ -164,8 +164,10 @@ pub fn calibrate(
         .filter(|&i| !dropped.contains(&model[i]))
         .collect();
     let declared: Vec<Param> = kept.iter().map(|&i| model[i]).collect();
-    // Then the tracker frame (when declared), by a rigid registration.
+    // Then the tracker frame (when declared), by a rigid registration; the
+    // rows there, every parameter zero, are the nominal error.
     e.register_base(&declared)?;
+    let nominal = Nominal::of(&e.rows.rows.iter().map(|r| r.y).collect::<Vec<_>>());
     // A declared compliance the data cannot identify is too few
     // configurations (or markers, or a load that does not load the joint)
     // for the declared model: an error naming the parameters, not a fit that
@@ -198,9 +200,10 @@ pub fn calibrate(
         )));
     }
     if declared.is_empty() {
-        return Err(CalibrationError::Data(
-            "the declared model has no parameter these data can identify".into(),
-        ));
+        return Err(CalibrationError::Data(format!(
+            "the declared model has no parameter these data can identify (nominal error \
+             before calibration: {nominal}); declare one in [model]"
+        )));
     }
     let mut settings = *settings;
     let mut notes = Vec::new();
@@ -211,6 +214,7 @@ pub fn calibrate(
         e.fit_settings.method = Method::Ols;
     }
     let mut report = diagnosis::run(e, declared, left_out, &settings, notes)?;
+    report.nominal = nominal;
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     Ok(report)

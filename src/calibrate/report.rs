@@ -149,6 +149,45 @@ pub struct Validation {
     pub interpolated_points: usize,
 }
 
+/// The error of the declared model before any parameter is identified
+/// (data contract 7.5): the nominal robot, its base placed by the rigid
+/// registration when the base frame is declared; over every row, the norm
+/// of the 3-D position error (a deflection row: the measured deflection).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Nominal {
+    /// RMS \[µm\].
+    pub rms_um: f64,
+    /// Mean \[µm\].
+    pub mean_um: f64,
+    /// Largest \[µm\].
+    pub max_um: f64,
+}
+
+impl Nominal {
+    /// The statistics of residuals `res` \[m\].
+    pub fn of(res: &[nalgebra::Vector3<f64>]) -> Self {
+        if res.is_empty() {
+            return Self::default();
+        }
+        let n = res.len() as f64;
+        Self {
+            rms_um: (res.iter().map(|r| r.norm_squared()).sum::<f64>() / n).sqrt() * 1e6,
+            mean_um: res.iter().map(|r| r.norm()).sum::<f64>() / n * 1e6,
+            max_um: res.iter().map(|r| r.norm()).fold(0.0, f64::max) * 1e6,
+        }
+    }
+}
+
+impl fmt::Display for Nominal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "RMS {:.1} um, mean {:.1} um, max {:.1} um",
+            self.rms_um, self.mean_um, self.max_um
+        )
+    }
+}
+
 /// Residuals against the variable an effect was traced by, before and after
 /// it was added (for `--plots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -170,6 +209,8 @@ pub struct PlotSeries {
 pub struct Report {
     /// `irls` | `wls` | `ols`.
     pub method: &'static str,
+    /// The declared model's error before calibration.
+    pub nominal: Nominal,
     /// Reweighting iterations of the final fit.
     pub iterations: usize,
     /// Whether IRLS converged.
@@ -286,6 +327,7 @@ impl fmt::Display for Report {
             "robcal calibrate: {} rows (3 equations each), {} configurations, method {}",
             self.rows, self.configurations, self.method
         )?;
+        writeln!(f, "nominal (before calibration): {}", self.nominal)?;
         for n in &self.notes {
             writeln!(f, "note: {n}")?;
         }

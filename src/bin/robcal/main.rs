@@ -280,6 +280,11 @@ fn to_json(r: &Report) -> Value {
         "iterations": r.iterations,
         "converged": r.converged,
         "relinearisations": r.relinearisations,
+        "nominal": json!({
+            "rms_um": num(r.nominal.rms_um),
+            "mean_um": num(r.nominal.mean_um),
+            "max_um": num(r.nominal.max_um),
+        }),
         "parameters": r.parameters.iter().map(|p| json!({
             "name": p.name, "value": num(p.value), "std": num(p.std), "unit": p.unit,
         })).collect::<Vec<_>>(),
