@@ -590,3 +590,46 @@ fn bom_and_crlf_line_ends_are_accepted() {
     let e = read_err(&job, &format!("{text}\r\n1,0,1,0,10,20,100\r\n"));
     assert_eq!((e.kind, e.line), (ErrorKind::Syntax, Some(6)));
 }
+
+/// Data contract 7.2: `rep`, `marker`, `load_kg` may be left out where the
+/// setup makes them unambiguous; `ignore_columns` skips a tracker export's
+/// extra columns (empty cells too); anything else stays an error.
+#[test]
+fn optional_columns_and_ignored_columns() {
+    let mut job = job();
+    // The fixture has two markers and a load: marker and load_kg needed.
+    let e = read_err(&job, "config,j1,j2,j3,x,y,z\n1,10,20,100,1000,0,500\n");
+    assert_eq!(e.kind, ErrorKind::MissingColumn);
+    assert_eq!(e.column.as_deref(), Some("marker"));
+    assert!(e.message.contains("more than one marker"), "{e}");
+    let e = read_err(
+        &job,
+        "config,marker,j1,j2,j3,x,y,z\n1,1,10,20,100,1000,0,500\n",
+    );
+    assert_eq!(e.column.as_deref(), Some("load_kg"));
+    assert!(e.message.contains("[load]"), "{e}");
+    // One marker, no load: only config, the joints and x, y, z.
+    job.setup.markers.truncate(1);
+    job.setup.load = None;
+    let m = read(
+        &job,
+        "config,j1,j2,j3,x,y,z\n1,10,20,100,1000,0,500\n2,11,20,100,1000,0,501\n",
+    )
+    .expect("reads");
+    assert_eq!(m.observations.len(), 2);
+    for o in &m.observations {
+        assert_eq!(
+            (o.rep, o.marker, o.load_kg),
+            (1, job.setup.markers[0].id, 0.0)
+        );
+    }
+    // Extra columns: an error naming the key that skips them ...
+    let text = "config,temperature,j1,j2,j3,x,y,z,note\n1,21.5,10,20,100,1000,0,500,\n";
+    let e = read_err(&job, text);
+    assert_eq!(e.kind, ErrorKind::UnknownColumn);
+    assert!(e.message.contains("ignore_columns"), "{e}");
+    // ... and skipped, empty cells too, once named.
+    job.setup.ignore_columns = vec!["temperature".into(), "note".into()];
+    let m = read(&job, text).expect("reads");
+    assert_eq!(m.observations[0].p_m, [1.0, 0.0, 0.5]);
+}

@@ -6,7 +6,10 @@
 //! any order, one joint column per movable joint of the chain named by its
 //! URDF joint name. Cells are trimmed. Joint columns and `x,y,z` are in the
 //! setup's `[units]` (prismatic joints in the length unit); `load_kg` in kg,
-//! `t` in s.
+//! `t` in s. Data contract 7.2: `rep` may be left out (every row is
+//! repetition 1), `marker` when the setup declares one marker, `load_kg`
+//! when it has no `[load]` (every row unloaded); a column named in the
+//! setup's `ignore_columns` is skipped, empty cells included.
 //!
 //! Conversion to SI, exact to the decimal: [`super::cells`]; the writer:
 //! [`super::writer`].
@@ -124,6 +127,8 @@ impl Measurements {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Col {
+    /// A column of the setup's `ignore_columns`.
+    Ignored,
     Config,
     Rep,
     Marker,
@@ -261,6 +266,13 @@ pub fn parse_measurements<R: std::io::Read>(
             .find(|(f, _)| *f == name)
             .map(|&(_, c)| c)
             .or_else(|| robot.joint_index(name).map(Col::Joint))
+            .or_else(|| {
+                setup
+                    .ignore_columns
+                    .iter()
+                    .any(|c| c == name)
+                    .then_some(Col::Ignored)
+            })
             .ok_or_else(|| {
                 cell_err(
                     ErrorKind::UnknownColumn,
@@ -268,7 +280,8 @@ pub fn parse_measurements<R: std::io::Read>(
                     name,
                     format!(
                         "neither a fixed column nor a movable joint of the chain \
-                         from '{}' to '{}' (joints: {})",
+                         from '{}' to '{}' (joints: {}); to leave it out, add it to \
+                         the setup's ignore_columns",
                         robot.base_link,
                         robot.tip_link,
                         robot.joint_names.join(", ")
@@ -285,18 +298,28 @@ pub fn parse_measurements<R: std::io::Read>(
         }
         cols.push(col);
     }
+    // `rep`, `marker` and `load_kg` may be left out where the setup makes
+    // them unambiguous (data contract 7.2): one repetition, the one marker,
+    // no load.
+    let one_marker = setup.markers.len() == 1;
+    let optional = |name: &str| match name {
+        "rep" => true,
+        "marker" => one_marker,
+        "load_kg" => setup.load.is_none(),
+        _ => false,
+    };
     let required = FIXED[..7]
         .iter()
         .map(|(n, _)| *n)
         .chain(robot.joint_names.iter().map(String::as_str));
     for name in required {
-        if !header.iter().any(|n| n == name) {
-            return Err(cell_err(
-                ErrorKind::MissingColumn,
-                1,
-                name,
-                "missing column".into(),
-            ));
+        if !header.iter().any(|n| n == name) && !optional(name) {
+            let why = match name {
+                "marker" => "missing column (the setup declares more than one marker)",
+                "load_kg" => "missing column (the setup has a [load])",
+                _ => "missing column",
+            };
+            return Err(cell_err(ErrorKind::MissingColumn, 1, name, why.into()));
         }
     }
     let has_time = cols.contains(&Col::Time);
@@ -313,14 +336,20 @@ pub fn parse_measurements<R: std::io::Read>(
             q: vec![0.0; dof],
             q_written: vec![String::new(); dof],
             line,
+            rep: 1,
+            marker: markers.first().copied().unwrap_or(1),
             ..Observation::default()
         };
         for ((cell, &col), name) in record.iter().zip(&cols).zip(header.iter()) {
             let cerr = |kind, message: String| cell_err(kind, line, name, message);
+            if col == Col::Ignored {
+                continue;
+            }
             if cell.is_empty() {
                 return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
             }
             match col {
+                Col::Ignored => {}
                 Col::Config => {
                     o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?
                 }

@@ -8,6 +8,7 @@
 //! | `robot` | required: URDF path, relative to the setup file's directory |
 //! | `base_link` | the URDF's root link (error if there are several) |
 //! | `tip_link` | the one leaf link below `base_link` (error if the tree branches) |
+//! | `ignore_columns` | `[]`: measurement CSV columns to skip (data contract 7.2) |
 //! | `[units] angle` | `"rad"` (`"deg"` \| `"rad"`) |
 //! | `[units] length` | `"m"` (`"mm"` \| `"m"`) |
 //! | `[[marker]]` | one marker, `id = 1`, at the origin of `tip_link` |
@@ -234,6 +235,11 @@ pub struct Setup {
     /// `[model]`.
     #[serde(default)]
     pub model: Model,
+    /// Measurement CSV columns to leave out (data contract 7.2: a tracker
+    /// export's extra columns, e.g. `temperature`); any other column that
+    /// is neither a fixed column nor a joint is an error.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ignore_columns: Vec<String>,
 }
 
 fn default_markers() -> Vec<Marker> {
@@ -255,6 +261,7 @@ impl Setup {
             load: None,
             noise: Noise::default(),
             model: Model::default(),
+            ignore_columns: Vec::new(),
         }
     }
 
