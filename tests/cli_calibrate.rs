@@ -98,7 +98,10 @@ fn kr270_naive_model_traces_the_compensator() {
     let nominal = &v["nominal"];
     for (key, want) in [("rms_um", rms), ("mean_um", mean), ("max_um", max)] {
         let got = nominal[key].as_f64().unwrap();
-        assert!((got - want).abs() < 1e-6 * want, "nominal {key}: {got} vs {want}");
+        assert!(
+            (got - want).abs() < 1e-6 * want,
+            "nominal {key}: {got} vs {want}"
+        );
     }
     assert_eq!(v["method"], "irls");
     assert_eq!(v["deflection_model"], "exact");
@@ -234,6 +237,20 @@ fn human_report_shows_the_errors_before_and_after() {
     assert!(text.contains("added compensator on a2"), "{text}");
     assert!(text.contains("RMS 261.8 -> 122.6 um"), "{text}");
     assert!(text.contains("held-out RMS"), "{text}");
+    // The nominal error, and what ± means, say themselves.
+    assert!(
+        text.contains("nominal (before calibration): RMS 6318.3 um"),
+        "{text}"
+    );
+    let head = text
+        .lines()
+        .find(|l| l.contains("value ± 1 sd"))
+        .expect("a labelled table");
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("  k_a2@-0.01") && l.contains('±'))
+        .unwrap();
+    assert_eq!(head.find('±'), row.find('±'), "aligned:\n{head}\n{row}");
 }
 
 #[test]

@@ -469,10 +469,20 @@ impl fmt::Display for Report {
                 String::new()
             }
         )?;
+        // Names as long as `gear_cyclic_shoulder_lift_joint.sin` keep the
+        // columns aligned.
+        let w = self
+            .parameters
+            .iter()
+            .map(|p| p.name.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(24);
+        writeln!(f, "  {:<w$} {:>12} ± {:<10} unit", "parameter", "value", "1 sd")?;
         for p in &self.parameters {
             writeln!(
                 f,
-                "  {:<24} {:>12.4} ± {:<10.4} {}",
+                "  {:<w$} {:>12.4} ± {:<10.4} {}",
                 p.name, p.value, p.std, p.unit
             )?;
         }
