@@ -66,10 +66,10 @@ fn fit(fault: SelfTest) -> bool {
         fail("update refused a valid block", e);
     }
     info!(
-        "streamed: {=usize} equations, {=usize} with sigma; eta = {}; sum dp'W²dp = {=f32}",
+        "streamed: {=usize} equations, {=usize} with sigma; eta = {=[?]}; sum dp'W²dp = {=f32}",
         acc32.equations(),
         acc32.sigma_rows(),
-        acc32.eta(),
+        acc32.eta().as_slice(),
         acc32.weighted_yy()
     );
     let bad = rejects_bad_block(&mut acc32);
@@ -81,15 +81,18 @@ fn fit(fault: SelfTest) -> bool {
     let s64 = acc64.solve().unwrap_or_else(|e| fail("f64 solve", e));
     // `Solution` has no `defmt::Format` (yet): its fields, once.
     info!(
-        "Solution<f32>: x = {}, active = {}, equations = {=usize}, wrss = {=f32}, rcond = {=f32}, parameters = {=usize}",
-        s32.x,
+        "Solution<f32>: x = {=[?]}, active = {}, equations = {=usize}, wrss = {=f32}, rcond = {=f32}, parameters = {=usize}",
+        s32.x.as_slice(),
         s32.active,
         s32.equations,
         s32.wrss,
         s32.rcond,
         s32.parameters()
     );
-    info!("Solution<f32>: lambda_inv = {}", s32.lambda_inv);
+    info!(
+        "Solution<f32>: lambda_inv (column-major) = {=[?]}",
+        s32.lambda_inv.as_slice()
+    );
 
     let v = check(&s32, &s64, &acc64, &crate::expected_x(fault));
     info!("param  x (f64) +/- 3 sigma [m|rad]   x (f32)   |err|/sigma  |f32-f64|/sigma");
@@ -227,8 +230,8 @@ fn kr270_rows(k: &mut usize, src: &Kr270<f32>) {
     )
     .unwrap_or_else(|e| fail("rows", e));
     info!(
-        "B of configuration 1, marker 1 [m per urad/(N*m)]: {}",
-        first[0]
+        "B of configuration 1, marker 1 [m per urad/(N*m)] (column-major): {=[?]}",
+        first[0].as_slice()
     );
 }
 
@@ -242,9 +245,9 @@ fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
     )
     .unwrap_or_else(|e| fail("weighted pass", e));
     info!(
-        "one pass: {=usize} equations, eta = {}",
+        "one pass: {=usize} equations, eta = {=[?]}",
         acc.equations(),
-        acc.eta()
+        acc.eta().as_slice()
     );
     let fit = solution(&acc);
     let mut sigma = [nalgebra::Vector3::zeros(); G];
