@@ -7,6 +7,7 @@
 //!                                                 (Observation, Deflection)
 //!   FIGAROH mocap CSV ──figaroh::import_mocap──► measurement CSV (write_atomic)
 //!   points CSV ──points::parse_points──► PointRow (robcal predict / compensate)
+//!   Robot ──template::setup_template──► a commented setup (robcal init)
 //! ```
 //!
 //! Everything is converted to SI on reading (rad, m, kg, s); the CSV's
@@ -69,6 +70,7 @@ pub mod job;
 pub mod measurements;
 pub mod points;
 pub mod setup;
+pub mod template;
 pub mod urdf;
 pub mod writer;
 

@@ -238,3 +238,57 @@ pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
     }
     emit(&out, a.output.as_deref(), &[&a.model, &a.targets])
 }
+
+/// `robcal init`.
+#[derive(clap::Args)]
+pub struct InitArgs {
+    /// The robot's URDF.
+    #[arg(long)]
+    urdf: PathBuf,
+    /// Base link (default: the URDF's root).
+    #[arg(long)]
+    base: Option<String>,
+    /// Tip link, where markers and the load are given (default: the one
+    /// leaf below the base).
+    #[arg(long)]
+    tip: Option<String>,
+    /// Write the setup here (all or nothing; never over an existing file)
+    /// instead of stdout. The URDF path in it is made relative to this
+    /// file's directory when it can be.
+    #[arg(long)]
+    output: Option<PathBuf>,
+}
+
+/// `robcal init`: a commented setup for a robot.
+pub fn run_init(a: &InitArgs) -> Result<(), String> {
+    let robot = robcal::io::Robot::load(&a.urdf, a.base.as_deref(), a.tip.as_deref())
+        .map_err(|e| e.to_string())?;
+    let path = match &a.output {
+        Some(out) => {
+            if out.exists() {
+                return Err(format!(
+                    "{}: already exists; robcal init does not overwrite a setup",
+                    out.display()
+                ));
+            }
+            relative_to(&a.urdf, out.parent().unwrap_or(Path::new("")))
+        }
+        None => a.urdf.display().to_string(),
+    };
+    let text = robcal::io::template::setup_template(&path, &robot);
+    emit(&text, a.output.as_deref(), &[&a.urdf])
+}
+
+/// `target` as seen from directory `dir` when both are relative (or both
+/// absolute) and `dir` is a prefix of it; else `target` as given.
+fn relative_to(target: &Path, dir: &Path) -> String {
+    match target.strip_prefix(dir) {
+        Ok(rel) if !dir.as_os_str().is_empty() => rel.display().to_string(),
+        _ => match (std::path::absolute(target), std::path::absolute(dir)) {
+            (Ok(t), Ok(d)) => t
+                .strip_prefix(&d)
+                .map_or_else(|_| t.display().to_string(), |r| r.display().to_string()),
+            _ => target.display().to_string(),
+        },
+    }
+}

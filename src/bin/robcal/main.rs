@@ -7,6 +7,7 @@
 //! robcal import figaroh-mocap IN.csv OUT.csv
 //! robcal predict --model DIR/model.json --poses P.csv [--output OUT.csv]
 //! robcal compensate --model DIR/model.json --targets T.csv [--output OUT.csv]
+//! robcal init --urdf R.urdf [--base B] [--tip T] [--output SETUP.toml]
 //! ```
 //!
 //! Exit status 0 on success; otherwise one line on stderr saying why, and
@@ -50,6 +51,9 @@ enum Command {
     /// The joint commands whose loaded, deflected calibrated robot puts a
     /// marker on each target (geometric and deflection compensation).
     Compensate(apply::CompensateArgs),
+    /// Write a commented setup file for a robot, every key with its
+    /// default and the CSV header its measurements need.
+    Init(apply::InitArgs),
 }
 
 /// `robcal import <format> IN OUT`.
@@ -141,6 +145,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => run_calibrate(&args),
         Command::Predict(args) => apply::run_predict(&args),
         Command::Compensate(args) => apply::run_compensate(&args),
+        Command::Init(args) => apply::run_init(&args),
         Command::Import(ImportCommand::FigarohMocap { input, output }) => {
             robcal::io::figaroh::import_mocap(&input, &output, None)
                 .map(|n| {
