@@ -416,3 +416,25 @@ fn output_dir_holds_the_calibrated_urdf_and_the_model_all_or_nothing() {
     assert!(!blocked.join("model.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `-q` leaves stderr empty on success; `-v` times each progress line.
+#[test]
+fn quiet_and_verbose() {
+    let mut args = NAIVE.to_vec();
+    args.push("-q");
+    let o = robcal(&args);
+    assert!(o.status.success());
+    assert!(
+        o.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let mut args = NAIVE.to_vec();
+    args.push("--verbose");
+    let o = robcal(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.lines().count() >= 1 && err.lines().all(|l| l.contains(" s] ")),
+        "{err}"
+    );
+}

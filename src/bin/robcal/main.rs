@@ -34,6 +34,21 @@ mod apply;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Print no progress on stderr (errors still are; warnings are in the
+    /// report).
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    quiet: bool,
+    /// Print each progress step with the time since the start.
+    #[arg(short, long, global = true)]
+    verbose: bool,
+}
+
+/// How much `robcal` says on stderr besides errors.
+#[derive(Clone, Copy, PartialEq)]
+enum Verbosity {
+    Quiet,
+    Normal,
+    Verbose,
 }
 
 /// One variant per subcommand (`import ...` goes here too).
@@ -141,8 +156,13 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    let verbosity = match (cli.quiet, cli.verbose) {
+        (true, _) => Verbosity::Quiet,
+        (_, true) => Verbosity::Verbose,
+        _ => Verbosity::Normal,
+    };
     let result = match cli.command {
-        Command::Calibrate(args) => run_calibrate(&args),
+        Command::Calibrate(args) => run_calibrate(&args, verbosity),
         Command::Predict(args) => apply::run_predict(&args),
         Command::Compensate(args) => apply::run_compensate(&args),
         Command::Init(args) => apply::run_init(&args),
@@ -171,7 +191,8 @@ fn main() -> ExitCode {
     }
 }
 
-fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
+fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> {
+    let start = std::time::Instant::now();
     if let Some(l) = a.lambda {
         if !(l.is_finite() && l >= 0.0) {
             return Err(format!("--lambda {l}: must be a finite number >= 0"));
@@ -186,7 +207,9 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         .read_measurements_limited(&a.data, max_bytes)
         .map_err(|e| e.to_string())?;
     for w in &data.warnings {
-        eprintln!("robcal: warning: {w}");
+        if verbosity != Verbosity::Quiet {
+            eprintln!("robcal: warning: {w}");
+        }
     }
     let validation_data = match &a.validate {
         Some(v) => Some(
@@ -211,7 +234,13 @@ fn run_calibrate(a: &CalibrateArgs) -> Result<(), String> {
         },
         ..Settings::default()
     };
-    let mut progress = |m: &str| eprintln!("robcal: {m}");
+    let mut progress = |m: &str| match verbosity {
+        Verbosity::Quiet => {}
+        Verbosity::Normal => eprintln!("robcal: {m}"),
+        Verbosity::Verbose => {
+            eprintln!("robcal: [{:7.2} s] {m}", start.elapsed().as_secs_f64());
+        }
+    };
     let mut report =
         calibrate::calibrate(&job, &data, &settings, &mut progress).map_err(|e| e.to_string())?;
     if let Some(v) = &validation_data {
