@@ -180,6 +180,26 @@ fn compensated_commands_put_the_markers_on_their_targets() {
         assert!(moved > 1e-3, "{}: moved {moved} rad", c[0]);
     }
 
+    // A pose target: the tip frame turned too (a rotation vector).
+    let pose_path = dir.join("pose.csv");
+    let lines: Vec<&str> = targets.lines().collect();
+    let mut cells: Vec<String> = lines[1].split(',').map(String::from).collect();
+    for (k, v) in ["0", "1.5", "0"].iter().enumerate() {
+        cells.insert(9 + k, v.to_string());
+    }
+    let head = lines[0].replacen(",z_m,", ",z_m,rx_rad,ry_rad,rz_rad,", 1);
+    std::fs::write(&pose_path, format!("{head}\n{}\n", cells.join(","))).unwrap();
+    let posed = ok(&robcal(&[
+        "compensate",
+        "--model",
+        m,
+        "--targets",
+        pose_path.to_str().unwrap(),
+    ]));
+    let (phead, prow) = table(&posed);
+    assert!(prow[0][col(&phead, "error_urad")].parse::<f64>().unwrap() <= 0.1);
+    assert!(prow[0][col(&phead, "error_um")].parse::<f64>().unwrap() <= 0.1);
+
     // Bad files: one line, exit 1, nothing written.
     let bad = dir.join("bad.csv");
     let out2 = dir.join("out2.csv");

@@ -28,7 +28,7 @@ use std::path::PathBuf;
 
 use host_tests::arms::tracker_frame;
 use host_tests::exact::Fk;
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Rotation3, UnitQuaternion, Vector3};
 use robcal::calibrate::model_file::ModelFile;
 use robcal::calibrate::predict::{Payload, Predictor};
 use robcal::calibrate::{self, Method, Settings};
@@ -81,6 +81,20 @@ impl Truth {
         };
         (self.base * Point3::from(self.fk.point(&loaded, marker))).coords
     }
+
+    /// The true orientation of the tip frame in the tracker frame.
+    fn rotation(&self, q: &[f64], mass_kg: f64) -> Rotation3<f64> {
+        let theta: Vec<f64> = q.iter().zip(&self.offsets).map(|(a, b)| a + b).collect();
+        let g = Vector3::new(0.0, 0.0, -9.80665);
+        let loaded = if mass_kg > 0.0 {
+            self.fk.loaded(&theta, &K, mass_kg, &Vector3::from(COM), &g)
+        } else {
+            theta
+        };
+        let tip = self.fk.pose(&loaded).tip;
+        self.base.rotation.to_rotation_matrix()
+            * Rotation3::from_matrix_unchecked(tip.fixed_view::<3, 3>(0, 0).into_owned())
+    }
 }
 
 fn random_q(rng: &mut SplitMix64) -> Vec<f64> {
@@ -99,8 +113,10 @@ fn rms(v: &[f64]) -> f64 {
 }
 
 /// One calibration and 100 compensated targets; returns the errors \[µm\]
-/// (uncompensated, geometry only, compensated, floor) per target.
-fn run(seed: u64) -> [Vec<f64>; 4] {
+/// (uncompensated, geometry only, compensated, floor) per target, then for
+/// pose targets (position error µm, orientation error µrad uncompensated,
+/// compensated).
+fn run(seed: u64) -> [Vec<f64>; 7] {
     let mut rng = SplitMix64::new(seed);
     let dir = std::env::temp_dir().join(format!("robcal-compensate-{seed}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
@@ -175,6 +191,7 @@ fn run(seed: u64) -> [Vec<f64>; 4] {
     let read = back.predictor().expect("a predictor");
     let (mut before, mut geometric, mut after, mut floor) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut pose_um, mut rot_before, mut rot_after) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..100 {
         let q0 = random_q(&mut rng);
         let target = (truth.base * Point3::from(nominal.point(&q0, &m1))).coords;
@@ -204,17 +221,45 @@ fn run(seed: u64) -> [Vec<f64>; 4] {
         geometric.push((truth.point(&g.q[..6], 200.0, &m1) - target).norm() * 1e6);
         after.push((truth.point(q, 200.0, &m1) - target).norm() * 1e6);
         floor.push(cov.trace().sqrt() * 1e6);
+        // The pose: marker 1 there, the tip frame turned as the nominal
+        // robot would turn it.
+        let r_nominal = Rotation3::from_matrix_unchecked(
+            nominal.pose(&q0).tip.fixed_view::<3, 3>(0, 0).into_owned(),
+        );
+        let r_target = truth.base.rotation.to_rotation_matrix() * r_nominal;
+        let target_rot = UnitQuaternion::from_rotation_matrix(&r_target);
+        let c = robot
+            .compensate_pose(
+                &tool,
+                &target,
+                &target_rot,
+                &q0,
+                Some(&payload),
+                &CompensateSettings::new(),
+            )
+            .expect("compensates the pose");
+        assert!(
+            c.error_m <= 1e-7 && c.error_rad <= 1e-7 && c.iterations <= 6,
+            "{c:?}"
+        );
+        let angle = |r: Rotation3<f64>| (r_target * r.inverse()).angle() * 1e6;
+        pose_um.push((truth.point(&c.q[..6], 200.0, &m1) - target).norm() * 1e6);
+        rot_before.push(angle(truth.rotation(&q0, 200.0)));
+        rot_after.push(angle(truth.rotation(&c.q[..6], 200.0)));
     }
-    [before, geometric, after, floor]
+    [
+        before, geometric, after, floor, pose_um, rot_before, rot_after,
+    ]
 }
 
 #[test]
 fn compensation_reaches_the_floor_set_by_the_parameter_uncertainty() {
     let (mut b, mut a, mut f) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut pu, mut rb_, mut ra_) = (Vec::new(), Vec::new(), Vec::new());
     println!("| calibration | uncompensated | geometry only | geometry + deflection | floor |");
     println!("|---|---|---|---|---|");
     for seed in 1..=4 {
-        let [before, geometric, after, floor] = run(seed);
+        let [before, geometric, after, floor, pose_um, rot_before, rot_after] = run(seed);
         let stat = |v: &[f64]| {
             format!(
                 "{:.1} / {:.1}",
@@ -233,7 +278,23 @@ fn compensation_reaches_the_floor_set_by_the_parameter_uncertainty() {
         b.extend(before);
         a.extend(after);
         f.extend(floor);
+        pu.extend(pose_um);
+        rb_.extend(rot_before);
+        ra_.extend(rot_after);
     }
+    println!(
+        "pose targets: position RMS {:.1} µm; orientation RMS {:.1} µrad uncompensated, {:.2} µrad compensated",
+        rms(&pu),
+        rms(&rb_),
+        rms(&ra_)
+    );
+    assert!(rms(&pu) <= 2.0 * rms(&f), "pose position {} µm", rms(&pu));
+    assert!(
+        rms(&ra_) * 20.0 <= rms(&rb_),
+        "orientation: {} vs {} µrad",
+        rms(&ra_),
+        rms(&rb_)
+    );
     let (rb, ra, rf) = (rms(&b), rms(&a), rms(&f));
     println!(
         "RMS over 400 targets: uncompensated {rb:.0} µm, compensated {ra:.1} µm, floor {rf:.1} µm"

@@ -22,7 +22,7 @@
 //! by central differences of the predictor itself (steps of 1 % of each
 //! parameter's σ): the error floor a compensation cannot go below.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::calibrated::CalibratedModel;
 use super::geometry::J;
@@ -31,8 +31,8 @@ use super::settings::CalibrationError;
 use crate::io::Job;
 use crate::model::{Param, Sample};
 use crate::robot::{
-    compensate, equilibrium, Chain, CompensateSettings, Compensation, EquilibriumSettings, Loading,
-    PointLoad,
+    compensate, compensate_pose, equilibrium, Chain, CompensateSettings, Compensation,
+    EquilibriumSettings, Loading, PointLoad,
 };
 use crate::Error;
 
@@ -415,5 +415,41 @@ impl Predictor {
         Err(Error::NotConverged {
             iterations: c.iterations,
         })
+    }
+
+    /// As [`Self::compensate`] for a pose: `tool_m` at `target_m` with the
+    /// tip frame turned to `target_rotation` (measurement frame;
+    /// [`compensate_pose`]). The links' bending is not applied here.
+    ///
+    /// # Errors
+    /// As [`Self::compensate`]; [`Error::Mismatch`] when the model has link
+    /// bending (a pose compensation would ignore it).
+    pub fn compensate_pose(
+        &self,
+        tool_m: &Vector3<f64>,
+        target_m: &Vector3<f64>,
+        target_rotation: &UnitQuaternion<f64>,
+        q_start: &[f64],
+        payload: Option<&Payload>,
+        settings: &CompensateSettings<f64>,
+    ) -> Result<Compensation<f64, J>, Error> {
+        self.check_q(q_start)?;
+        if !self.bending.is_empty() && payload.is_some() {
+            return Err(Error::Mismatch {
+                what: "a pose compensation of a model with link bending",
+            });
+        }
+        let loading = self.loading(payload)?;
+        let lin = &self.lin;
+        compensate_pose(
+            &self.chain,
+            tool_m,
+            target_m,
+            target_rotation,
+            q_start,
+            &loading,
+            |q: &[f64]| lin.joint_law(q, true),
+            settings,
+        )
     }
 }

@@ -10,6 +10,7 @@
 //! | `com_x_m`, `com_y_m`, `com_z_m` | the payload's centre of mass \[m, tip frame\] | required with a payload |
 //! | `<joint>_rad` / `<joint>_m` | joint values \[rad, or m for a prismatic joint\] by URDF name: the pose to predict, or the start of a compensation (e.g. the nominal inverse kinematics of the target) | one per joint |
 //! | `x_m`, `y_m`, `z_m` | the target \[m, measurement frame\] | `compensate` only |
+//! | `rx_rad`, `ry_rad`, `rz_rad` | the target orientation of the tip frame, a rotation vector (axis × angle) \[rad, measurement frame\]: a pose target | `compensate`, optional |
 //!
 //! Any other column is an error; so is a non-finite or malformed cell,
 //! with its line and column.
@@ -36,6 +37,9 @@ pub struct PointRow {
     pub q: Vec<f64>,
     /// The target \[m, measurement frame\] (with the `x_m…` columns).
     pub target_m: Option<[f64; 3]>,
+    /// The tip frame's target orientation, rotation vector \[rad,
+    /// measurement frame\] (with the `rx_rad…` columns).
+    pub target_rotation_rad: Option<[f64; 3]>,
 }
 
 /// The joint value column of a joint: `<name>_rad` or `<name>_m`.
@@ -83,12 +87,14 @@ pub fn parse_points(
     }
     let xyz = |prefix: &str| ["x", "y", "z"].map(|a| format!("{prefix}{a}_m"));
     let (com_names, target_names) = (xyz("com_"), xyz(""));
+    let rot_names = ["rx_rad", "ry_rad", "rz_rad"].map(String::from);
     let joint_names: Vec<String> = joints.iter().map(|(n, k)| joint_column(n, *k)).collect();
     let mut known: Vec<&str> = vec!["id", "marker", "load_kg"];
     known.extend(com_names.iter().map(String::as_str));
     known.extend(joint_names.iter().map(String::as_str));
     if target {
         known.extend(target_names.iter().map(String::as_str));
+        known.extend(rot_names.iter().map(String::as_str));
     }
     if let Some(h) = header.iter().find(|h| !known.contains(&h.as_str())) {
         let why = if target_names.contains(h) {
@@ -118,6 +124,18 @@ pub fn parse_points(
         Some(required(&target_names)?)
     } else {
         None
+    };
+    let rot_present: Vec<usize> = rot_names.iter().filter_map(|n| find(n)).collect();
+    let rot_cols = match rot_present.len() {
+        0 => None,
+        3 => Some(rot_present),
+        _ => {
+            return Err(err(
+                ErrorKind::MissingColumn,
+                "rx_rad, ry_rad and rz_rad come together".into(),
+            )
+            .at_line(1))
+        }
     };
     let com_present: Vec<Option<usize>> = com_names.iter().map(|n| find(n)).collect();
     let com_cols = match com_present.iter().flatten().count() {
@@ -197,6 +215,7 @@ pub fn parse_points(
             com_m,
             q: q_cols.iter().map(|&c| real(c)).collect::<Result<_, _>>()?,
             target_m: target_cols.as_deref().map(three).transpose()?,
+            target_rotation_rad: rot_cols.as_deref().map(three).transpose()?,
         });
     }
     if rows.is_empty() {

@@ -28,12 +28,16 @@
 //! stops when `‖e‖ ≤ tolerance_m`, and is an error after `max_iterations`.
 //! Typical: 2–3 steps (the corrections are millimetres on metres).
 //!
+//! [`compensate_pose`] does the same for a pose (the tool point and the tip
+//! frame's orientation, six equations), where the markers determine the
+//! orientation.
+//!
 //! Everything is on the stack (`J` is the chain's capacity), nothing
 //! allocates, and an error leaves nothing behind: the function is pure.
 
-use nalgebra::{Matrix3, RealField, SMatrix, Vector3};
+use nalgebra::{RealField, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use super::chain::Chain;
+use super::chain::{Chain, JointKind};
 use super::equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
 use crate::Error;
 
@@ -86,6 +90,8 @@ pub struct Compensation<T: RealField + Copy, const J: usize> {
     pub reached_m: Vector3<T>,
     /// `‖p* − reached‖` \[m\].
     pub error_m: T,
+    /// The orientation error \[rad\] of [`compensate_pose`] (0 for a point).
+    pub error_rad: T,
     /// Newton steps taken.
     pub iterations: usize,
     /// The loaded robot at the command (its frames, torques, deflections).
@@ -111,7 +117,7 @@ pub fn compensate<T, const J: usize, L, F>(
     target_m: &Vector3<T>,
     q_start: &[T],
     loading: &Loading<T>,
-    mut law: F,
+    law: F,
     settings: &CompensateSettings<T>,
 ) -> Result<Compensation<T, J>, Error>
 where
@@ -119,7 +125,108 @@ where
     L: JointLaw<T>,
     F: FnMut(&[T]) -> L,
 {
-    let dof = chain.dof();
+    check_inputs(tool_m, target_m, None, q_start, chain.dof())?;
+    newton::<T, J, 3, L, F>(
+        chain,
+        q_start,
+        loading,
+        law,
+        settings,
+        |eq| {
+            let p = eq.frames.point_m(tool_m);
+            let e = target_m - p;
+            (e, p, e.norm(), T::zero())
+        },
+        |eq, p| {
+            let mut jac = SMatrix::<T, 3, J>::zeros();
+            for j in 0..eq.frames.dof() {
+                jac.set_column(j, &eq.twist_column(j, p)?);
+            }
+            Ok(jac)
+        },
+    )
+}
+
+/// As [`compensate`], for a **pose**: the tool frame (the tip frame moved
+/// to `tool_m`) at `target_m` with the tip frame's orientation
+/// `target_rotation` (both in the chain's base frame) — for a robot whose
+/// markers determine its orientation. Six equations: the position error
+/// and the rotation error `log(R* Rᵀ)` (rotation vector, base frame), an
+/// angle `θ` weighing as `θ · 1 m` in the step and the stopping rule
+/// ([`Compensation::error_rad`] ≤ `tolerance_m / 1 m`). A robot with fewer
+/// than six joints reaches the pose only where it can; a redundant one
+/// takes the smallest step.
+///
+/// # Errors
+/// As [`compensate`]; [`Error::NonFinite`] `"target rotation"`.
+#[allow(clippy::too_many_arguments)]
+pub fn compensate_pose<T, const J: usize, L, F>(
+    chain: &Chain<T, J>,
+    tool_m: &Vector3<T>,
+    target_m: &Vector3<T>,
+    target_rotation: &UnitQuaternion<T>,
+    q_start: &[T],
+    loading: &Loading<T>,
+    law: F,
+    settings: &CompensateSettings<T>,
+) -> Result<Compensation<T, J>, Error>
+where
+    T: RealField + Copy,
+    L: JointLaw<T>,
+    F: FnMut(&[T]) -> L,
+{
+    check_inputs(
+        tool_m,
+        target_m,
+        Some(target_rotation),
+        q_start,
+        chain.dof(),
+    )?;
+    newton::<T, J, 6, L, F>(
+        chain,
+        q_start,
+        loading,
+        law,
+        settings,
+        |eq| {
+            let p = eq.frames.point_m(tool_m);
+            let ep = target_m - p;
+            let er = (target_rotation * eq.frames.tip().rotation.inverse()).scaled_axis();
+            let e = SVector::<T, 6>::from_fn(|i, _| if i < 3 { ep[i] } else { er[i - 3] });
+            (e, p, ep.norm(), er.norm())
+        },
+        |eq, p| {
+            let mut jac = SMatrix::<T, 6, J>::zeros();
+            let m = &eq.sensitivity;
+            for j in 0..eq.frames.dof() {
+                let lin = eq.twist_column(j, p)?;
+                // ω per unit εⱼ: Σᵢ zᵢ Mᵢⱼ over the revolute joints.
+                let ang = eq
+                    .frames
+                    .joints()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, f)| f.kind == JointKind::Revolute)
+                    .fold(Vector3::zeros(), |s, (i, f)| {
+                        s + f.axis.into_inner() * m[(i, j)]
+                    });
+                for r in 0..3 {
+                    jac[(r, j)] = lin[r];
+                    jac[(r + 3, j)] = ang[r];
+                }
+            }
+            Ok(jac)
+        },
+    )
+}
+
+fn check_inputs<T: RealField + Copy>(
+    tool_m: &Vector3<T>,
+    target_m: &Vector3<T>,
+    target_rotation: Option<&UnitQuaternion<T>>,
+    q_start: &[T],
+    dof: usize,
+) -> Result<(), Error> {
     if q_start.len() != dof {
         return Err(Error::Mismatch {
             what: "compensation start length differs from the chain's dof",
@@ -129,12 +236,40 @@ where
     if !finite(target_m.as_slice()) {
         return Err(Error::NonFinite { what: "target" });
     }
+    if target_rotation.is_some_and(|r| !finite(r.coords.as_slice())) {
+        return Err(Error::NonFinite {
+            what: "target rotation",
+        });
+    }
     if !finite(tool_m.as_slice()) {
         return Err(Error::NonFinite { what: "tool" });
     }
     if !finite(q_start) {
         return Err(Error::NonFinite { what: "q_start" });
     }
+    Ok(())
+}
+
+/// The Newton iteration of [`compensate`] and [`compensate_pose`] on `R`
+/// equations: `error(eq)` gives the error vector, the point reached and
+/// the position and angle errors; `jacobian(eq, p)` its derivative by the
+/// commanded joint values.
+#[allow(clippy::too_many_arguments)]
+fn newton<T, const J: usize, const R: usize, L, F>(
+    chain: &Chain<T, J>,
+    q_start: &[T],
+    loading: &Loading<T>,
+    mut law: F,
+    settings: &CompensateSettings<T>,
+    error: impl Fn(&Equilibrium<T, J>) -> (SVector<T, R>, Vector3<T>, T, T),
+    jacobian: impl Fn(&Equilibrium<T, J>, &Vector3<T>) -> Result<SMatrix<T, R, J>, Error>,
+) -> Result<Compensation<T, J>, Error>
+where
+    T: RealField + Copy,
+    L: JointLaw<T>,
+    F: FnMut(&[T]) -> L,
+{
+    let dof = chain.dof();
     let mut q = [T::zero(); J];
     q[..dof].copy_from_slice(q_start);
     let mut guess = q;
@@ -148,19 +283,19 @@ where
             &law(&q[..dof]),
             &settings.equilibrium,
         )?;
-        let p = eq.frames.point_m(tool_m);
-        let e = target_m - p;
-        let error_m = e.norm();
-        if !error_m.is_finite() {
+        let (e, p, error_m, error_rad) = error(&eq);
+        if !(error_m.is_finite() && error_rad.is_finite()) {
             return Err(Error::NonFinite {
                 what: "compensation",
             });
         }
-        if error_m <= settings.tolerance_m {
+        // An angle weighs as its arc on a 1 m lever.
+        if error_m <= settings.tolerance_m && error_rad <= settings.tolerance_m {
             return Ok(Compensation {
                 q,
                 reached_m: p,
                 error_m,
+                error_rad,
                 iterations,
                 equilibrium: eq,
             });
@@ -168,14 +303,11 @@ where
         if iterations >= settings.max_iterations {
             return Err(Error::NotConverged { iterations });
         }
-        // J = ∂p/∂q (3 × dof), the minimum-norm step Jᵀ (J Jᵀ)⁻¹ e.
-        let mut jac = SMatrix::<T, 3, J>::zeros();
-        for j in 0..dof {
-            jac.set_column(j, &eq.twist_column(j, &p)?);
-        }
-        let mut jjt: Matrix3<T> = jac * jac.transpose();
+        // The minimum-norm step Jᵀ (J Jᵀ + μ²I)⁻¹ e.
+        let jac = jacobian(&eq, &p)?;
+        let mut jjt: SMatrix<T, R, R> = jac * jac.transpose();
         let mu2 = T::default_epsilon() * nalgebra::convert(1000.0) * jjt.trace();
-        for i in 0..3 {
+        for i in 0..R {
             jjt[(i, i)] += mu2;
         }
         let Some(chol) = jjt.cholesky() else {

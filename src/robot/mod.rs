@@ -19,7 +19,7 @@ pub mod kinematics;
 pub mod load;
 
 pub use chain::{Chain, Joint, JointKind, LinkInertia};
-pub use compensate::{compensate, CompensateSettings, Compensation, Compliances};
+pub use compensate::{compensate, compensate_pose, CompensateSettings, Compensation, Compliances};
 pub use equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
 pub use kinematics::{Frames, JointFrame};
 pub use load::{gravity_torques, joint_torques, PointLoad, Wrench};

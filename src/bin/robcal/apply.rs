@@ -36,7 +36,8 @@ pub struct CompensateArgs {
     model: PathBuf,
     /// Targets: `x_m, y_m, z_m` (measurement frame), `marker`, `load_kg`,
     /// `com_x_m..`, and the start `<joint>_rad` per joint (e.g. the nominal
-    /// inverse kinematics of the target).
+    /// inverse kinematics of the target); optional `rx_rad, ry_rad, rz_rad`
+    /// (the tip frame's orientation, rotation vector) make it a pose.
     #[arg(long)]
     targets: PathBuf,
     /// Write the CSV here (all or nothing) instead of stdout.
@@ -116,6 +117,9 @@ fn header(robot: &Predictor, row: &PointRow, target: bool) -> String {
     h.extend(["marker", "load_kg", "com_x_m", "com_y_m", "com_z_m"].map(String::from));
     if target {
         h.extend(["x_m", "y_m", "z_m"].map(String::from));
+        if row.target_rotation_rad.is_some() {
+            h.extend(["rx_rad", "ry_rad", "rz_rad"].map(String::from));
+        }
     }
     h.extend(
         robot
@@ -125,6 +129,9 @@ fn header(robot: &Predictor, row: &PointRow, target: bool) -> String {
             .map(|(n, j)| joint_column(n, j.kind)),
     );
     if target {
+        if row.target_rotation_rad.is_some() {
+            h.push("error_urad".into());
+        }
         h.extend(["error_um", "iterations"].map(String::from));
     } else {
         h.extend(["x_m", "y_m", "z_m"].map(String::from));
@@ -217,18 +224,34 @@ pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
     for row in &rows {
         let (id, tool, payload) = tool_and_payload(&robot, row, &a.targets)?;
         let target = Vector3::from(row.target_m.unwrap_or_default());
-        let c = robot
-            .compensate(&tool, &target, &row.q, payload.as_ref(), &settings)
-            .map_err(|e| {
-                format!(
-                    "{}:{}: cannot reach the target from the given joint values: {e}",
-                    a.targets.display(),
-                    row.line
-                )
-            })?;
+        let c = match row.target_rotation_rad {
+            None => robot.compensate(&tool, &target, &row.q, payload.as_ref(), &settings),
+            Some(r) => robot.compensate_pose(
+                &tool,
+                &target,
+                &nalgebra::UnitQuaternion::from_scaled_axis(Vector3::from(r)),
+                &row.q,
+                payload.as_ref(),
+                &settings,
+            ),
+        }
+        .map_err(|e| {
+            format!(
+                "{}:{}: cannot reach the target from the given joint values: {e}",
+                a.targets.display(),
+                row.line
+            )
+        })?;
+        let (rot, err_rot) = match row.target_rotation_rad {
+            Some(r) => (
+                format!(",{}", join(&r)),
+                format!("{:.6},", c.error_rad * 1e6),
+            ),
+            None => (String::new(), String::new()),
+        };
         let _ = writeln!(
             out,
-            "{},{},{},{:.6},{}",
+            "{},{}{rot},{},{err_rot}{:.6},{}",
             lead(row, id),
             join(target.as_slice()),
             join(&c.q[..dof]),
