@@ -478,7 +478,11 @@ impl fmt::Display for Report {
             .max()
             .unwrap_or(0)
             .max(24);
-        writeln!(f, "  {:<w$} {:>12} ± {:<10} unit", "parameter", "value", "1 sd")?;
+        writeln!(
+            f,
+            "  {:<w$} {:>12} ± {:<10} unit",
+            "parameter", "value", "1 sd"
+        )?;
         for p in &self.parameters {
             writeln!(
                 f,
