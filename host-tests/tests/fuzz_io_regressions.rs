@@ -106,6 +106,11 @@ fn urdf_empty_namespace_prefix_is_an_error_not_a_panic() {
     assert_eq!(e.kind, ErrorKind::Syntax);
     assert_eq!(e.line, Some(1));
     assert!(e.to_string().contains("empty namespace prefix"), "{e}");
+    // The second form (the run after the fix): an element named `"` with a
+    // default namespace, `<" xmlns="\0":m=""/>`.
+    let bytes: &[u8] = include_bytes!("fuzz_regressions/urdf-quote-name-panic.bin");
+    let e = urdf_err(bytes);
+    assert!(e.to_string().contains("element name starting with a quote"), "{e}");
     // Spread over lines and inside a real tag.
     let e = urdf_err(b"\0\0<robot name=\"r\" xmlns=\"u\">\n<link name=\"a\"\n  :x=\"1\"/></robot>");
     assert_eq!(e.line, Some(3), "{e}");

@@ -140,6 +140,11 @@ struct CalibrateArgs {
     max_data_mib: u64,
 }
 
+thread_local! {
+    /// The message of the last panic (see `main`).
+    static LAST_PANIC: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -161,7 +166,16 @@ fn main() -> ExitCode {
         (_, true) => Verbosity::Verbose,
         _ => Verbosity::Normal,
     };
-    let result = match cli.command {
+    // A panic (a dependency's; robcal's own code does not panic on input)
+    // is one line on stderr, like every error: the hook keeps its message
+    // instead of printing it, and the run is wrapped. A panic robcal
+    // catches and turns into an error (urdf-rs's XML parser) prints nothing.
+    std::panic::set_hook(Box::new(|info| {
+        let message = info.to_string().replace('\n', " ");
+        LAST_PANIC.with(|p| *p.borrow_mut() = Some(message));
+    }));
+    let command = cli.command;
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match command {
         Command::Calibrate(args) => run_calibrate(&args, verbosity),
         Command::Predict(args) => apply::run_predict(&args),
         Command::Compensate(args) => apply::run_compensate(&args),
@@ -178,7 +192,15 @@ fn main() -> ExitCode {
                 })
                 .map_err(|e| e.to_string())
         }
-    };
+    }))
+    .unwrap_or_else(|_| {
+        Err(format!(
+            "internal error: {}",
+            LAST_PANIC
+                .with(|p| p.borrow_mut().take())
+                .unwrap_or_default()
+        ))
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -78,6 +78,11 @@ fn too_large(text: &str) -> Option<(usize, String)> {
                 continue;
             }
             b'<' if b.get(i + 1) == Some(&b'/') => depth = depth.saturating_sub(1),
+            b'<' if matches!(b.get(i + 1), Some(b'"' | b'\'')) => {
+                // Not a name; RustyXML 0.3 takes it for one (and a namespace
+                // declared on it panics its formatter).
+                return Some((line, "an XML element name starting with a quote".into()));
+            }
             b'<' => {
                 // A start tag: to its '>', past quoted values.
                 let mut j = i + 1;
