@@ -110,7 +110,10 @@ fn urdf_empty_namespace_prefix_is_an_error_not_a_panic() {
     // default namespace, `<" xmlns="\0":m=""/>`.
     let bytes: &[u8] = include_bytes!("fuzz_regressions/urdf-quote-name-panic.bin");
     let e = urdf_err(bytes);
-    assert!(e.to_string().contains("element name starting with a quote"), "{e}");
+    assert!(
+        e.to_string().contains("element name starting with a quote"),
+        "{e}"
+    );
     // Spread over lines and inside a real tag.
     let e = urdf_err(b"\0\0<robot name=\"r\" xmlns=\"u\">\n<link name=\"a\"\n  :x=\"1\"/></robot>");
     assert_eq!(e.line, Some(3), "{e}");
