@@ -260,19 +260,36 @@ fn plots_are_svg_and_complete() {
     let d = dir.to_str().unwrap().to_string();
     args.extend(["--plots", &d, "--json"]);
     json(&robcal(&args));
-    let files: Vec<PathBuf> = std::fs::read_dir(&dir)
+    let mut files: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
-        .map(|e| e.unwrap().path())
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(files.len(), 1, "{files:?}");
-    let svg = std::fs::read_to_string(&files[0]).unwrap();
-    assert!(files[0]
-        .to_str()
-        .unwrap()
-        .ends_with("01_compensator_a2.svg"));
-    assert!(svg.trim_start().starts_with("<svg"), "{}", &svg[..80]);
-    assert!(svg.trim_end().ends_with("</svg>"));
-    assert!(svg.contains("q_a2"));
+    files.sort();
+    assert_eq!(
+        files,
+        [
+            "01_compensator_a2.svg",
+            "error_distribution.svg",
+            "parameters_urad__N_m.svg",
+            "per_pose.svg"
+        ]
+    );
+    for (file, axis) in [
+        ("01_compensator_a2.svg", "q_a2 [deg]"),
+        ("per_pose.svg", "error per pose, RMS [µm] (log)"),
+        ("error_distribution.svg", "error per point, |Δp| [µm] (log)"),
+        ("parameters_urad__N_m.svg", "value [urad/(N*m)]"),
+    ] {
+        let svg = std::fs::read_to_string(dir.join(file)).unwrap();
+        assert!(svg.trim_start().starts_with("<svg"), "{}", &svg[..80]);
+        assert!(svg.trim_end().ends_with("</svg>"));
+        // Units on the axes; the Okabe–Ito palette, no pure red or green.
+        assert!(svg.contains(axis), "{file}");
+        assert!(
+            !svg.contains("#FF0000") && !svg.contains("#00FF00"),
+            "{file}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

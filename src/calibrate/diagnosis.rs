@@ -6,12 +6,15 @@ use super::effects::{candidates, inadmissible, Candidate};
 use super::engine::{Engine, Fitted};
 use super::fit::{self, Method};
 use super::report::{
-    ConfigNoise, EffectStep, LeftOut, NearDependent, PlotSeries, Report, Tested, Unexplained,
+    ConfigNoise, EffectStep, LeftOut, NearDependent, PlotSeries, Report, RowError, Tested,
+    Unexplained,
 };
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
+use super::rows::RowKind;
 use super::settings::{CalibrationError, Settings};
 use crate::model::Param;
 use crate::Error;
+use nalgebra::Vector3;
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -453,6 +456,19 @@ pub fn run(
         rows: e.rows.rows.len(),
         configurations: e.rows.configs.len(),
         plots,
+        row_errors: e
+            .rows
+            .rows
+            .iter()
+            .zip(&current.residuals)
+            .map(|(r, res)| RowError {
+                config: r.config,
+                marker: e.names.marker_id(r.marker),
+                deflection: r.kind == RowKind::Deflection,
+                nominal_um: Vector3::zeros(),
+                final_um: res * 1e6,
+            })
+            .collect(),
         model: e.calibrated(&current),
         notes,
         warnings: Vec::new(),

@@ -82,7 +82,7 @@ pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
 pub use report::{
     Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Nominal, Parameter, PlotSeries,
-    Report, Unexplained, Validation,
+    Report, RowError, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
@@ -213,8 +213,12 @@ pub fn calibrate(
         settings.method = Method::Ols;
         e.fit_settings.method = Method::Ols;
     }
+    let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
     let mut report = diagnosis::run(e, declared, left_out, &settings, notes)?;
     report.nominal = nominal;
+    for (r, n) in report.row_errors.iter_mut().zip(nominal_rows) {
+        r.nominal_um = n;
+    }
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     Ok(report)

@@ -204,6 +204,23 @@ pub struct PlotSeries {
     pub after_um: Vec<Vector3<f64>>,
 }
 
+/// One row's error before and after calibration (the report's per-pose
+/// plots and statistics).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowError {
+    /// `config` as in the CSV.
+    pub config: i64,
+    /// Marker id.
+    pub marker: u32,
+    /// Whether the row is a deflection (loaded minus unloaded) rather than
+    /// an absolute position.
+    pub deflection: bool,
+    /// The nominal robot's error \[µm\] (as [`Nominal`]).
+    pub nominal_um: Vector3<f64>,
+    /// The final model's residual \[µm\].
+    pub final_um: Vector3<f64>,
+}
+
 /// The outcome of [`super::calibrate`].
 #[derive(Debug, Clone)]
 pub struct Report {
@@ -265,6 +282,9 @@ pub struct Report {
     pub configurations: usize,
     /// Plot data.
     pub plots: Vec<PlotSeries>,
+    /// Every row's error before and after, in the rows' order (deflections
+    /// first, then absolute positions, in file order).
+    pub row_errors: Vec<RowError>,
     /// The calibrated model (for validation and prediction).
     pub model: CalibratedModel,
     /// What the run changed on its own and why (e.g. IRLS → OLS when a

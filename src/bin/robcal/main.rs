@@ -18,12 +18,14 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use serde_json::{json, Value};
 
-use robcal::calibrate::{self, DeflectionModel, Method, PlotSeries, Report, Settings};
+use robcal::calibrate::{self, DeflectionModel, Method, Settings};
 use robcal::io::Job;
 
 mod apply;
+mod html;
+mod json;
+mod plots;
 
 #[derive(Parser)]
 #[command(
@@ -274,150 +276,54 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         let robot = job.setup.robot_path(&job.setup_path);
         inputs.push(&robot);
         inputs.extend(a.validate.as_deref());
-        write_plots(dir, &report, &inputs)?;
+        // The report's figures (`--output` has them too).
+        let files = plots::figures(&report, html::t975(&report).1)?
+            .into_iter()
+            .map(|f| (dir.join(f.file), f.svg.into_bytes()))
+            .collect();
+        write_dir(dir, files, &inputs)?;
     }
     if let Some(dir) = &a.output {
         let urdf =
             calibrate::export::calibrated_urdf(&report.model, &job).map_err(|e| e.to_string())?;
-        let mut model = to_json(&report);
-        let names: Vec<&str> = report.parameters.iter().map(|p| p.name.as_str()).collect();
-        let c = &report.covariance;
-        model["covariance"] = json!({
-            "parameters": names,
-            "unit": "product of the two parameters' units",
-            "matrix": (0..c.nrows())
-                .map(|i| (0..c.ncols()).map(|k| num(c[(i, k)])).collect::<Vec<_>>())
-                .collect::<Vec<_>>(),
-        });
         let robot = calibrate::predict::Predictor::new(&report.model, &job);
-        model["predictor"] = serde_json::to_value(calibrate::model_file::ModelFile::of(&robot))
-            .map_err(|e| e.to_string())?;
+        let model = json::ModelJson::of(&report, calibrate::model_file::ModelFile::of(&robot));
         let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
+        let figures = plots::figures(&report, html::t975(&report).1)?;
+        let page = html::page(
+            &report,
+            &html::JobInfo {
+                job: &job,
+                data: &a.data,
+                validate: a.validate.as_deref(),
+                lambda: a.lambda.unwrap_or(job.setup.noise.lambda),
+            },
+            &figures,
+        );
         let robot = job.setup.robot_path(&job.setup_path);
         let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot.as_path()];
         inputs.extend(a.validate.as_deref());
-        write_dir(
-            dir,
-            vec![
-                (dir.join("robot.urdf"), urdf.into_bytes()),
-                (dir.join("model.json"), model.into_bytes()),
-            ],
-            &inputs,
-        )?;
+        let mut files = vec![
+            (dir.join("robot.urdf"), urdf.into_bytes()),
+            (dir.join("model.json"), model.into_bytes()),
+            (dir.join("report.html"), page.into_bytes()),
+        ];
+        files.extend(
+            figures
+                .into_iter()
+                .map(|f| (dir.join(f.file), f.svg.into_bytes())),
+        );
+        write_dir(dir, files, &inputs)?;
     }
     let out = if a.json {
-        serde_json::to_string_pretty(&to_json(&report)).map_err(|e| e.to_string())? + "\n"
+        serde_json::to_string_pretty(&json::ReportJson::of(&report)).map_err(|e| e.to_string())?
+            + "\n"
     } else {
         report.to_string()
     };
     std::io::stdout()
         .write_all(out.as_bytes())
         .map_err(|e| format!("cannot write the report: {e}"))
-}
-
-/// Finite numbers as numbers; NaN/∞ (not JSON) as null.
-fn num(v: f64) -> Value {
-    serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)
-}
-
-fn opt_num(v: Option<f64>) -> Value {
-    v.map_or(Value::Null, num)
-}
-
-fn per_marker(m: &std::collections::BTreeMap<String, f64>) -> Value {
-    Value::Object(m.iter().map(|(k, x)| (k.clone(), num(*x))).collect())
-}
-
-/// The contract's JSON (§5, §7.5).
-fn to_json(r: &Report) -> Value {
-    let mut v = json!({
-        "method": r.method,
-        "deflection_model": r.deflection_model,
-        "iterations": r.iterations,
-        "converged": r.converged,
-        "relinearisations": r.relinearisations,
-        "nominal": json!({
-            "rms_um": num(r.nominal.rms_um),
-            "mean_um": num(r.nominal.mean_um),
-            "max_um": num(r.nominal.max_um),
-        }),
-        "parameters": r.parameters.iter().map(|p| json!({
-            "name": p.name, "value": num(p.value), "std": num(p.std), "unit": p.unit,
-        })).collect::<Vec<_>>(),
-        "rms_um": num(r.rms_um),
-        "heldout_rms_um": opt_num(r.heldout_rms_um),
-        "effects": r.effects.iter().map(|s| {
-            let mut e = json!({
-                "effect": s.effect.name(),
-                "joint": s.joint,
-                "p_value": num(s.p_value),
-                "rms_um_before": num(s.rms_um_before),
-                "rms_um_after": num(s.rms_um_after),
-                "heldout_rms_um_before": opt_num(s.heldout_rms_um_before),
-                "heldout_rms_um_after": opt_num(s.heldout_rms_um_after),
-            });
-            if let Some(m) = s.marker {
-                e["marker"] = json!(m);
-            }
-            e
-        }).collect::<Vec<_>>(),
-        "unexplained": r.unexplained.as_ref().map(|u| json!({
-            "variable": u.variable, "statistic": num(u.statistic), "p_value": num(u.p_value),
-        })),
-        "validation": r.validation.as_ref().map(|v| json!({
-            "rms_mm": num(v.rms_mm),
-            "per_marker_rms_mm": per_marker(&v.per_marker_rms_mm),
-            "per_marker_mean_mm": per_marker(&v.per_marker_mean_mm),
-            "per_marker_max_mm": per_marker(&v.per_marker_max_mm),
-            "points": v.points,
-            "interpolated_points": v.interpolated_points,
-        })),
-        "warnings": r.warnings,
-        "identifiability": r.left_out.iter().map(|l| json!({
-            "left_out": l.name,
-            "absorbed_by": l.absorbed_by.iter().map(|a| a.name.as_str()).collect::<Vec<_>>(),
-            "coefficients": l.absorbed_by.iter().map(|a| num(a.coefficient)).collect::<Vec<_>>(),
-            "coefficient_units": l.absorbed_by.iter().map(|a| a.unit.as_str()).collect::<Vec<_>>(),
-        })).collect::<Vec<_>>(),
-        "near_dependent": r.near_dependent.iter().map(|n| json!({
-            "name": n.name,
-            "variance_inflation": num(n.inflation),
-            "with": n.with,
-        })).collect::<Vec<_>>(),
-    });
-    // Optional (an extension of the contract's §5): what the run changed on
-    // its own, e.g. IRLS → OLS.
-    if !r.notes.is_empty() {
-        v["notes"] = json!(r.notes);
-    }
-    v
-}
-
-fn slug(s: &str) -> String {
-    s.chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-        .collect::<String>()
-        .trim_matches('_')
-        .to_string()
-}
-
-/// One SVG per plot series: the three residual components against the
-/// traced variable, before (top) and after (bottom).
-/// All or nothing: every SVG is made before any is written, and written by
-/// one [`robcal::io::write_all_atomic`]; a directory this call created is
-/// removed again when the writing fails.
-fn write_plots(dir: &Path, r: &Report, inputs: &[&Path]) -> Result<(), String> {
-    let mut svgs = Vec::new();
-    for (i, s) in r.plots.iter().enumerate() {
-        let svg = plot_svg(s).map_err(|e| format!("plot '{}': {e}", s.title))?;
-        svgs.push((
-            dir.join(format!("{:02}_{}.svg", i + 1, slug(&s.title))),
-            svg,
-        ));
-    }
-    let files: Vec<(PathBuf, Vec<u8>)> =
-        svgs.into_iter().map(|(p, s)| (p, s.into_bytes())).collect();
-    write_dir(dir, files, inputs)
 }
 
 /// `files` into `dir` by one [`robcal::io::write_all_atomic`]; `dir` is
@@ -431,65 +337,4 @@ fn write_dir(dir: &Path, files: Vec<(PathBuf, Vec<u8>)>, inputs: &[&Path]) -> Re
         }
         format!("{}: cannot write: {e}", dir.display())
     })
-}
-
-fn plot_svg(s: &PlotSeries) -> Result<String, Box<dyn std::error::Error>> {
-    use plotters::prelude::*;
-    let mut buf = String::new();
-    {
-        let panels = if s.after_um.is_empty() { 1 } else { 2 };
-        let root = SVGBackend::with_string(&mut buf, (900, 380 * panels)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let areas = root.split_evenly((panels as usize, 1));
-        let (xmin, xmax) = bounds(s.x.iter().copied());
-        let all = s
-            .before_um
-            .iter()
-            .chain(&s.after_um)
-            .flat_map(|v| v.iter().copied());
-        let (ymin, ymax) = bounds(all);
-        let series = [("before", &s.before_um), ("after", &s.after_um)];
-        for (area, (label, res)) in areas.iter().zip(series) {
-            let mut chart = ChartBuilder::on(area)
-                .caption(
-                    format!("{} — residuals {label}", s.title),
-                    ("sans-serif", 18),
-                )
-                .margin(10)
-                .x_label_area_size(35)
-                .y_label_area_size(60)
-                .build_cartesian_2d(xmin..xmax, ymin..ymax)?;
-            chart
-                .configure_mesh()
-                .x_desc(s.variable.as_str())
-                .y_desc("residual [um]")
-                .draw()?;
-            for (a, color) in [(0usize, RED), (1, GREEN), (2, BLUE)] {
-                chart
-                    .draw_series(
-                        s.x.iter()
-                            .zip(res.iter())
-                            .map(|(&x, r)| Circle::new((x, r[a]), 2, color.filled())),
-                    )?
-                    .label(["x", "y", "z"][a])
-                    .legend(move |(x, y)| Circle::new((x, y), 3, color.filled()));
-            }
-            chart.configure_series_labels().border_style(BLACK).draw()?;
-        }
-        root.present()?;
-    }
-    Ok(buf)
-}
-
-fn bounds(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for x in v.filter(|x| x.is_finite()) {
-        lo = lo.min(x);
-        hi = hi.max(x);
-    }
-    if !lo.is_finite() {
-        return (-1.0, 1.0);
-    }
-    let pad = ((hi - lo) * 0.05).max(1e-9);
-    (lo - pad, hi + pad)
 }

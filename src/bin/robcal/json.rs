@@ -1,0 +1,227 @@
+//! The data contract's JSON (§5, §7.5) and `model.json` (§7.4) as serde
+//! types: `--json` prints a [`ReportJson`], `--output DIR` writes a
+//! [`ModelJson`] (the same keys, the full covariance and the predictor).
+//!
+//! Units are in the keys (`_um`, `_mm`) or beside the value (`unit`).
+//! Non-finite numbers are written as `null` (serde_json's rule for `f64`).
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use robcal::calibrate::model_file::ModelFile;
+use robcal::calibrate::{EffectStep, LeftOut, NearDependent, Report, Unexplained, Validation};
+
+/// `--json`: the report (contract §5).
+#[derive(Serialize)]
+pub struct ReportJson<'a> {
+    method: &'a str,
+    deflection_model: &'a str,
+    iterations: usize,
+    converged: bool,
+    relinearisations: usize,
+    nominal: NominalJson,
+    parameters: Vec<ParameterJson<'a>>,
+    rms_um: f64,
+    heldout_rms_um: Option<f64>,
+    effects: Vec<EffectJson<'a>>,
+    unexplained: Option<UnexplainedJson<'a>>,
+    validation: Option<ValidationJson<'a>>,
+    warnings: &'a [String],
+    identifiability: Vec<LeftOutJson<'a>>,
+    near_dependent: Vec<NearDependentJson<'a>>,
+    /// What the run changed on its own (an extension of §5), e.g. IRLS →
+    /// OLS; absent when empty.
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    notes: &'a [String],
+}
+
+/// `DIR/model.json`: the report, its covariance and the predictor.
+#[derive(Serialize)]
+pub struct ModelJson<'a> {
+    #[serde(flatten)]
+    report: ReportJson<'a>,
+    covariance: CovarianceJson<'a>,
+    predictor: ModelFile,
+}
+
+#[derive(Serialize)]
+struct NominalJson {
+    rms_um: f64,
+    mean_um: f64,
+    max_um: f64,
+}
+
+#[derive(Serialize)]
+struct ParameterJson<'a> {
+    name: &'a str,
+    value: f64,
+    std: f64,
+    unit: &'a str,
+}
+
+#[derive(Serialize)]
+struct EffectJson<'a> {
+    effect: &'static str,
+    joint: Option<&'a str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    marker: Option<u32>,
+    p_value: f64,
+    rms_um_before: f64,
+    rms_um_after: f64,
+    heldout_rms_um_before: Option<f64>,
+    heldout_rms_um_after: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct UnexplainedJson<'a> {
+    variable: &'a str,
+    statistic: f64,
+    p_value: f64,
+}
+
+#[derive(Serialize)]
+struct ValidationJson<'a> {
+    rms_mm: f64,
+    per_marker_rms_mm: &'a BTreeMap<String, f64>,
+    per_marker_mean_mm: &'a BTreeMap<String, f64>,
+    per_marker_max_mm: &'a BTreeMap<String, f64>,
+    points: usize,
+    interpolated_points: usize,
+}
+
+#[derive(Serialize)]
+struct LeftOutJson<'a> {
+    left_out: &'a str,
+    absorbed_by: Vec<&'a str>,
+    coefficients: Vec<f64>,
+    coefficient_units: Vec<&'a str>,
+}
+
+#[derive(Serialize)]
+struct NearDependentJson<'a> {
+    name: &'a str,
+    variance_inflation: f64,
+    with: &'a [String],
+}
+
+#[derive(Serialize)]
+struct CovarianceJson<'a> {
+    parameters: Vec<&'a str>,
+    unit: &'static str,
+    matrix: Vec<Vec<f64>>,
+}
+
+impl<'a> ReportJson<'a> {
+    /// The contract's JSON of `r`.
+    pub fn of(r: &'a Report) -> Self {
+        Self {
+            method: r.method,
+            deflection_model: r.deflection_model,
+            iterations: r.iterations,
+            converged: r.converged,
+            relinearisations: r.relinearisations,
+            nominal: NominalJson {
+                rms_um: r.nominal.rms_um,
+                mean_um: r.nominal.mean_um,
+                max_um: r.nominal.max_um,
+            },
+            parameters: r
+                .parameters
+                .iter()
+                .map(|p| ParameterJson {
+                    name: &p.name,
+                    value: p.value,
+                    std: p.std,
+                    unit: &p.unit,
+                })
+                .collect(),
+            rms_um: r.rms_um,
+            heldout_rms_um: r.heldout_rms_um,
+            effects: r.effects.iter().map(EffectJson::of).collect(),
+            unexplained: r.unexplained.as_ref().map(UnexplainedJson::of),
+            validation: r.validation.as_ref().map(ValidationJson::of),
+            warnings: &r.warnings,
+            identifiability: r.left_out.iter().map(LeftOutJson::of).collect(),
+            near_dependent: r.near_dependent.iter().map(NearDependentJson::of).collect(),
+            notes: &r.notes,
+        }
+    }
+}
+
+impl<'a> ModelJson<'a> {
+    /// `model.json` of `r`, with the predictor of the calibrated robot.
+    pub fn of(r: &'a Report, predictor: ModelFile) -> Self {
+        let c = &r.covariance;
+        Self {
+            report: ReportJson::of(r),
+            covariance: CovarianceJson {
+                parameters: r.parameters.iter().map(|p| p.name.as_str()).collect(),
+                unit: "product of the two parameters' units",
+                matrix: (0..c.nrows())
+                    .map(|i| (0..c.ncols()).map(|k| c[(i, k)]).collect())
+                    .collect(),
+            },
+            predictor,
+        }
+    }
+}
+
+impl<'a> EffectJson<'a> {
+    fn of(s: &'a EffectStep) -> Self {
+        Self {
+            effect: s.effect.name(),
+            joint: s.joint.as_deref(),
+            marker: s.marker,
+            p_value: s.p_value,
+            rms_um_before: s.rms_um_before,
+            rms_um_after: s.rms_um_after,
+            heldout_rms_um_before: s.heldout_rms_um_before,
+            heldout_rms_um_after: s.heldout_rms_um_after,
+        }
+    }
+}
+
+impl<'a> UnexplainedJson<'a> {
+    fn of(u: &'a Unexplained) -> Self {
+        Self {
+            variable: &u.variable,
+            statistic: u.statistic,
+            p_value: u.p_value,
+        }
+    }
+}
+
+impl<'a> ValidationJson<'a> {
+    fn of(v: &'a Validation) -> Self {
+        Self {
+            rms_mm: v.rms_mm,
+            per_marker_rms_mm: &v.per_marker_rms_mm,
+            per_marker_mean_mm: &v.per_marker_mean_mm,
+            per_marker_max_mm: &v.per_marker_max_mm,
+            points: v.points,
+            interpolated_points: v.interpolated_points,
+        }
+    }
+}
+
+impl<'a> LeftOutJson<'a> {
+    fn of(l: &'a LeftOut) -> Self {
+        Self {
+            left_out: &l.name,
+            absorbed_by: l.absorbed_by.iter().map(|a| a.name.as_str()).collect(),
+            coefficients: l.absorbed_by.iter().map(|a| a.coefficient).collect(),
+            coefficient_units: l.absorbed_by.iter().map(|a| a.unit.as_str()).collect(),
+        }
+    }
+}
+
+impl<'a> NearDependentJson<'a> {
+    fn of(n: &'a NearDependent) -> Self {
+        Self {
+            name: &n.name,
+            variance_inflation: n.inflation,
+            with: &n.with,
+        }
+    }
+}
