@@ -15,12 +15,30 @@ fn root() -> PathBuf {
 /// `shared/datasets/tiago-mocap` beside the repository (CI), else in the
 /// nearest ancestor that has it (a nested git worktree).
 fn data_dir() -> PathBuf {
+    find_data().expect("shared/datasets/tiago-mocap beside the repository")
+}
+
+fn find_data() -> Option<PathBuf> {
     root()
         .ancestors()
         .skip(1)
         .map(|a| a.join("shared/datasets/tiago-mocap"))
         .find(|d| d.join("tiago_48_schunk.urdf").exists())
-        .expect("shared/datasets/tiago-mocap beside the repository")
+}
+
+/// Whether `test` is skipped: the data are not there (a plain clone; it
+/// says so on stderr). With `ROBCAL_REQUIRE_SHARED=1` (CI) that is a
+/// failure instead.
+fn skip(test: &str) -> bool {
+    if find_data().is_some() {
+        return false;
+    }
+    let what = "shared/datasets/tiago-mocap";
+    if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
+        panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
+    }
+    eprintln!("skipped {test}: {what} not found beside the repository (CI has it)");
+    true
 }
 
 fn robcal(args: &[&str]) -> Output {
@@ -78,6 +96,9 @@ fn import(dir: &Path, day: &str) -> PathBuf {
 
 #[test]
 fn import_then_calibrate_with_validation() {
+    if skip("import_then_calibrate_with_validation") {
+        return;
+    }
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (train, held) = (import(&dir, "2021-11-30"), import(&dir, "2021-11-26"));
@@ -129,6 +150,9 @@ fn import_then_calibrate_with_validation() {
 /// estimate its σ from, so IRLS falls back to OLS and the report says so.
 #[test]
 fn one_marker_per_configuration_falls_back_to_ols() {
+    if skip("one_marker_per_configuration_falls_back_to_ols") {
+        return;
+    }
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-ols-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let all = import(&dir, "2021-11-30");
@@ -166,6 +190,9 @@ fn one_marker_per_configuration_falls_back_to_ols() {
 /// geometry is left to the loop's candidates.
 #[test]
 fn select_declares_the_registration_only() {
+    if skip("select_declares_the_registration_only") {
+        return;
+    }
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-sel-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let train = import(&dir, "2021-11-30");
@@ -251,6 +278,9 @@ fn effects(v: &Value) -> Vec<String> {
 ///   2.501 with eq. 3), BL 3.310 mm; days swapped 2.413 mm.
 #[test]
 fn protocol_pins_the_validation_run() {
+    if skip("protocol_pins_the_validation_run") {
+        return;
+    }
     let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-proto-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (d30, d26) = (import(&dir, "2021-11-30"), import(&dir, "2021-11-26"));

@@ -16,9 +16,18 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// `shared/` beside the repository (as in CI); `None` on a plain clone
+/// (the test says it is skipped), a failure with `ROBCAL_REQUIRE_SHARED=1`.
 fn shared() -> Option<PathBuf> {
     let s = root().join("../shared");
-    s.is_dir().then_some(s)
+    if s.is_dir() {
+        return Some(s);
+    }
+    let what = "shared/";
+    if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
+        panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
+    }
+    None
 }
 
 fn quick() -> Settings {

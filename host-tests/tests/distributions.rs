@@ -10,7 +10,10 @@ use statrs::distribution::{ChiSquared, ContinuousCDF, FisherSnedecor};
 fn close(got: f64, want: f64, what: &str) {
     // Relative where the tail is representable, absolute near underflow.
     let tol = 1e-10 * want.abs() + 1e-280;
-    assert!((got - want).abs() <= tol, "{what}: {got:e} vs statrs {want:e}");
+    assert!(
+        (got - want).abs() <= tol,
+        "{what}: {got:e} vs statrs {want:e}"
+    );
 }
 
 #[test]

@@ -23,12 +23,21 @@ fn fixture(name: &str) -> PathBuf {
 /// `shared/datasets/tiago-mocap/tiago_48_schunk.urdf`, found from the
 /// manifest dir upward (`../../shared` in a checkout of main, one level more
 /// in a worktree). Never copied into the repository (CC BY-NC-ND).
-fn tiago_urdf() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+/// `None` on a plain clone (the test says it is skipped), a failure with
+/// `ROBCAL_REQUIRE_SHARED=1` (CI).
+fn tiago_urdf(test: &str) -> Option<PathBuf> {
+    let found = Path::new(env!("CARGO_MANIFEST_DIR"))
         .ancestors()
         .map(|d| d.join("shared/datasets/tiago-mocap/tiago_48_schunk.urdf"))
-        .find(|p| p.is_file())
-        .expect("shared/datasets/tiago-mocap/tiago_48_schunk.urdf not found above host-tests")
+        .find(|p| p.is_file());
+    if found.is_none() {
+        let what = "shared/datasets/tiago-mocap/tiago_48_schunk.urdf";
+        if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
+            panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
+        }
+        eprintln!("skipped {test}: {what} not found above the repository (CI has it)");
+    }
+    found
 }
 
 /// URDF `rpy` written out by hand: `R = Rz(y)·Ry(p)·Rx(r)` (fixed X-Y-Z).
@@ -167,7 +176,9 @@ fn small_fixture_defaults_and_mid_chain_tip() {
 
 #[test]
 fn tiago_torso_and_arm() {
-    let path = tiago_urdf();
+    let Some(path) = tiago_urdf("tiago_torso_and_arm") else {
+        return;
+    };
     let robot = Robot::load(&path, Some("base_footprint"), Some("arm_7_link")).unwrap();
     let names: Vec<String> = std::iter::once("torso_lift_joint".to_owned())
         .chain((1..=7).map(|i| format!("arm_{i}_joint")))
@@ -255,7 +266,9 @@ fn tiago_torso_and_arm() {
 
 #[test]
 fn tiago_tip_folds_the_fixed_tool_chain() {
-    let path = tiago_urdf();
+    let Some(path) = tiago_urdf("tiago_tip_folds_the_fixed_tool_chain") else {
+        return;
+    };
     let robot = Robot::load(&path, None, Some("gripper_tool_link")).unwrap();
     assert_eq!(robot.base_link, "base_footprint", "the one root link");
     assert_eq!(robot.dof(), 8);
@@ -284,7 +297,9 @@ fn tiago_tip_folds_the_fixed_tool_chain() {
 
 #[test]
 fn tiago_errors_name_the_file_and_line() {
-    let path = tiago_urdf();
+    let Some(path) = tiago_urdf("tiago_errors_name_the_file_and_line") else {
+        return;
+    };
     let text = std::fs::read_to_string(&path).unwrap();
     let line_of = |needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
 

@@ -50,10 +50,15 @@ pub fn data_dir() -> Option<PathBuf> {
 }
 
 /// The data directory, or `None` after saying on stderr that the test is
-/// skipped and why (a plain clone without `../shared`).
+/// skipped and why (a plain clone without `../shared`). With
+/// `ROBCAL_REQUIRE_SHARED=1` (CI) a missing directory fails the test.
 pub fn data_or_skip(test: &str) -> Option<PathBuf> {
     let d = data_dir();
     if d.is_none() {
+        let what = "shared/datasets/tiago-mocap";
+        if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
+            panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
+        }
         eprintln!(
             "skipped {test}: shared/datasets/tiago-mocap not found beside the repository \
              (CI has it; set ROBCAL_TIAGO_DATA to run it elsewhere)"
