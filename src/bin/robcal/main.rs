@@ -13,11 +13,12 @@
 //! Exit status 0 on success; otherwise one line on stderr saying why, and
 //! nothing written (files are written to a temporary name and renamed).
 
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressDrawTarget, ProgressStyle};
 
 use robcal::calibrate::{self, DeflectionModel, Method, Settings};
 use robcal::io::Job;
@@ -258,15 +259,33 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         },
         ..Settings::default()
     };
-    let mut progress = |m: &str| match verbosity {
-        Verbosity::Quiet => {}
-        Verbosity::Normal => eprintln!("robcal: {m}"),
-        Verbosity::Verbose => {
+    // On a terminal, a spinner with the current step once the run has
+    // taken a second; elsewhere (a pipe, a log) one line per step.
+    let spinner = (verbosity == Verbosity::Normal && std::io::stderr().is_terminal()).then(|| {
+        indicatif::ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden()).with_style(
+            ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        )
+    });
+    let mut progress = |m: &str| match (verbosity, &spinner) {
+        (Verbosity::Quiet, _) => {}
+        (Verbosity::Normal, Some(bar)) => {
+            if bar.is_hidden() && start.elapsed().as_secs_f64() >= 1.0 {
+                bar.set_draw_target(ProgressDrawTarget::stderr());
+                bar.enable_steady_tick(std::time::Duration::from_millis(120));
+            }
+            bar.set_message(format!("robcal: {m}"));
+        }
+        (Verbosity::Normal, None) => eprintln!("robcal: {m}"),
+        (Verbosity::Verbose, _) => {
             eprintln!("robcal: [{:7.2} s] {m}", start.elapsed().as_secs_f64());
         }
     };
-    let mut report =
-        calibrate::calibrate(&job, &data, &settings, &mut progress).map_err(|e| e.to_string())?;
+    let result = calibrate::calibrate(&job, &data, &settings, &mut progress);
+    if let Some(bar) = &spinner {
+        bar.finish_and_clear();
+    }
+    let mut report = result.map_err(|e| e.to_string())?;
     if let Some(v) = &validation_data {
         report.validation =
             Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
