@@ -37,7 +37,9 @@ fn skip(test: &str) -> bool {
     if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
         panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
     }
-    eprintln!("skipped {test}: {what} not found beside the repository (CI has it)");
+    skipped_note(&format!(
+        "skipped {test}: {what} not found beside the repository (CI has it)"
+    ));
     true
 }
 
@@ -335,4 +337,12 @@ fn protocol_pins_the_validation_run() {
         .unwrap();
     assert!(near(bl, 2.413), "BL validation, days swapped: {bl} mm");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Says on the real stderr (libtest captures `eprintln!` of a passing
+/// test, a direct write shows in `cargo test`'s output) why a test is
+/// skipped.
+fn skipped_note(why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{why}");
 }

@@ -91,7 +91,7 @@ fn calibrate_and_check(job: &Job, train: &Path, check: &Path) -> (String, Report
 #[test]
 fn ur10_calibrated_urdf_reproduces_the_model_and_reads_back_without_correction() {
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/repro is not beside the repository");
+        skipped_note("skipped: shared/repro is not beside the repository");
         return;
     };
     let dir = shared.join("repro/ur10-offsets");
@@ -145,7 +145,7 @@ fn ur10_calibrated_urdf_reproduces_the_model_and_reads_back_without_correction()
 #[test]
 fn tiago_calibrated_urdf_reproduces_the_model_on_the_validation_postures() {
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/datasets is not beside the repository");
+        skipped_note("skipped: shared/datasets is not beside the repository");
         return;
     };
     let job = Job::load(root().join("data/tiago/setup.toml")).expect("setup");
@@ -171,4 +171,12 @@ fn tiago_calibrated_urdf_reproduces_the_model_on_the_validation_postures() {
     calibrate_and_check(&job, &train, &check);
     let _ = std::fs::remove_file(&train);
     let _ = std::fs::remove_file(&check);
+}
+
+/// Says on the real stderr (libtest captures `eprintln!` of a passing
+/// test, a direct write shows in `cargo test`'s output) why a test is
+/// skipped.
+fn skipped_note(why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{why}");
 }

@@ -83,7 +83,7 @@ const NOISE_NORM_UM: f64 = 34.64;
 #[test]
 fn ur10_reproduction_runs_with_both_setups() {
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/repro is not beside the repository");
+        skipped_note("skipped: shared/repro is not beside the repository");
         return;
     };
     let dir = shared.join("repro/ur10-offsets");
@@ -136,7 +136,7 @@ fn ur10_reproduction_runs_with_both_setups() {
 fn ur10_thousands_of_poses() {
     // No cap on configurations (the old one was 512).
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/repro is not beside the repository");
+        skipped_note("skipped: shared/repro is not beside the repository");
         return;
     };
     let dir = shared.join("repro/ur10-offsets");
@@ -179,7 +179,7 @@ fn kr270_everything_declared() {
 #[test]
 fn tiago_everything_declared() {
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/datasets is not beside the repository");
+        skipped_note("skipped: shared/datasets is not beside the repository");
         return;
     };
     let data = shared.join("datasets/tiago-mocap/qualisys_2021-11-30_static_postures.csv");
@@ -365,7 +365,7 @@ fn poses_in_a_small_range_flag_near_dependence() {
     // ±0.1 rad of its zero the arm barely changes shape, and the frame
     // errors trade against one another.
     let Some(shared) = shared() else {
-        eprintln!("skipped: shared/repro is not beside the repository");
+        skipped_note("skipped: shared/repro is not beside the repository");
         return;
     };
     let dir = shared.join("repro/ur10-offsets");
@@ -387,4 +387,12 @@ fn poses_in_a_small_range_flag_near_dependence() {
         .all(|n| n.inflation >= threshold && !n.with.is_empty()));
     assert!(near.windows(2).all(|w| w[0].inflation >= w[1].inflation));
     assert!(near.iter().any(|n| n.name == "base.ty"));
+}
+
+/// Says on the real stderr (libtest captures `eprintln!` of a passing
+/// test, a direct write shows in `cargo test`'s output) why a test is
+/// skipped.
+fn skipped_note(why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{why}");
 }

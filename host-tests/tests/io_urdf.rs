@@ -35,7 +35,9 @@ fn tiago_urdf(test: &str) -> Option<PathBuf> {
         if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
             panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
         }
-        eprintln!("skipped {test}: {what} not found above the repository (CI has it)");
+        skipped_note(&format!(
+            "skipped {test}: {what} not found above the repository (CI has it)"
+        ));
     }
     found
 }
@@ -433,4 +435,12 @@ fn too_many_joints() {
     let e = parse(&urdf, "l0", &format!("l{}", MAX_JOINTS + 1)).unwrap_err();
     assert_eq!(e.kind, ErrorKind::Robot);
     assert!(e.message.contains("more than 16 movable joints"), "{e}");
+}
+
+/// Says on the real stderr (libtest captures `eprintln!` of a passing
+/// test, a direct write shows in `cargo test`'s output) why a test is
+/// skipped.
+fn skipped_note(why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{why}");
 }

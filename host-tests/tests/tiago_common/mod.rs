@@ -59,10 +59,10 @@ pub fn data_or_skip(test: &str) -> Option<PathBuf> {
         if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
             panic!("{what} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
         }
-        eprintln!(
+        skipped_note(&format!(
             "skipped {test}: shared/datasets/tiago-mocap not found beside the repository \
              (CI has it; set ROBCAL_TIAGO_DATA to run it elsewhere)"
-        );
+        ));
     }
     d
 }
@@ -190,4 +190,12 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (Matrix3<f64>, Vector3<
     }
     let r = vt.transpose() * d * u.transpose();
     (r, cb - r * ca)
+}
+
+/// Says on the real stderr (libtest captures `eprintln!` of a passing
+/// test, a direct write shows in `cargo test`'s output) why a test is
+/// skipped.
+pub fn skipped_note(why: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{why}");
 }
