@@ -79,20 +79,7 @@ fn fit(fault: SelfTest) -> bool {
     }
     let s32 = acc32.solve().unwrap_or_else(|e| fail("f32 solve", e));
     let s64 = acc64.solve().unwrap_or_else(|e| fail("f64 solve", e));
-    // `Solution` has no `defmt::Format` (yet): its fields, once.
-    info!(
-        "Solution<f32>: x = {=[?]}, active = {}, equations = {=usize}, wrss = {=f32}, rcond = {=f32}, parameters = {=usize}",
-        s32.x.as_slice(),
-        s32.active,
-        s32.equations,
-        s32.wrss,
-        s32.rcond,
-        s32.parameters()
-    );
-    info!(
-        "Solution<f32>: lambda_inv (column-major) = {=[?]}",
-        s32.lambda_inv.as_slice()
-    );
+    info!("Solution<f32>: {}", s32);
 
     let v = check(&s32, &s64, &acc64, &crate::expected_x(fault));
     info!("param  x (f64) +/- 3 sigma [m|rad]   x (f32)   |err|/sigma  |f32-f64|/sigma");
@@ -230,8 +217,8 @@ fn kr270_rows(k: &mut usize, src: &Kr270<f32>) {
     )
     .unwrap_or_else(|e| fail("rows", e));
     info!(
-        "B of configuration 1, marker 1 [m per urad/(N*m)] (column-major): {=[?]}",
-        first[0].as_slice()
+        "B of configuration 1, marker 1 [m per urad/(N*m)]: {}",
+        robcal::estimate::fmt::rows(&first[0])
     );
 }
 
@@ -352,9 +339,10 @@ fn fail(what: &str, e: Error) -> ! {
 
 /// Logs one value of every public type of robcal that has (or should have)
 /// `defmt::Format`, so that a missing derive, or a dependency's missing
-/// `defmt` feature, fails this build. `Block` is logged in `main`, `Error`
-/// here and in `main`; `Solution` and `Accumulator` have no derive yet and
-/// are logged field by field in `main`.
+/// `defmt` feature, fails this build. `Block` and `Solution` are logged in
+/// `fit`, `Fit` and `Iteration` in the KR-270 fit, `Error` here and on a
+/// failure; robcal prints its matrices and vectors as plain lists
+/// (`robcal::estimate::fmt`).
 #[inline(never)]
 fn log_types() {
     let e = Accumulator::<f32, Dn>::new().solve().err();

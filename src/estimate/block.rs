@@ -12,7 +12,6 @@ use crate::Error;
 /// Rows are the x, y, z components of a marker displacement or position, in
 /// metres; `B` in metres per unit of each parameter.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Block<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -35,6 +34,26 @@ where
     DefaultAllocator: Alloc<D>,
     OMatrix<T, U3, D>: Copy,
 {
+}
+
+/// `B` row by row, `Δp`, `w` and `σ` as lists (not nalgebra's internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Block<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "Block {{ b: {}, dp: {}, w: {}, sigma: {}, rows: {=usize} }}",
+            rows(&self.b),
+            rows(&self.dp),
+            rows(&self.w),
+            self.sigma.as_ref().map(rows),
+            self.rows
+        )
+    }
 }
 
 impl<T: RealField + Copy, D: Dim> Block<T, D>

@@ -48,7 +48,6 @@ pub fn pivot_tolerance<T: RealField + Copy>() -> T {
 /// assert!((f.inverse() * lambda - Matrix2::identity()).norm() < 1e-14);
 /// ```
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Factor<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -61,6 +60,26 @@ where
     active: OVector<bool, D>,
     /// Smallest and largest pivot of the active parameters.
     pivots: (T, T),
+}
+
+/// `L` row by row, `S` and the active flags as lists (not nalgebra's
+/// internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Factor<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "Factor {{ l: {}, scale: {}, active: {}, pivots: {} }}",
+            rows(&self.l),
+            rows(&self.scale),
+            rows(&self.active),
+            self.pivots
+        )
+    }
 }
 
 impl<T: RealField + Copy, D: Dim> Factor<T, D>
@@ -227,7 +246,6 @@ where
 
 /// A weighted least-squares estimate and what is needed for its covariances.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Solution<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -247,6 +265,28 @@ where
     /// Reciprocal condition estimate of the scaled information matrix:
     /// smallest over largest Cholesky pivot, in (0, 1].
     pub rcond: T,
+}
+
+/// `X̂` and the active flags as lists, `Λ⁻¹` row by row (not nalgebra's
+/// internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Solution<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "Solution {{ x: {}, lambda_inv: {}, active: {}, equations: {=usize}, wrss: {}, rcond: {} }}",
+            rows(&self.x),
+            rows(&self.lambda_inv),
+            rows(&self.active),
+            self.equations,
+            self.wrss,
+            self.rcond
+        )
+    }
 }
 
 impl<T: RealField + Copy, D: Dim> Solution<T, D>

@@ -34,7 +34,6 @@ use crate::Error;
 
 /// Moments of the rows of one group and one axis.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AxisMoments<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -47,6 +46,25 @@ where
     pub yy: T,
     /// Rows.
     pub n: usize,
+}
+
+/// `S` row by row and `u` as a list (not nalgebra's internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for AxisMoments<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "AxisMoments {{ s_upper: {}, u: {}, yy: {}, n: {=usize} }}",
+            rows(&self.s_upper),
+            rows(&self.u),
+            self.yy,
+            self.n
+        )
+    }
 }
 
 impl<T: RealField + Copy, D: Dim> AxisMoments<T, D>

@@ -57,7 +57,6 @@ impl<T: RealField + Copy> IrlsSettings<T> {
 
 /// One iteration's estimate (for the convergence plot, Fig. 3).
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Iteration<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -77,10 +76,27 @@ where
 {
 }
 
+/// `x` and `std` as lists (not nalgebra's internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Iteration<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "Iteration {{ x: {}, std: {}, change: {} }}",
+            rows(&self.x),
+            rows(&self.std),
+            self.change
+        )
+    }
+}
+
 /// A fit and its covariance. The weights it used and the residual σ per
 /// group and axis are in the slices the caller passed.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Fit<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -105,6 +121,24 @@ where
     #[must_use]
     pub fn std(&self) -> OVector<T, D> {
         std_devs(&self.covariance)
+    }
+}
+
+/// The covariance row by row (not nalgebra's internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Fit<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(
+            f,
+            "Fit {{ solution: {}, covariance: {}, iterations: {=usize}, converged: {=bool} }}",
+            self.solution,
+            super::fmt::rows(&self.covariance),
+            self.iterations,
+            self.converged
+        )
     }
 }
 

@@ -33,6 +33,7 @@
 //! | [`rank`] | [`identifiability`]: the one column-independence test |
 //! | [`nested`] | [`nested_test`]: the F test of a candidate effect from cross-products |
 //! | [`distributions`] | χ² and F tail probabilities (no std) |
+//! | `fmt` | with `defmt`: matrices in defmt logs as plain nested lists |
 
 use nalgebra::allocator::Allocator;
 use nalgebra::{DefaultAllocator, Dim, U3};
@@ -53,6 +54,8 @@ pub mod accumulator;
 pub mod block;
 pub mod distributions;
 pub mod factor;
+#[cfg(feature = "defmt")]
+pub mod fmt;
 pub mod grouped;
 pub mod irls;
 mod linalg;

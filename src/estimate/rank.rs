@@ -122,7 +122,6 @@ pub struct Absorber<T: RealField + Copy> {
 
 /// Which parameters of a candidate set are identifiable.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Identifiability<T: RealField + Copy, D: Dim>
 where
     DefaultAllocator: Alloc<D>,
@@ -145,6 +144,29 @@ where
     /// Smallest over largest pivot of the kept parameters (scaled), in
     /// (0, 1]; 0 when nothing is kept.
     pub rcond: T,
+}
+
+/// The flags, residuals and scales as lists, `β` row by row (not
+/// nalgebra's internals).
+#[cfg(feature = "defmt")]
+impl<T: RealField + Copy + defmt::Format, D: Dim> defmt::Format for Identifiability<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn format(&self, f: defmt::Formatter<'_>) {
+        use super::fmt::rows;
+        defmt::write!(
+            f,
+            "Identifiability {{ kept: {}, left_out: {}, residual: {}, beta: {}, scale: {}, absorb_threshold: {}, rcond: {} }}",
+            rows(&self.kept),
+            rows(&self.left_out),
+            rows(&self.residual),
+            rows(&self.beta),
+            rows(&self.scale),
+            self.absorb_threshold,
+            self.rcond
+        )
+    }
 }
 
 impl<T: RealField + Copy, D: Dim> Identifiability<T, D>
