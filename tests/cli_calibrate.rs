@@ -251,6 +251,16 @@ fn human_report_shows_the_errors_before_and_after() {
         .find(|l| l.starts_with("  k_a2@-0.01") && l.contains('±'))
         .unwrap();
     assert_eq!(head.find('±'), row.find('±'), "aligned:\n{head}\n{row}");
+    // t = value / σ, right-aligned under its header.
+    let t_end = head.find(" t ").unwrap() + 2;
+    let t: f64 = row[..t_end].rsplit(' ').next().unwrap().parse().unwrap();
+    let cells: Vec<f64> = row
+        .split_whitespace()
+        .filter_map(|c| c.parse().ok())
+        .collect();
+    // (σ is printed to 4 decimals: 0.0006 for 0.000627.)
+    assert!((t / (cells[0] / cells[1]) - 1.0).abs() < 0.1, "{row}");
+    assert!(t > 100.0, "{row}");
 }
 
 #[test]

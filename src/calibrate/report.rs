@@ -498,16 +498,21 @@ impl fmt::Display for Report {
             .max()
             .unwrap_or(0)
             .max(24);
+        // t = value / σ (statsmodels' column); units last, any length.
         writeln!(
             f,
-            "  {:<w$} {:>12} ± {:<10} unit",
-            "parameter", "value", "1 sd"
+            "  {:<w$} {:>12} ± {:<10} {:>8}  unit",
+            "parameter", "value", "1 sd", "t"
         )?;
         for p in &self.parameters {
             writeln!(
                 f,
-                "  {:<w$} {:>12.4} ± {:<10.4} {}",
-                p.name, p.value, p.std, p.unit
+                "  {:<w$} {:>12.4} ± {:<10.4} {:>8.1}  {}",
+                p.name,
+                p.value,
+                p.std,
+                p.value / p.std,
+                p.unit
             )?;
         }
         writeln!(

@@ -74,7 +74,8 @@ fn um(v: Option<f64>) -> String {
     v.map_or_else(|| "n/a".into(), |v| format!("{v:.1}"))
 }
 
-const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1000px;\
+const STYLE: &str =
+    "body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1000px;padding:0 1.5em;\
 color:#222;line-height:1.4}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;\
 padding-bottom:.2em;margin-top:1.8em}table{border-collapse:collapse;margin:.6em 0}\
 td,th{padding:.25em .7em;border-bottom:1px solid #e4e4e4;text-align:left;vertical-align:top}\
