@@ -517,10 +517,10 @@ fn plot_figure3(irls: &Report, path: &Path) -> Res<()> {
     let t = kr270::WLS_VALUE[0];
     c.draw_series(LineSeries::new(
         [(-0.5, t), (n as f64 - 0.5, t)],
-        RED.stroke_width(1),
+        RGBColor(213, 94, 0).stroke_width(1),
     ))?
     .label("truth (Table 3 WLS)")
-    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(213, 94, 0)));
     c.configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE)
@@ -560,16 +560,22 @@ fn plot_ci(f: &Fits, crb: &SVector<f64, N>, path: &Path) -> Res<()> {
         (
             "paper OLS",
             kr270::CI_OLS_PERCENT.to_vec(),
-            RGBColor(255, 150, 150),
+            RGBColor(230, 159, 0),
         ),
         (
             "paper WLS",
             kr270::CI_WLS_PERCENT.to_vec(),
-            RGBColor(150, 150, 255),
+            RGBColor(86, 180, 233),
         ),
-        ("robcal OLS (8)", pct(&f.ols), RED),
-        ("robcal WLS λ=1 (11)", pct(&f.wls[1]), GREEN),
-        ("robcal iterative WLS (11)", pct(&f.irls), BLUE),
+        // Okabe–Ito: distinguishable with every common colour-vision
+        // deficiency (no red/green pair).
+        ("robcal OLS (8)", pct(&f.ols), RGBColor(213, 94, 0)),
+        ("robcal WLS λ=1 (11)", pct(&f.wls[1]), RGBColor(0, 158, 115)),
+        (
+            "robcal iterative WLS (11)",
+            pct(&f.irls),
+            RGBColor(0, 114, 178),
+        ),
         (
             "Cramér–Rao (true Σ)",
             (0..N).map(|i| 300.0 * crb[i] / t[i]).collect(),

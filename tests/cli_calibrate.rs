@@ -237,6 +237,10 @@ fn human_report_shows_the_errors_before_and_after() {
     assert!(text.contains("added compensator on a2"), "{text}");
     assert!(text.contains("RMS 261.8 -> 122.6 um"), "{text}");
     assert!(text.contains("held-out RMS"), "{text}");
+    assert!(
+        text.contains("error per point after calibration: mean 104.5 um, max 342.9 um"),
+        "{text}"
+    );
     // The nominal error, and what ± means, say themselves.
     assert!(
         text.contains("nominal (before calibration): RMS 6318.3 um"),

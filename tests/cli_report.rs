@@ -95,6 +95,31 @@ fn the_page_has_every_section_and_the_json_numbers() {
             assert!(page.contains(&x), "{key} {m} {x}");
         }
     }
+    // The final error per point (mean, max) is the validation's on the
+    // calibration file itself (a separate prediction path, `--validate`):
+    // 90 rows per marker, so the mean is the markers' mean.
+    let maxes: Vec<f64> = ["1", "2", "3"]
+        .iter()
+        .map(|m| val["per_marker_max_mm"][m].as_f64().unwrap() * 1e3)
+        .collect();
+    let means: Vec<f64> = ["1", "2", "3"]
+        .iter()
+        .map(|m| val["per_marker_mean_mm"][m].as_f64().unwrap() * 1e3)
+        .collect();
+    let max = maxes.iter().copied().fold(0.0, f64::max);
+    let mean = means.iter().sum::<f64>() / 3.0;
+    let summary = page
+        .split("after calibration (final model)")
+        .nth(1)
+        .expect("summary row");
+    assert!(
+        summary.starts_with(&format!(
+            "</td><td>{:.1}</td><td>{mean:.1}</td><td>{max:.1}</td>",
+            v["rms_um"].as_f64().unwrap()
+        )),
+        "{}",
+        &summary[..80]
+    );
     // Every parameter with its value, σ and 95 % interval. ν = 3·270 − 9 =
     // 801; t₀.₉₇₅(801) by the Cornish–Fisher expansion z + (z³ + z)/(4ν)
     // (independent of statrs) is 1.96292.

@@ -295,6 +295,16 @@ pub struct Report {
     pub warnings: Vec<String>,
 }
 
+impl Report {
+    /// The final model's error per point over the calibration data, as
+    /// [`Nominal`] is before calibration: RMS, mean and max of the norm of
+    /// each row's 3-D residual \[µm\].
+    pub fn final_error(&self) -> Nominal {
+        let res: Vec<Vector3<f64>> = self.row_errors.iter().map(|e| e.final_um * 1e-6).collect();
+        Nominal::of(&res)
+    }
+}
+
 impl LeftOut {
     /// `a3.offset left out: absorbed by base.rz (1 mrad/mrad), …` or
     /// `… left out: no information in these data`.
@@ -520,6 +530,12 @@ impl fmt::Display for Report {
             "RMS {:.1} um, held-out RMS {} um",
             self.rms_um,
             opt(self.heldout_rms_um)
+        )?;
+        let e = self.final_error();
+        writeln!(
+            f,
+            "error per point after calibration: mean {:.1} um, max {:.1} um (before: mean {:.1} um, max {:.1} um)",
+            e.mean_um, e.max_um, self.nominal.mean_um, self.nominal.max_um
         )?;
         if let Some(v) = &self.validation {
             write!(f, "validation: RMS {:.4} mm", v.rms_mm)?;

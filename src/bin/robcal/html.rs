@@ -150,16 +150,9 @@ fn job(h: &mut String, r: &Report, info: &JobInfo<'_>) {
     h.push_str("</table></section>\n");
 }
 
-/// Mean and max of the final residual norms \[µm\].
-fn final_stats(r: &Report) -> (f64, f64) {
-    let n = r.row_errors.len().max(1) as f64;
-    let norms = r.row_errors.iter().map(|e| e.final_um.norm());
-    let max = norms.clone().fold(0.0, f64::max);
-    (norms.sum::<f64>() / n, max)
-}
-
 fn summary(h: &mut String, r: &Report) {
-    let (mean, max) = final_stats(r);
+    let after = r.final_error();
+    let (mean, max) = (after.mean_um, after.max_um);
     let _ = write!(
         h,
         "<section id=\"summary\"><h2>Error before and after</h2>\
