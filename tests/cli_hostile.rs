@@ -266,6 +266,12 @@ fn fifos_devices_and_directories_are_not_read() {
             "/dev/zero",
             "a device",
         ),
+        (vec!["import", "poses", f, "out.csv"], "fifo", "a FIFO"),
+        (
+            vec!["import", "poses", "/dev/zero", "out.csv"],
+            "/dev/zero",
+            "a device",
+        ),
     ] {
         let line = refused(&robcal(&d, &args), file);
         assert!(line.contains(what), "{args:?}: {line}");

@@ -6,6 +6,7 @@
 //!   robot.urdf ──Robot::load──► Robot ─┴─► Job ──read_measurements──► Measurements
 //!                                                 (Observation, Deflection)
 //!   FIGAROH mocap CSV ──figaroh::import_mocap──► measurement CSV (write_atomic)
+//!   wide pose CSV (shared/datasets) ──poses::import_poses──► measurement CSV
 //!   points CSV ──points::parse_points──► PointRow (robcal predict / compensate)
 //!   Robot ──template::setup_template──► a commented setup (robcal init)
 //! ```
@@ -69,6 +70,7 @@ pub mod input;
 pub mod job;
 pub mod measurements;
 pub mod points;
+pub mod poses;
 pub mod setup;
 pub mod template;
 pub mod urdf;

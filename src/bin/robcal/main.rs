@@ -5,6 +5,7 @@
 //!                  [--method irls|wls|ols] [--lambda L] [--max-iter N]
 //!                  [--no-diagnose] [--validate V.csv] [--plots DIR] [--json]
 //! robcal import figaroh-mocap IN.csv OUT.csv
+//! robcal import poses IN.csv OUT.csv [--split NAME]
 //! robcal predict --model DIR/model.json --poses P.csv [--output OUT.csv]
 //! robcal compensate --model DIR/model.json --targets T.csv [--output OUT.csv]
 //! robcal init --urdf R.urdf [--base B] [--tip T] [--output SETUP.toml]
@@ -86,6 +87,19 @@ enum ImportCommand {
         input: PathBuf,
         /// Contract CSV to write (left untouched on error).
         output: PathBuf,
+    },
+    /// The wide one-row-per-pose layout of the real data sets
+    /// (`<urdf joint>_rad`/`_m`, `x<i>_m, y<i>_m, z<i>_m` per marker,
+    /// optional `pose_id`, `split`, per-axis uncertainty `ux<i>_m` or
+    /// `std_x<i>_m`): one row per measured point, SI units (rad, m).
+    Poses {
+        /// Pose CSV.
+        input: PathBuf,
+        /// Contract CSV to write (left untouched on error).
+        output: PathBuf,
+        /// Keep only the rows whose `split` column is NAME.
+        #[arg(long, value_name = "NAME")]
+        split: Option<String>,
     },
 }
 
@@ -190,6 +204,32 @@ fn main() -> ExitCode {
                         "robcal: {} postures, {} rows written to {}",
                         n.postures,
                         n.rows,
+                        output.display()
+                    );
+                })
+                .map_err(|e| e.to_string())
+        }
+        Command::Import(ImportCommand::Poses {
+            input,
+            output,
+            split,
+        }) => {
+            let options = robcal::io::poses::ImportOptions { split };
+            robcal::io::poses::import_poses(&input, &output, &options)
+                .map(|n| {
+                    if !n.left_out.is_empty() {
+                        eprintln!(
+                            "robcal: left out (not needed by the model): {}",
+                            n.left_out.join(", ")
+                        );
+                    }
+                    let markers: Vec<String> = n.markers.iter().map(u32::to_string).collect();
+                    eprintln!(
+                        "robcal: {} poses, {} rows (markers {}{}) written to {}",
+                        n.poses,
+                        n.rows,
+                        markers.join(", "),
+                        if n.has_sigma { "; with sx, sy, sz" } else { "" },
                         output.display()
                     );
                 })
