@@ -7,7 +7,7 @@ use model_common::*;
 use nalgebra::{Matrix3, Vector3};
 use robcal::model::{
     base_columns, compliance_columns, deflection_m, joint_frame_columns, joint_offset_columns,
-    marker_columns,
+    marker_columns, tool_columns,
 };
 use robcal::robot::{gravity_torques, joint_torques, PointLoad, Wrench};
 use robcal::Chain;
@@ -111,6 +111,21 @@ fn geometric_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
                 robot.point(q, &pert, marker)
             });
             assert_close(*col, r, TOL, "marker");
+        }
+        // Tool frame: the marker moved rigidly in the tip frame,
+        // r ← Rot(w) r + t, through the reference's marker argument.
+        for (k, col) in tool_columns(&frames, &p).iter().enumerate() {
+            let r = fd(|h| {
+                let mut d = Vector3::zeros();
+                d[k % 3] = h;
+                let moved = if k < 3 {
+                    v(marker) + d
+                } else {
+                    nalgebra::Rotation3::from_scaled_axis(d) * v(marker)
+                };
+                robot.point(q, &zero, [moved.x, moved.y, moved.z])
+            });
+            assert_close(*col, r, TOL, "tool");
         }
     }
 }

@@ -13,7 +13,10 @@ use crate::model::Param;
 /// rows): it identifies geometry, the base or the markers.
 pub fn needs_absolute(job: &Job) -> bool {
     let m = &job.setup.model;
-    m.geometry != GeometryModel::None || m.base_frame || m.markers == MarkerModel::Identify
+    m.geometry != GeometryModel::None
+        || m.base_frame
+        || m.tool_frame
+        || m.markers == MarkerModel::Identify
 }
 
 /// The parameters of the setup's `[model]`, in order: compliances by angle
@@ -63,6 +66,9 @@ pub fn declared(
     }
     if m.base_frame {
         model.extend((0..6).map(|axis| Param::Base { axis }));
+    }
+    if m.tool_frame {
+        model.extend((0..6).map(|axis| Param::Tool { axis }));
     }
     if m.markers == MarkerModel::Identify {
         for marker in 0..names.markers.len() as u8 {

@@ -20,7 +20,9 @@
 //! - joint offset: `originⱼ ← originⱼ · motionⱼ(δqⱼ)` ([`crate::Joint::motion`],
 //!   the same as adding `δqⱼ` to the joint value);
 //! - joint-frame error: `originⱼ ← originⱼ · E(x)`;
-//! - marker: `markerₘ ← markerₘ + δ` (tip frame).
+//! - marker: `markerₘ ← markerₘ + δ` (tip frame);
+//! - tool frame: every marker (and its nominal position) `r ← E(x) · r`
+//!   in the tip frame.
 //!
 //! Deflection rows move with the model too: their `Δp` is measured in the
 //! measurement frame, so their columns (and the load's torques, gravity
@@ -117,6 +119,7 @@ impl Geometry {
     pub fn apply(&mut self, params: &[Param], x: &[f64]) -> f64 {
         let dof = self.chain.dof();
         let mut base = [Vector3::zeros(); 2];
+        let mut tool = [Vector3::zeros(); 2];
         let mut frame = vec![[Vector3::zeros(); 2]; dof];
         let mut largest: f64 = 0.0;
         for (p, &v) in params.iter().zip(x) {
@@ -129,6 +132,10 @@ impl Geometry {
                 Param::Base { axis } => base[usize::from(axis / 3)][usize::from(axis % 3)] = si,
                 Param::Marker { marker, axis } => {
                     self.markers[usize::from(marker)][usize::from(axis)] += si;
+                }
+                Param::Tool { axis } => {
+                    tool[usize::from(axis / 3)][usize::from(axis % 3)] = si;
+                    *self.applied.entry(*p).or_insert(0.0) += v;
                 }
                 Param::JointOffset { joint } => {
                     let jt = &mut self.chain.joints_mut()[usize::from(joint)];
@@ -145,6 +152,15 @@ impl Geometry {
         for (jt, f) in self.chain.joints_mut().iter_mut().zip(&frame) {
             if f[0] != Vector3::zeros() || f[1] != Vector3::zeros() {
                 jt.origin *= small_pose(f[0], f[1]);
+            }
+        }
+        if tool[0] != Vector3::zeros() || tool[1] != Vector3::zeros() {
+            // Everything on the tip link moves together, the nominal
+            // positions too: a marker's own displacement (its value) stays
+            // its own.
+            let e = small_pose(tool[0], tool[1]);
+            for m in self.markers.iter_mut().chain(&mut self.nominal_markers) {
+                *m = (e * nalgebra::Point3::from(*m)).coords;
             }
         }
         if base[0] != Vector3::zeros() || base[1] != Vector3::zeros() {

@@ -58,7 +58,7 @@ impl Names {
 
     /// The parameter's name (data contract §5): `k_<joint>`,
     /// `k_<joint>@<angle as written>`, `<joint>.offset`, `<joint>.tx`…,
-    /// `base.tx`…, `marker<id>.x`…, `<effect>_<joint>`, `load_com_x`…,
+    /// `base.tx`…, `tool.tx`…, `marker<id>.x`…, `<effect>_<joint>`, `load_com_x`…,
     /// `drift_x`…, `gear_cyclic_<joint>.sin`/`.cos`.
     pub fn name(&self, p: &Param) -> String {
         let c = p.component();
@@ -83,6 +83,7 @@ impl Names {
                 format!("{}.{c}", self.joint(joint))
             }
             Param::Base { .. } => format!("base.{c}"),
+            Param::Tool { .. } => format!("tool.{c}"),
             Param::Marker { marker, .. } => format!("marker{}.{c}", self.marker_id(marker)),
             Param::GearCyclic { joint, .. } => format!("gear_cyclic_{}.{c}", self.joint(joint)),
         }

@@ -24,6 +24,7 @@
 //! | `[model] geometry` | `"none"` (`"none"` \| `"joint_offsets"` \| `"full"` \| `"select"`) |
 //! | `[model] base_frame` | `false` |
 //! | `[model] markers` | `"nominal"` (`"nominal"` \| `"identify"`) |
+//! | `[model] tool_frame` | `false` |
 //!
 //! `geometry = "select"` extends the data contract (an optional value of
 //! an existing key; the contract's three values keep their meaning): no
@@ -33,6 +34,13 @@
 //! (`geometry`) as candidates, added only when the data call for them. It
 //! is meant with `base_frame = true` and `markers = "identify"`: the
 //! registration declared, the joint geometry selected.
+//!
+//! `tool_frame = true` extends the data contract (an optional key): the
+//! tip link's own 6-D pose error ([`crate::model::Param::Tool`]), which moves
+//! every marker rigidly, is identified. It is what predicts a point never
+//! measured in a calibration pose (a test point, the tool centre point)
+//! from the ones that were: per-marker positions (`markers = "identify"`)
+//! move only the measured markers.
 //!
 //! A joint may be in both `compliance` and `compliance_by_angle` (as in the
 //! contract's example); what that means is the model's business, not the
@@ -206,6 +214,10 @@ pub struct Model {
     /// Marker positions nominal or identified.
     #[serde(default)]
     pub markers: MarkerModel,
+    /// Identify the tool frame: a 6-D error of the tip link that moves every
+    /// marker together (extension of the contract; default `false`).
+    #[serde(default)]
+    pub tool_frame: bool,
 }
 
 /// The setup file. See the module doc for keys and defaults.

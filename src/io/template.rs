@@ -68,7 +68,8 @@ pub fn setup_template(robot_path: &str, robot: &Robot) -> String {
         "compliance_by_angle = []    # a compliance per angle of a joint (a gravity compensator)\n\
          geometry = \"none\"           # \"none\" | \"joint_offsets\" | \"full\" | \"select\"\n\
          base_frame = false          # identify the base's 6-D pose in the measurement frame\n\
-         markers = \"nominal\"         # \"nominal\" | \"identify\"\n",
+         markers = \"nominal\"         # \"nominal\" | \"identify\"\n\
+         tool_frame = false          # identify the tip link's 6-D pose error (moves every marker together)\n",
     );
     t
 }

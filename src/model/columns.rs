@@ -178,6 +178,7 @@ impl Param {
                 joint_frame_columns(s.frames, usize::from(joint), p)?[axis(a, 6)?]
             }
             Param::Base { axis: a } => base_columns(p)[axis(a, 6)?],
+            Param::Tool { axis: a } => tool_columns(s.frames, p)[axis(a, 6)?],
             Param::Marker { marker, axis: a } => {
                 if marker == s.marker {
                     marker_columns(s.frames)[axis(a, 3)?]
@@ -256,6 +257,28 @@ pub fn joint_frame_columns<T: RealField + Copy, const J: usize>(
 pub fn base_columns<T: RealField + Copy>(p_m: &Vector3<T>) -> [Vector3<T>; 6] {
     let (x, y, z) = (Vector3::x(), Vector3::y(), Vector3::z());
     [x, y, z, x.cross(p_m), y.cross(p_m), z.cross(p_m)]
+}
+
+/// The six tool-frame columns at a point `p_m` [m, base frame] fixed to the
+/// tip link: the tip frame's axes `R_tip eₖ` (m/m), then
+/// `R_tip eₖ × (p − o_tip)` (m/rad) — a small rigid motion of the tip link's
+/// contents in the tip frame ([`Param::Tool`]).
+pub fn tool_columns<T: RealField + Copy, const J: usize>(
+    frames: &Frames<T, J>,
+    p_m: &Vector3<T>,
+) -> [Vector3<T>; 6] {
+    let tip = frames.tip();
+    let r = tip.rotation.to_rotation_matrix();
+    let arm = p_m - tip.translation.vector;
+    let e = |k: usize| r.matrix().column(k).into_owned();
+    [
+        e(0),
+        e(1),
+        e(2),
+        e(0).cross(&arm),
+        e(1).cross(&arm),
+        e(2).cross(&arm),
+    ]
 }
 
 /// The three marker-position columns (m/m): the tip frame's axes in the base

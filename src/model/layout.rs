@@ -264,7 +264,7 @@ pub fn column_of(
         None => JointKind::Revolute,
     };
     let (axis, len) = match param {
-        Param::JointFrame { axis, .. } | Param::Base { axis } => (axis, 6),
+        Param::JointFrame { axis, .. } | Param::Base { axis } | Param::Tool { axis } => (axis, 6),
         Param::Marker { axis, .. } | Param::LoadCom { axis } | Param::Drift { axis } => (axis, 3),
         _ => (0, 1),
     };

@@ -11,7 +11,7 @@
 //! | parameter | unit (revolute / prismatic joint) | `si` | eq. |
 //! |---|---|---|---|
 //! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`] | `mrad` / `mm` | 1e-3 | 2 |
-//! | [`Param::JointFrame`], [`Param::Base`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
+//! | [`Param::JointFrame`], [`Param::Base`], [`Param::Tool`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
 //! | [`Param::Marker`], [`Param::LoadCom`] | `mm` | 1e-3 | 2 |
 //! | [`Param::Compliance`], [`Param::ComplianceAt`] | `urad/(N*m)` / `um/N` | 1e-6 | 3 |
 //! | [`Param::LinkCompliance`] | `urad/(N*m)` | 1e-6 | |
@@ -56,6 +56,15 @@ pub enum Param {
     },
     /// One of the six components of the base pose in the measurement frame.
     Base {
+        /// 0..6: tx, ty, tz, rx, ry, rz.
+        axis: u8,
+    },
+    /// One of the six components of the tool frame's error: a small rigid
+    /// motion `E` of everything fixed to the tip link, in the tip frame
+    /// (every marker `r ← E r`). It carries points never measured in a
+    /// calibration pose (a test point, a tool centre point) with the ones
+    /// that were, which per-marker positions ([`Param::Marker`]) cannot.
+    Tool {
         /// 0..6: tx, ty, tz, rx, ry, rz.
         axis: u8,
     },
@@ -150,6 +159,7 @@ impl Param {
             | Param::LinkCompliance { joint }
             | Param::GearCyclic { joint, .. } => Some(joint),
             Param::Base { .. }
+            | Param::Tool { .. }
             | Param::Marker { .. }
             | Param::LoadCom { .. }
             | Param::Drift { .. } => None,
@@ -165,6 +175,7 @@ impl Param {
             Param::JointOffset { .. }
                 | Param::JointFrame { .. }
                 | Param::Base { .. }
+                | Param::Tool { .. }
                 | Param::Marker { .. }
         )
     }
@@ -187,7 +198,7 @@ impl Param {
                     MRAD
                 }
             }
-            Param::JointFrame { axis, .. } | Param::Base { axis } => {
+            Param::JointFrame { axis, .. } | Param::Base { axis } | Param::Tool { axis } => {
                 if axis < 3 {
                     MM
                 } else {
@@ -226,7 +237,9 @@ impl Param {
         let xyz = |a: u8| XYZ.get(usize::from(a)).copied().unwrap_or("?");
         match *self {
             Param::JointOffset { .. } => "offset",
-            Param::JointFrame { axis, .. } | Param::Base { axis } => six(axis),
+            Param::JointFrame { axis, .. } | Param::Base { axis } | Param::Tool { axis } => {
+                six(axis)
+            }
             Param::Marker { axis, .. } | Param::LoadCom { axis } | Param::Drift { axis } => {
                 xyz(axis)
             }
@@ -265,6 +278,7 @@ impl fmt::Display for Param {
                 write!(f, "j{joint}.{c}")
             }
             Param::Base { .. } => write!(f, "base.{c}"),
+            Param::Tool { .. } => write!(f, "tool.{c}"),
             Param::Marker { marker, .. } => write!(f, "marker{marker}.{c}"),
             Param::Compliance { joint } => write!(f, "k_j{joint}"),
             Param::ComplianceAt { joint, angle_urad } => write!(
