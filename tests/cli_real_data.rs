@@ -281,3 +281,57 @@ fn abb_tool_frame_equals_a_tool_joint_held_at_zero() {
     assert!((rms - 271.3).abs() < 0.1, "rms {rms}");
     assert!((held - 325.4).abs() < 0.1, "held-out {held}");
 }
+
+/// The protocol of docs/real-data.md, pinned: the closed loop on the 36
+/// calibration poses, validated on the 40 test points never measured in
+/// calibration (T1: marker 4 in 10 poses, T2: marker 5 in 30).
+#[test]
+fn abb_protocol_on_the_test_points() {
+    let Some(data) = datasets("abb_protocol_on_the_test_points") else {
+        return;
+    };
+    let d = dir("protocol");
+    let (cal, _) = import(&data, &d, "abb_irb120", "cal");
+    let (test, _) = import(&data, &d, "abb_irb120", "test");
+    let setup = abb_setup(&data, &d);
+    let run = |extra: &[&str]| -> Value {
+        let mut args = vec![
+            "calibrate",
+            "--setup",
+            setup.to_str().unwrap(),
+            "--data",
+            cal.to_str().unwrap(),
+            "--validate",
+            test.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend(extra);
+        let o = robcal(&args);
+        ok(&o);
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    // (run, mean mm, max mm, RMS mm): docs/real-data.md's table.
+    for (extra, mean, max, rms) in [
+        (&[][..], 0.1921, 0.6424, 0.2241),
+        (&["--no-diagnose"][..], 0.2565, 0.5361, 0.2779),
+    ] {
+        let v = run(extra);
+        let val = &v["validation"];
+        assert_eq!(val["points"].as_u64(), Some(40));
+        let m = |k: &str, id: &str| val[k][id].as_f64().unwrap();
+        let got_mean =
+            (10.0 * m("per_marker_mean_mm", "4") + 30.0 * m("per_marker_mean_mm", "5")) / 40.0;
+        let got_max = m("per_marker_max_mm", "4").max(m("per_marker_max_mm", "5"));
+        let got_rms = val["rms_mm"].as_f64().unwrap();
+        for (what, got, want) in [
+            ("mean", got_mean, mean),
+            ("max", got_max, max),
+            ("rms", got_rms, rms),
+        ] {
+            assert!(
+                (got - want).abs() < 1e-4,
+                "{extra:?} {what}: {got} mm, want {want}"
+            );
+        }
+    }
+}
