@@ -71,9 +71,12 @@ fn kr270_naive_model_traces_the_compensator() {
             "rms_um",
             "unexplained",
             "validation",
-            "warnings"
+            "warnings",
+            "weights"
         ]
     );
+    // No instrument σ in these data: the paper's estimated σ.
+    assert_eq!(v["weights"], "estimated");
     // The nominal error (data contract 7.5) of a deflection-only job is the
     // measured deflections themselves: computed here from the CSV.
     let csv = std::fs::read_to_string(root().join("data/kr270/measurements.csv")).unwrap();

@@ -335,3 +335,106 @@ fn abb_protocol_on_the_test_points() {
         }
     }
 }
+
+/// `[noise] weights = "instrument"` (data contract 7.2) against OLS, an
+/// independent path: equal instrument σ everywhere give OLS's estimate; a
+/// pose whose points have a σ of 100 m weighs nothing, and the estimate is
+/// OLS's without that pose.
+#[test]
+fn instrument_weights_against_ols() {
+    let Some(data) = datasets("instrument_weights_against_ols") else {
+        return;
+    };
+    let d = dir("weights");
+    let (cal, _) = import(&data, &d, "abb_irb120", "cal");
+    let text = std::fs::read_to_string(&cal).unwrap();
+    let with_sigma =
+        |name: &str, sigma: &dyn Fn(&str) -> &'static str, keep: &dyn Fn(&str) -> bool| {
+            let mut out = String::new();
+            for (i, line) in text.lines().enumerate() {
+                let config = line.split(',').next().unwrap();
+                if i == 0 {
+                    out.push_str(&format!("{line},sx,sy,sz\n"));
+                } else if keep(config) {
+                    let s = sigma(config);
+                    out.push_str(&format!("{line},{s},{s},{s}\n"));
+                }
+            }
+            let path = d.join(name);
+            std::fs::write(&path, out).unwrap();
+            path
+        };
+    let setup = std::fs::read_to_string(abb_setup(&data, &d)).unwrap();
+    let setup = setup.replace(
+        "../../../shared/datasets/abb_irb120/abb_irb120.urdf",
+        &data.join("abb_irb120/abb_irb120.urdf").to_string_lossy(),
+    );
+    let instrument = d.join("instrument.toml");
+    std::fs::write(
+        &instrument,
+        setup.replace("lambda = 1.0", "lambda = 1.0\nweights = \"instrument\""),
+    )
+    .unwrap();
+    let run = |setup: &Path, data: &Path, method: &str| -> Value {
+        let o = robcal(&[
+            "calibrate",
+            "--setup",
+            setup.to_str().unwrap(),
+            "--data",
+            data.to_str().unwrap(),
+            "--method",
+            method,
+            "--no-diagnose",
+            "--json",
+        ]);
+        ok(&o);
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let params = |v: &Value| -> Vec<(String, f64, f64)> {
+        v["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                (
+                    p["name"].as_str().unwrap().to_owned(),
+                    p["value"].as_f64().unwrap(),
+                    p["std"].as_f64().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let same = |a: &Value, b: &Value, tol_sd: f64| {
+        let (a, b) = (params(a), params(b));
+        assert_eq!(a.len(), b.len());
+        for ((na, xa, sa), (nb, xb, _)) in a.iter().zip(&b) {
+            assert_eq!(na, nb);
+            assert!(
+                (xa - xb).abs() <= tol_sd * sa,
+                "{na}: {xa} vs {xb} (sd {sa})"
+            );
+        }
+    };
+    let plain = abb_setup(&data, &d);
+    let equal = with_sigma("equal.csv", &|_| "0.00002", &|_| true);
+    let v = run(&instrument, &equal, "irls");
+    assert_eq!(v["weights"], "instrument");
+    // To the Gauss–Newton iteration's stopping step (the two paths stop at
+    // different relinearisations): 1 % of a standard deviation.
+    same(&v, &run(&plain, &cal, "ols"), 1e-2);
+    let one_off = with_sigma(
+        "one_off.csv",
+        &|c| if c == "5" { "100" } else { "0.00002" },
+        &|_| true,
+    );
+    let without = with_sigma("without.csv", &|_| "0.00002", &|c| c != "5");
+    let ols_without = run(&plain, &without, "ols");
+    same(&run(&instrument, &one_off, "irls"), &ols_without, 1e-2);
+    // And the test can fail: pose 5 moves OLS by more than that.
+    let moved = params(&run(&plain, &cal, "ols"))
+        .iter()
+        .zip(params(&ols_without))
+        .map(|((_, a, s), (_, b, _))| (a - b).abs() / s)
+        .fold(0.0, f64::max);
+    assert!(moved > 0.05, "pose 5 moves the estimate by {moved} sd only");
+}

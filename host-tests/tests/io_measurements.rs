@@ -633,3 +633,43 @@ fn optional_columns_and_ignored_columns() {
     let m = read(&job, text).expect("reads");
     assert_eq!(m.observations[0].p_m, [1.0, 0.0, 0.5]);
 }
+
+/// `sx, sy, sz` (data contract 7.2): the instrument's σ per axis, in the
+/// length unit (mm here), three columns or none, each a length ≥ 0.
+#[test]
+fn instrument_sigma_columns() {
+    let job = job();
+    let m = read(
+        &job,
+        &format!("{HEADER},sx,sy,sz\n1,0,7,0,90,-45,150,1234.5,-0.25,1000,0.01,0.02,0\n"),
+    )
+    .unwrap();
+    assert_eq!(m.observations[0].sigma_m, Some([1e-5, 2e-5, 0.0]));
+    let m = read(
+        &job,
+        &format!("{HEADER}\n1,0,7,0,90,-45,150,1234.5,-0.25,1000\n"),
+    )
+    .unwrap();
+    assert_eq!(m.observations[0].sigma_m, None);
+    let e = read_err(
+        &job,
+        &format!("{HEADER},sx,sz\n1,0,7,0,90,-45,150,1234.5,-0.25,1000,0.01,0\n"),
+    );
+    assert_eq!(
+        e.to_string(),
+        "d.csv:1: column 'sy': the instrument's σ comes as three columns sx, sy, sz or none"
+    );
+    let e = read_err(
+        &job,
+        &format!("{HEADER},sx,sy,sz\n1,0,7,0,90,-45,150,1234.5,-0.25,1000,0.01,-0.02,0\n"),
+    );
+    assert_eq!(e.kind, ErrorKind::InvalidValue);
+    assert_eq!(e.column.as_deref(), Some("sy"));
+    // The writer writes them back, bit for bit.
+    let path = temp("sigma.csv");
+    let mut rows = m.observations.clone();
+    rows[0].sigma_m = Some([1e-5, 2.5e-5, 3e-6]);
+    write_measurements(&path, &job.robot, job.setup.units, &rows).unwrap();
+    let back = read_measurements(&path, &job.robot, &job.setup).unwrap();
+    assert_eq!(back.observations[0].sigma_m, rows[0].sigma_m);
+}

@@ -24,6 +24,9 @@ pub struct Design {
     pub group: Vec<usize>,
     /// Number of groups.
     pub groups: usize,
+    /// The instrument's σ per group and axis \[m\] (the root mean square of
+    /// its rows'), when every row has one (data contract 7.2).
+    pub instrument_sigma: Option<Vec<Vector3<f64>>>,
 }
 
 impl Design {
@@ -58,12 +61,27 @@ impl Design {
             }
             y.extend_from_slice(row.y.as_slice());
         }
+        let instrument_sigma = rows.iter().all(|r| r.sigma.is_some()).then(|| {
+            let mut ss = vec![Vector3::<f64>::zeros(); groups];
+            let mut n = vec![0.0_f64; groups];
+            for r in rows {
+                if let (Some(s), Some(g)) = (r.sigma, ss.get_mut(r.group)) {
+                    *g += s.component_mul(&s);
+                    n[r.group] += 1.0;
+                }
+            }
+            ss.iter()
+                .zip(&n)
+                .map(|(s, &k)| (s / k.max(1.0)).map(f64::sqrt))
+                .collect()
+        });
         Ok(Self {
             params: params.to_vec(),
             b,
             y,
             group: rows.iter().map(|r| r.group).collect(),
             groups,
+            instrument_sigma,
         })
     }
 

@@ -418,6 +418,11 @@ pub fn run(
     e.restore(&current)?;
     Ok(Report {
         method: e.fit_settings.method.name(),
+        weights: if e.fit_settings.method == Method::Ols {
+            "none"
+        } else {
+            e.fit_settings.weighting.name()
+        },
         nominal: Default::default(),
         iterations: current.fit.iterations,
         relinearisations: current.relinearisations,

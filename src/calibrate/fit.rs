@@ -7,9 +7,10 @@ use nalgebra::{Dyn, OMatrix, Vector3, U3};
 use super::design::Design;
 pub use super::settings::Method;
 use crate::estimate::{
-    group_dof, group_sigma, leverage, nested_test, Accumulator, Block, Fit, IrlsSettings,
-    NestedTest, Noise, Reweightable, RobustWeight, Solution,
+    group_dof, group_sigma, leverage, nested_test, robust_weights, Accumulator, Block, Fit,
+    IrlsSettings, NestedTest, Noise, Reweightable, RobustWeight, Solution,
 };
+pub use crate::io::Weighting;
 use crate::Error;
 
 /// How one fit is made.
@@ -23,6 +24,9 @@ pub struct FitSettings {
     pub max_iterations: usize,
     /// IRLS stops when no parameter moves by more than this many of its σ.
     pub tolerance: f64,
+    /// Which σ enters eq. 14 (WLS and IRLS); `instrument` and `both` use
+    /// the design's [`Design::instrument_sigma`] (estimated without it).
+    pub weighting: Weighting,
 }
 
 /// A fit on some columns of a design: the estimate and its noise model.
@@ -72,6 +76,9 @@ struct View<'a> {
     d: &'a Design,
     cols: &'a [usize],
     skip_group: Option<usize>,
+    /// A floor for the residual σ per group and axis \[m\]: the
+    /// instrument's ([`Weighting::Both`]).
+    floor: Option<&'a [Vector3<f64>]>,
 }
 
 impl View<'_> {
@@ -145,6 +152,9 @@ impl Reweightable<f64, Dyn> for View<'_> {
         }
         for g in 0..groups {
             sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[g][a], n[g], h[g][a]));
+            if let Some(floor) = self.floor.and_then(|f| f.get(g)) {
+                sigma[g] = sigma[g].sup(floor);
+            }
             dof[g] = Vector3::from_fn(|a, _| group_dof(n[g], h[g][a]));
         }
         Ok(())
@@ -162,10 +172,12 @@ pub fn fit(
     skip_group: Option<usize>,
     s: &FitSettings,
 ) -> Result<FitOut, Error> {
+    let instrument = d.instrument_sigma.as_deref();
     let view = View {
         d,
         cols,
         skip_group,
+        floor: instrument.filter(|_| s.weighting == Weighting::Both),
     };
     let active = vec![true; cols.len()];
     let mut weights = vec![Vector3::zeros(); d.groups];
@@ -181,6 +193,25 @@ pub fn fit(
         Method::Ols => {
             let f = view.fit_ols(&active, &mut weights, &mut sigma, &mut dof)?;
             history.push(step(&f, 0.0));
+            f
+        }
+        Method::Wls | Method::Irls
+            if s.weighting == Weighting::Instrument && instrument.is_some() =>
+        {
+            // Weights known in advance: one weighted fit (eq. 10) with
+            // eq. 14 at the instrument's σ; the sandwich with σ from its
+            // residuals.
+            let ols = view.fit_ols(&active, &mut weights, &mut sigma, &mut dof)?;
+            history.push(step(&ols, 0.0));
+            robust_weights(instrument.unwrap_or_default(), &s.weight, &mut weights)?;
+            let mut f = view.fit_weighted(&weights, &active, &mut sigma, &mut dof)?;
+            f.iterations = 1;
+            let std = f.std();
+            let change = (0..cols.len())
+                .filter(|&i| std[i] > 0.0)
+                .map(|i| (f.solution.x[i] - ols.solution.x[i]).abs() / std[i])
+                .fold(0.0, f64::max);
+            history.push(step(&f, change));
             f
         }
         Method::Wls => {
@@ -229,7 +260,9 @@ pub fn fit(
         sigma,
         dof,
         iterations: fit.iterations,
-        converged: s.method != Method::Irls || fit.converged,
+        converged: s.method != Method::Irls
+            || fit.converged
+            || (s.weighting == Weighting::Instrument && instrument.is_some()),
         history,
     })
 }
@@ -251,6 +284,7 @@ pub fn test(
         d,
         cols: &cols,
         skip_group: None,
+        floor: None,
     };
     let acc = view.weighted(weights, None)?;
     let m: Vec<bool> = (0..cols.len()).map(|i| i < model.len()).collect();

@@ -94,6 +94,7 @@ mod tests {
             y,
             group: (0..rows).map(|i| i / per).collect(),
             groups,
+            instrument_sigma: None,
         }
     }
 
@@ -103,6 +104,7 @@ mod tests {
             weight: RobustWeight::new(1e-5, 0.0).expect("valid weight"),
             max_iterations: 1,
             tolerance: 0.1,
+            weighting: super::super::fit::Weighting::Estimated,
         }
     }
 

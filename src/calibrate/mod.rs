@@ -130,6 +130,7 @@ pub fn calibrate(
         settings.lambda.unwrap_or(setup.noise.lambda),
     )
     .map_err(|e| CalibrationError::Core("noise settings", e))?;
+    let weighting = weighting(setup, &rows, &data.file)?;
     let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut e = engine::Engine {
         geometry: Geometry::nominal(&job.robot.chain, &markers),
@@ -141,6 +142,7 @@ pub fn calibrate(
             weight,
             max_iterations: settings.max_iterations,
             tolerance: policy.irls_tolerance,
+            weighting,
         },
         policy,
         heldout: settings.heldout,
@@ -207,11 +209,15 @@ pub fn calibrate(
     }
     let mut settings = *settings;
     let mut notes = Vec::new();
-    if let Some(note) = diagnosis::weighting_fallback(&e, settings.method) {
-        (e.progress)(&note);
-        notes.push(note);
-        settings.method = Method::Ols;
-        e.fit_settings.method = Method::Ols;
+    // Weights known in advance (the instrument's σ) need no scatter per
+    // configuration; estimated ones (`estimated`, `both`) fall back to OLS.
+    if e.fit_settings.weighting != fit::Weighting::Instrument {
+        if let Some(note) = diagnosis::weighting_fallback(&e, settings.method) {
+            (e.progress)(&note);
+            notes.push(note);
+            settings.method = Method::Ols;
+            e.fit_settings.method = Method::Ols;
+        }
     }
     let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
     let mut report = diagnosis::run(e, declared, left_out, &settings, notes)?;
@@ -222,6 +228,44 @@ pub fn calibrate(
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     Ok(report)
+}
+
+/// Which σ enters the weights ([`crate::io::Weighting`]): the setup's
+/// `[noise] weights`, else `both` when every row carries the instrument's
+/// σ (`sx, sy, sz`, data contract 7.2) and `estimated` when none does.
+///
+/// # Errors
+/// [`CalibrationError::Data`] when some rows carry it and some do not
+/// (only deflections without both points' σ), or when the setup asks for
+/// the instrument's σ and the data do not have it.
+fn weighting(
+    setup: &crate::io::Setup,
+    rows: &Rows,
+    file: &std::path::Path,
+) -> Result<fit::Weighting, CalibrationError> {
+    use fit::Weighting;
+    let with = rows.rows.iter().filter(|r| r.sigma.is_some()).count();
+    let all = with == rows.rows.len();
+    if with > 0 && !all {
+        return Err(CalibrationError::Data(format!(
+            "{}: {with} of {} rows carry the instrument's σ (sx, sy, sz): all or none",
+            file.display(),
+            rows.rows.len()
+        )));
+    }
+    match setup.noise.weights {
+        None if all && with > 0 => Ok(Weighting::Both),
+        None => Ok(Weighting::Estimated),
+        Some(w @ (Weighting::Instrument | Weighting::Both)) if with == 0 => {
+            Err(CalibrationError::Data(format!(
+                "{}: [noise] weights = \"{}\" needs the instrument's σ, but the \
+                 measurements have no sx, sy, sz columns",
+                file.display(),
+                w.name()
+            )))
+        }
+        Some(w) => Ok(w),
+    }
 }
 
 #[cfg(test)]

@@ -226,6 +226,10 @@ pub struct RowError {
 pub struct Report {
     /// `irls` | `wls` | `ols`.
     pub method: &'static str,
+    /// Which σ entered eq. 14's weights: `estimated` (the paper's),
+    /// `instrument` (`sx, sy, sz`), `both` (the estimate, floored at the
+    /// instrument's), or `none` (OLS).
+    pub weights: &'static str,
     /// The declared model's error before calibration.
     pub nominal: Nominal,
     /// Reweighting iterations of the final fit.
@@ -350,6 +354,21 @@ fn about(s: &EffectStep) -> String {
     }
 }
 
+/// What the weights were, in words, for `[noise] weights` = `w`.
+pub fn weights_line(w: &str) -> &'static str {
+    match w {
+        "instrument" => {
+            "eq. 14 at the instrument's sigma (sx, sy, sz), known in advance: one weighted fit"
+        }
+        "both" => {
+            "eq. 14 at the estimated sigma per configuration and axis, never below the \
+             instrument's (sx, sy, sz), iterated"
+        }
+        "none" => "none (OLS)",
+        _ => "eq. 14 at the sigma estimated per configuration and axis, iterated",
+    }
+}
+
 impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
@@ -357,6 +376,9 @@ impl fmt::Display for Report {
             "robcal calibrate: {} rows (3 equations each), {} configurations, method {}",
             self.rows, self.configurations, self.method
         )?;
+        if self.weights != "estimated" && self.weights != "none" {
+            writeln!(f, "weights: {}", weights_line(self.weights))?;
+        }
         writeln!(f, "nominal (before calibration): {}", self.nominal)?;
         for n in &self.notes {
             writeln!(f, "note: {n}")?;

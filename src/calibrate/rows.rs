@@ -62,6 +62,10 @@ pub struct Row {
     pub measured: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
+    /// The instrument's σ of what was measured, per axis \[m\] (data
+    /// contract 7.2): the point's, or for a deflection the root sum of
+    /// squares of its two points'.
+    pub sigma: Option<Vector3<f64>>,
     /// Frames of the current model in the measurement frame, at the pose
     /// the row's point is at: `q`, or with the exact deflection model the
     /// equilibrium (the loaded one for a deflection).
@@ -243,7 +247,15 @@ impl Rows {
         let index_of = |id: u32| names.marker_index(id).unwrap_or(0);
         let core = |what: &'static str| move |e: Error| CalibrationError::Core(what, e);
         let mut rows = Vec::new();
-        let mut row = |kind, config, marker, load_kg, q: &[f64], dt, measured: [f64; 3], line| {
+        let mut row = |kind,
+                       config,
+                       marker,
+                       load_kg,
+                       q: &[f64],
+                       dt,
+                       measured: [f64; 3],
+                       line,
+                       sigma: Option<[f64; 3]>| {
             rows.push(Row {
                 kind,
                 group: group_of(config),
@@ -254,6 +266,7 @@ impl Rows {
                 dt,
                 measured: Vector3::from(measured),
                 line,
+                sigma: sigma.map(Vector3::from),
                 frames: chain.frames(q).map_err(core("forward kinematics"))?,
                 p: Vector3::zeros(),
                 tau: vec![0.0; dof],
@@ -275,6 +288,10 @@ impl Rows {
                 dt,
                 d.dp_m,
                 d.lines[0],
+                loaded
+                    .sigma_m
+                    .zip(unloaded.sigma_m)
+                    .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
             )?;
         }
         if use_absolute {
@@ -289,6 +306,7 @@ impl Rows {
                     dt,
                     o.p_m,
                     o.line,
+                    o.sigma_m,
                 )?;
             }
         }

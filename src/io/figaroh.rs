@@ -137,6 +137,7 @@ impl MocapFile {
                     q_written: Vec::new(),
                     p_m: *point,
                     t_s: p.t_mid_s,
+                    sigma_m: None,
                     line: p.line,
                 });
             }

@@ -6,7 +6,9 @@
 //! any order, one joint column per movable joint of the chain named by its
 //! URDF joint name. Cells are trimmed. Joint columns and `x,y,z` are in the
 //! setup's `[units]` (prismatic joints in the length unit); `load_kg` in kg,
-//! `t` in s. Data contract 7.2: `rep` may be left out (every row is
+//! `t` in s; `sx, sy, sz` (optional, all three or none), the instrument's
+//! standard deviation of the point per axis, in the length unit. Data
+//! contract 7.2: `rep` may be left out (every row is
 //! repetition 1), `marker` when the setup declares one marker, `load_kg`
 //! when it has no `[load]` (every row unloaded); a column named in the
 //! setup's `ignore_columns` is skipped, empty cells included.
@@ -77,6 +79,9 @@ pub struct Observation {
     pub p_m: [f64; 3],
     /// Time \[s\], when the file has a `t` column.
     pub t_s: Option<f64>,
+    /// The instrument's standard deviation of this point per axis \[m\],
+    /// when the file has `sx, sy, sz` (data contract 7.2).
+    pub sigma_m: Option<[f64; 3]>,
     /// 1-based line in the file (header is line 1); ignored by the writer.
     pub line: usize,
 }
@@ -136,9 +141,11 @@ enum Col {
     Joint(usize),
     Pos(usize),
     Time,
+    /// `sx, sy, sz`: the instrument's σ per axis.
+    Sigma(usize),
 }
 
-const FIXED: [(&str, Col); 8] = [
+const FIXED: [(&str, Col); 11] = [
     ("config", Col::Config),
     ("rep", Col::Rep),
     ("marker", Col::Marker),
@@ -147,6 +154,9 @@ const FIXED: [(&str, Col); 8] = [
     ("y", Col::Pos(1)),
     ("z", Col::Pos(2)),
     ("t", Col::Time),
+    ("sx", Col::Sigma(0)),
+    ("sy", Col::Sigma(1)),
+    ("sz", Col::Sigma(2)),
 ];
 
 /// Reads a measurement file for `robot` and `setup` (units, markers, load).
@@ -323,6 +333,19 @@ pub fn parse_measurements<R: std::io::Read>(
         }
     }
     let has_time = cols.contains(&Col::Time);
+    // `sx, sy, sz` come together (data contract 7.2).
+    let sigma_cols = (0..3).filter(|&k| cols.contains(&Col::Sigma(k))).count();
+    if sigma_cols != 0 && sigma_cols != 3 {
+        let missing = ["sx", "sy", "sz"][(0..3)
+            .find(|&k| !cols.contains(&Col::Sigma(k)))
+            .unwrap_or(0)];
+        return Err(cell_err(
+            ErrorKind::MissingColumn,
+            1,
+            missing,
+            "the instrument's σ comes as three columns sx, sy, sz or none".into(),
+        ));
+    }
 
     let units = setup.units;
     let dof = robot.dof();
@@ -466,6 +489,20 @@ pub fn parse_measurements<R: std::io::Read>(
                         ));
                     }
                     o.t_s = Some(t);
+                }
+                Col::Sigma(k) => {
+                    let v = parse_real(cell, Scale::Length(units.length))
+                        .map_err(|(k, m)| cerr(k, m))?;
+                    if !(0.0..=MAX_POSITION_M).contains(&v) {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "σ {v:?} m: the instrument's standard deviation is a length \
+                                 from 0 to {MAX_POSITION_M:?} m"
+                            ),
+                        ));
+                    }
+                    o.sigma_m.get_or_insert([0.0; 3])[k] = v;
                 }
             }
         }

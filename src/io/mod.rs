@@ -84,6 +84,7 @@ pub use measurements::{
 };
 pub use setup::{
     AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,
+    Weighting,
 };
 pub use urdf::{JointLimits, OffChainBranch, Robot, UrdfJointKind, MAX_JOINTS};
 pub use writer::write_measurements;

@@ -19,6 +19,7 @@
 //! | `[load] gravity` | `[0, 0, -9.80665]` m/s², base frame |
 //! | `[noise] sigma0_um` | `10` µm, `> 0` |
 //! | `[noise] lambda` | `1`, `≥ 0` |
+//! | `[noise] weights` | `"both"` with `sx, sy, sz` in the data, else `"estimated"` (`"estimated"` \| `"instrument"` \| `"both"`) |
 //! | `[model] compliance` | `[]`: joint names, movable joints of the chain |
 //! | `[model] compliance_by_angle` | `[]`: revolute/continuous joints of the chain |
 //! | `[model] geometry` | `"none"` (`"none"` \| `"joint_offsets"` \| `"full"` \| `"select"`) |
@@ -149,6 +150,37 @@ pub struct Noise {
     /// `λ`, the eq. 14 tuning factor, `≥ 0`.
     #[serde(default = "default_lambda")]
     pub lambda: f64,
+    /// Which σ enters eq. 14's weights (an extension; `None`: `both` when
+    /// the measurements carry the instrument's `sx, sy, sz`, else
+    /// `estimated`).
+    #[serde(default)]
+    pub weights: Option<Weighting>,
+}
+
+/// `[noise] weights`: which σ enters the weights `w = σ0 / (σ0 + λσ)` of
+/// eq. 14, per configuration and axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weighting {
+    /// σ estimated from the residuals (eq. 14, iterated): the paper's.
+    #[default]
+    Estimated,
+    /// The instrument's σ (`sx, sy, sz`), known in advance: one weighted fit.
+    Instrument,
+    /// The estimated σ, never below the instrument's (the instrument's σ
+    /// as a floor), iterated.
+    Both,
+}
+
+impl Weighting {
+    /// Its name in the setup and the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Weighting::Estimated => "estimated",
+            Weighting::Instrument => "instrument",
+            Weighting::Both => "both",
+        }
+    }
 }
 
 fn default_sigma0() -> f64 {
@@ -164,6 +196,7 @@ impl Default for Noise {
         Self {
             sigma0_um: default_sigma0(),
             lambda: default_lambda(),
+            weights: None,
         }
     }
 }

@@ -9,8 +9,9 @@ use super::urdf::Robot;
 use super::{ErrorKind, InputError};
 
 /// Writes `rows` (SI) as a measurement file for `robot` in `units`:
-/// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t]`
-/// (`t` when the rows have times). [`read_measurements`] reads it back to
+/// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t][,sx,sy,sz]`
+/// (`t` when the rows have times, `sx, sy, sz` when they have the
+/// instrument's σ). [`read_measurements`] reads it back to
 /// the same values (see the module doc for deg).
 ///
 /// The file is written to a temporary file next to `path` and renamed over
@@ -29,6 +30,7 @@ pub fn write_measurements(
 ) -> Result<(), InputError> {
     let path = path.as_ref();
     let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
+    let has_sigma = rows.first().is_some_and(|r| r.sigma_m.is_some());
     let dof = robot.dof();
     let scales: Vec<Scale> = robot
         .joint_kinds
@@ -48,6 +50,9 @@ pub fn write_measurements(
     header.extend(["x", "y", "z"]);
     if has_time {
         header.push("t");
+    }
+    if has_sigma {
+        header.extend(["sx", "sy", "sz"]);
     }
     let io_err = |e: &dyn std::fmt::Display| {
         InputError::new(
@@ -74,7 +79,19 @@ pub fn write_measurements(
                 "some rows have a time and some do not".into(),
             );
         }
-        let numbers = r.q.iter().chain(&r.p_m).chain(&r.t_s).chain([&r.load_kg]);
+        if r.sigma_m.is_some() != has_sigma {
+            return err(
+                ErrorKind::InvalidValue,
+                "some rows have the instrument's σ and some do not".into(),
+            );
+        }
+        let sigma = r.sigma_m.iter().flatten();
+        let numbers =
+            r.q.iter()
+                .chain(&r.p_m)
+                .chain(&r.t_s)
+                .chain([&r.load_kg])
+                .chain(sigma.clone());
         if numbers.clone().any(|v| !v.is_finite()) {
             return err(ErrorKind::NonFinite, "non-finite value".into());
         }
@@ -97,6 +114,7 @@ pub fn write_measurements(
                 .map(|&v| format_real(v, Scale::Length(units.length))),
         );
         fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
+        fields.extend(sigma.map(|&v| format_real(v, Scale::Length(units.length))));
         out.write_record(&fields).map_err(|e| io_err(&e))?;
     }
     let bytes = out.into_inner().map_err(|e| io_err(&e))?;

@@ -16,6 +16,7 @@ use robcal::calibrate::{EffectStep, LeftOut, NearDependent, Report, Unexplained,
 #[derive(Serialize)]
 pub struct ReportJson<'a> {
     method: &'a str,
+    weights: &'a str,
     deflection_model: &'a str,
     iterations: usize,
     converged: bool,
@@ -117,6 +118,7 @@ impl<'a> ReportJson<'a> {
     pub fn of(r: &'a Report) -> Self {
         Self {
             method: r.method,
+            weights: r.weights,
             deflection_model: r.deflection_model,
             iterations: r.iterations,
             converged: r.converged,
