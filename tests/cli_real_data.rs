@@ -438,3 +438,66 @@ fn instrument_weights_against_ols() {
         .fold(0.0, f64::max);
     assert!(moved > 0.05, "pose 5 moves the estimate by {moved} sd only");
 }
+
+/// The protocol of docs/real-data.md for the Motoman, pinned: the closed
+/// loop on the 410 training poses validated on the 176 test poses, by the
+/// default weights (OLS: one point per pose) and by the tracker's σ.
+#[test]
+fn motoman_protocol_on_the_test_poses() {
+    let Some(data) = datasets("motoman_protocol_on_the_test_poses") else {
+        return;
+    };
+    let d = dir("motoman");
+    let (train, _) = import(&data, &d, "ctu_motoman", "train");
+    let (test, _) = import(&data, &d, "ctu_motoman", "test");
+    let urdf = data.join("ctu_motoman/ctu_motoman.urdf");
+    // (setup, weights, test RMS mm, mean mm, max mm): docs/real-data.md.
+    for (name, weights, rms, mean, max) in [
+        ("setup.toml", "none", 1.8644, 1.5658, 7.1928),
+        (
+            "setup-instrument.toml",
+            "instrument",
+            1.8926,
+            1.5842,
+            7.1116,
+        ),
+    ] {
+        let text = std::fs::read_to_string(root().join("data/ctu_motoman").join(name))
+            .unwrap()
+            .replace(
+                "../../../shared/datasets/ctu_motoman/ctu_motoman.urdf",
+                &urdf.to_string_lossy(),
+            );
+        let setup = d.join(name);
+        std::fs::write(&setup, text).unwrap();
+        let o = robcal(&[
+            "calibrate",
+            "--setup",
+            setup.to_str().unwrap(),
+            "--data",
+            train.to_str().unwrap(),
+            "--validate",
+            test.to_str().unwrap(),
+            "--json",
+        ]);
+        ok(&o);
+        let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["weights"], weights, "{name}");
+        let val = &v["validation"];
+        assert_eq!(val["points"].as_u64(), Some(176));
+        for (what, got, want) in [
+            ("rms", val["rms_mm"].as_f64().unwrap(), rms),
+            (
+                "mean",
+                val["per_marker_mean_mm"]["1"].as_f64().unwrap(),
+                mean,
+            ),
+            ("max", val["per_marker_max_mm"]["1"].as_f64().unwrap(), max),
+        ] {
+            assert!(
+                (got - want).abs() < 1e-4,
+                "{name} {what}: {got} mm, want {want}"
+            );
+        }
+    }
+}
