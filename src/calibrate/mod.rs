@@ -81,8 +81,8 @@ pub use geometry::Geometry;
 pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
 pub use report::{
-    Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Nominal, Parameter, PlotSeries,
-    Report, RowError, Unexplained, Validation,
+    weights_line, Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Nominal, Parameter,
+    PlotSeries, Report, RowError, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};

@@ -147,6 +147,12 @@ fn job(h: &mut String, r: &Report, info: &JobInfo<'_>) {
         },
         r.relinearisations,
     );
+    let _ = write!(
+        h,
+        "<tr><td>weights</td><td>{}: {}</td></tr>",
+        r.weights,
+        esc(robcal::calibrate::weights_line(r.weights))
+    );
     h.push_str("</table></section>\n");
 }
 
