@@ -1,5 +1,6 @@
 //! Invariants of the data-contract readers under arbitrary input, shared by
-//! the cargo-fuzz targets `csv_measurements`, `setup_toml`, `urdf` and the
+//! the cargo-fuzz targets `csv_measurements`, `setup_toml`, `urdf`, `figaroh_mocap`,
+//! `poses` and the
 //! stable replay `tests/fuzz_io_regressions.rs`.
 //!
 //! For every input: no panic; an error names the file the reader was given
@@ -19,6 +20,8 @@ pub const CSV_FILE: &str = "fuzz.csv";
 pub const TOML_FILE: &str = "fuzz.toml";
 /// The file name every fuzzed reader is given.
 pub const URDF_FILE: &str = "fuzz.urdf";
+/// The file name the pose importer is given.
+pub const POSES_FILE: &str = "fuzz-poses.csv";
 
 /// The fixed robot of the CSV target: a 3-joint chain (revolute with
 /// limits, continuous, prismatic with limits).
@@ -231,5 +234,46 @@ pub fn run_mocap(data: &[u8]) {
             Err(e) => check_err(&e, MOCAP_FILE, Some(data)),
         },
         Err(e) => check_err(&e, MOCAP_FILE, Some(data)),
+    }
+}
+
+/// Arbitrary text as a wide pose file (`robcal import poses`, data contract
+/// 7.3), with and without `--split cal`: no panic; an error names the file
+/// (and a line inside it); a success is a measurement CSV whose every row
+/// has the header's cells, integers in `config, rep, marker, load_kg` and
+/// finite numbers elsewhere, one row per reported point.
+pub fn run_poses(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    for split in [None, Some("cal".to_owned())] {
+        let options = robcal::io::poses::ImportOptions { split };
+        match robcal::io::poses::convert_poses(text, POSES_FILE, &options) {
+            Ok((csv, summary)) => {
+                let mut lines = csv.lines();
+                let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+                assert_eq!(&header[..4], ["config", "rep", "marker", "load_kg"]);
+                assert_eq!(
+                    header.len(),
+                    4 + summary.joints.len() + 3 + if summary.has_sigma { 3 } else { 0 }
+                );
+                let mut rows = 0;
+                for line in lines {
+                    let cells: Vec<&str> = line.split(',').collect();
+                    assert_eq!(cells.len(), header.len(), "{line}");
+                    for c in &cells[..3] {
+                        assert!(c.parse::<i64>().is_ok(), "{line}");
+                    }
+                    for c in &cells[3..] {
+                        let v: f64 = c.parse().unwrap_or(f64::NAN);
+                        assert!(v.is_finite(), "{line}");
+                    }
+                    rows += 1;
+                }
+                assert_eq!(rows, summary.rows);
+                assert!(rows > 0 && summary.poses > 0 && summary.poses <= rows);
+            }
+            Err(e) => check_err(&e, POSES_FILE, Some(data)),
+        }
     }
 }

@@ -10,7 +10,9 @@
 
 use std::time::{Duration, Instant};
 
-use host_tests::fuzz_io::{csv_robot, run_csv, run_mocap, run_setup, run_urdf, URDF_FILE};
+use host_tests::fuzz_io::{
+    csv_robot, run_csv, run_mocap, run_poses, run_setup, run_urdf, URDF_FILE,
+};
 use robcal::io::{parse_measurements, ErrorKind, Robot};
 
 /// Runs `f` on a thread and fails if it takes longer than `limit` (the
@@ -149,11 +151,18 @@ fn replay_parser_corpora() {
             "setup_toml" | "toml" => run_setup(bytes),
             "urdf" => run_urdf(bytes),
             "figaroh_mocap" | "mocap" => run_mocap(bytes),
+            "poses" => run_poses(bytes),
             _ => return,
         }
         n += 1;
     };
-    for target in ["csv_measurements", "setup_toml", "urdf", "figaroh_mocap"] {
+    for target in [
+        "csv_measurements",
+        "setup_toml",
+        "urdf",
+        "figaroh_mocap",
+        "poses",
+    ] {
         let Ok(dir) = std::fs::read_dir(format!("{root}/fuzz/corpus/{target}")) else {
             continue;
         };
@@ -172,4 +181,67 @@ fn replay_parser_corpora() {
     }
     println!("replayed {n} parser inputs");
     assert!(n > 0);
+}
+
+/// Structured random pose files: headers drawn from the layout's own
+/// column kinds (and near misses), cells drawn from numbers, empties,
+/// garbage and non-finite text, so that the importer's branches are
+/// reached, not only its first check (libFuzzer's `poses` target takes
+/// arbitrary bytes).
+#[test]
+fn structured_pose_files_keep_the_invariants() {
+    let mut rng = host_tests::Rng::new(7);
+    let names = [
+        "pose_id", "split", "test_set", "a_rad", "b_rad", "slide_m", "_rad", "x1_m", "y1_m",
+        "z1_m", "x2_m", "y2_m", "z2_m", "ux1_m", "uy1_m", "uz1_m", "std_x2_m", "std_y2_m",
+        "std_z2_m", "u1_m", "x0_m", "x1", "a_rad", "",
+    ];
+    let cells = [
+        "0", "1", "2", "-0.5", "1e-3", "", "", "cal", "test", "nan", "inf", "x", "1e400", "\"1\"",
+        "7",
+    ];
+    let valid = [
+        "pose_id", "split", "a_rad", "slide_m", "x1_m", "y1_m", "z1_m", "ux1_m", "uy1_m", "uz1_m",
+    ];
+    let numbers = ["0", "1", "2", "-0.5", "1e-3", "3", "0.25"];
+    let (mut ok, mut err) = (0, 0);
+    for _ in 0..4000 {
+        let pick = |rng: &mut host_tests::Rng, n: usize| (rng.next_u64() % n as u64) as usize;
+        // A valid header, then up to two mutations: a column dropped, or
+        // one of the layout's names (or a near miss) added.
+        let mut header: Vec<&str> = valid.to_vec();
+        for _ in 0..pick(&mut rng, 3) {
+            if rng.next_u64() % 2 == 0 {
+                let at = pick(&mut rng, header.len());
+                header.remove(at);
+            } else {
+                header.push(names[pick(&mut rng, names.len())]);
+            }
+        }
+        let k = header.len();
+        let mut text = header.join(",");
+        text.push('\n');
+        for _ in 0..(1 + rng.next_u64() % 4) {
+            let width = if rng.next_u64() % 20 == 0 { k + 1 } else { k };
+            let row: Vec<&str> = (0..width)
+                .map(|_| {
+                    if rng.next_u64() % 8 == 0 {
+                        cells[pick(&mut rng, cells.len())]
+                    } else {
+                        numbers[pick(&mut rng, numbers.len())]
+                    }
+                })
+                .collect();
+            text.push_str(&row.join(","));
+            text.push('\n');
+        }
+        run_poses(text.as_bytes());
+        let options = robcal::io::poses::ImportOptions { split: None };
+        match robcal::io::poses::convert_poses(&text, "f.csv", &options) {
+            Ok(_) => ok += 1,
+            Err(_) => err += 1,
+        }
+    }
+    // Both outcomes are reached.
+    assert!(ok > 20 && err > 20, "ok {ok}, err {err}");
 }
