@@ -211,7 +211,7 @@ fn structured_pose_files_keep_the_invariants() {
         // one of the layout's names (or a near miss) added.
         let mut header: Vec<&str> = valid.to_vec();
         for _ in 0..pick(&mut rng, 3) {
-            if rng.next_u64() % 2 == 0 {
+            if rng.next_u64().is_multiple_of(2) {
                 let at = pick(&mut rng, header.len());
                 header.remove(at);
             } else {
@@ -222,10 +222,14 @@ fn structured_pose_files_keep_the_invariants() {
         let mut text = header.join(",");
         text.push('\n');
         for _ in 0..(1 + rng.next_u64() % 4) {
-            let width = if rng.next_u64() % 20 == 0 { k + 1 } else { k };
+            let width = if rng.next_u64().is_multiple_of(20) {
+                k + 1
+            } else {
+                k
+            };
             let row: Vec<&str> = (0..width)
                 .map(|_| {
-                    if rng.next_u64() % 8 == 0 {
+                    if rng.next_u64().is_multiple_of(8) {
                         cells[pick(&mut rng, cells.len())]
                     } else {
                         numbers[pick(&mut rng, numbers.len())]
