@@ -35,7 +35,7 @@
 //! ```
 
 use super::Alloc;
-use nalgebra::{DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField, U3};
+use nalgebra::{DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField};
 
 use super::block::{validate_rows, Block};
 use super::factor::Solution;
@@ -44,9 +44,9 @@ use crate::Error;
 /// Sufficient statistics of a weighted least-squares problem with `D`
 /// parameters. See the [module docs](self).
 ///
-/// Besides the statistics it owns a workspace of three vectors that an
-/// update fills before it commits anything (so that a rejected update leaves
-/// the statistics as they were, without allocating): it is not part of the
+/// Besides the statistics it keeps `bound`, an upper bound of the values an
+/// update checks for overflow, so that an update can validate a block in
+/// one cheap sweep and then commit it in one pass: it is not part of the
 /// state, and `PartialEq`, `Debug` and `defmt::Format` ignore it.
 #[derive(Clone)]
 pub struct Accumulator<T: RealField + Copy, D: Dim>
@@ -65,26 +65,9 @@ where
     equations: usize,
     /// Rows with a positive weight that carried a σ.
     sigma_rows: usize,
-    /// The update under way: its new diagonals and `η`, and a block with
-    /// fewer than three rows, its unused rows zeroed.
-    work: Work<T, D>,
-}
-
-/// The workspace of an update (see [`Accumulator`]).
-#[derive(Clone)]
-struct Work<T: RealField + Copy, D: Dim>
-where
-    DefaultAllocator: Alloc<D>,
-{
-    /// New diagonal of `Λ`.
-    diag: OVector<T, D>,
-    /// New `η`.
-    eta: OVector<T, D>,
-    /// New diagonal of `M`.
-    mdiag: OVector<T, D>,
-    /// `B` of a block of one or two rows, the other rows zero (3 × n,
-    /// column-major).
-    b: OMatrix<T, U3, D>,
+    /// At least the largest of `Λᵢᵢ`, `|ηᵢ|`, `Mᵢᵢ` and `Σ Δpᵀ W² Δp` (see
+    /// [`Accumulator::update`]).
+    bound: T,
 }
 
 impl<T: RealField + Copy, D: Dim> PartialEq for Accumulator<T, D>
@@ -166,12 +149,7 @@ where
             middle: OMatrix::zeros_generic(dim, dim),
             equations: 0,
             sigma_rows: 0,
-            work: Work {
-                diag: OVector::zeros_generic(dim, nalgebra::Const::<1>),
-                eta: OVector::zeros_generic(dim, nalgebra::Const::<1>),
-                mdiag: OVector::zeros_generic(dim, nalgebra::Const::<1>),
-                b: OMatrix::zeros_generic(U3, dim),
-            },
+            bound: T::zero(),
         }
     }
 
@@ -193,6 +171,7 @@ where
         self.yy = T::zero();
         self.equations = 0;
         self.sigma_rows = 0;
+        self.bound = T::zero();
     }
 
     /// Adds one measurement block: `Λ += Bᵀ W² B`, `η += Bᵀ W² Δp`, and, when
@@ -207,8 +186,6 @@ where
     /// - [`Error::NonFinite`] with `what = "overflow"` when the sums would
     ///   overflow (checked on the diagonal, which bounds every off-diagonal
     ///   element of a sum of positive semi-definite terms).
-    // `!(w >= 0)` is meant: it is true for NaN, which `w < 0` is not.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn update(&mut self, block: &Block<T, D>) -> Result<(), Error> {
         let (b, dp, w, sigma, rows) = (
             &block.b,
@@ -226,105 +203,146 @@ where
             return validate_rows(b, dp, w, sigma, rows);
         }
         // Cheap screening of the values whose problems the sums below cannot
-        // show (negative weight, σ ≤ 0); everything non-finite shows up as a
-        // non-finite new diagonal, η or Σ Δpᵀ W² Δp (every b, Δp and w enters
-        // one of them, also with w = 0: 0·∞ = NaN). Any failure takes the
+        // show (negative weight, σ ≤ 0); everything non-finite shows up in
+        // the bound or the new values `add_rows` checks (every b, Δp and w
+        // enters them, also with w = 0: 0·∞ = NaN). Any failure takes the
         // slow path, `validate_rows`, for the precise error. Rows past
         // `rows` are never read: they count as zero rows of weight 0.
-        let zero = T::zero();
-        let mut rw = RowWeights {
-            w2: [zero; 3],
-            s2: sigma.map(|_| [zero; 3]),
-            y: [zero; 3],
-            equations: 0,
+        let added = match RowWeights::new(dp, w, sigma, rows) {
+            Some(rw) if rows == 3 => self.add_rows3(b.as_slice(), &rw),
+            Some(rw) => self.add_rows(b.as_slice(), &rw, rows),
+            None => Err(Error::NonFinite { what: "weight" }),
         };
-        for r in 0..rows {
-            let wr = w[r];
-            if !(wr >= zero) {
-                return validate_rows(b, dp, w, sigma, rows);
-            }
-            rw.w2[r] = wr * wr;
-            rw.y[r] = dp[r];
-            rw.equations += usize::from(rw.w2[r] > zero);
-            if let (Some(s), Some(s2)) = (sigma, rw.s2.as_mut()) {
-                if !(s[r] > zero) {
-                    return validate_rows(b, dp, w, sigma, rows);
-                }
-                s2[r] = rw.w2[r] * rw.w2[r] * s[r] * s[r];
-            }
-        }
-        if rows < 3 {
-            // The used rows into the workspace, the others zero.
-            let copy = self.work.b.as_mut_slice().chunks_exact_mut(3);
-            for (dst, src) in copy.zip(b.as_slice().chunks_exact(3)) {
-                for (r, (d, s)) in dst.iter_mut().zip(src).enumerate() {
-                    *d = if r < rows { *s } else { zero };
-                }
-            }
-        }
-        let added = self.add_rows(rows < 3, b, &rw);
         if added.is_err() {
             validate_rows(b, dp, w, sigma, rows)?;
         }
         added
     }
 
-    /// The update proper, on `B` (column-major, 3 × n: the block's, or the
-    /// workspace's copy of a block of fewer rows) and the checked weights:
-    /// a first sweep computes the new diagonal of `Λ` (and `M`) and the new
-    /// `η` into the workspace, and checks them; only then one sweep over the
-    /// columns commits the strict upper triangle and the workspace.
+    /// The update of a block of three rows, on `B` (column-major, 3 × n)
+    /// and the checked weights.
+    ///
+    /// Validation first, without touching the state: one sweep over `B`
+    /// gives `s = Σ |b| + Σ |Δp|`, and `(Σ w² + Σ w⁴σ²) s²` bounds the change
+    /// of every checked value (`Λⱼⱼ`, `ηⱼ`, `Mⱼⱼ`, `Σ Δpᵀ W² Δp`: each term is
+    /// a weight times `b²`, `b Δp` or `Δp²`). While the running bound stays
+    /// below `max/16`, no new value can overflow — which is the check — and
+    /// a non-finite input makes the bound NaN or ∞. (`s` is a sum of
+    /// absolute values rather than of squares: one addition per value,
+    /// where soft floating point — f64 on the Cortex-M4F, everything on the
+    /// M3 — pays dearly for each multiplication.) Otherwise (rare: huge values, or a
+    /// non-finite input) [`Self::fits_exactly`] computes the new checked
+    /// values as the commit will: the check of the two-sweep update this
+    /// replaced. Then one pass over the columns commits everything
+    /// ([`add_upper3`]).
     #[inline]
-    fn add_rows(
-        &mut self,
-        masked: bool,
-        block_b: &OMatrix<T, U3, D>,
-        rw: &RowWeights<T>,
-    ) -> Result<(), Error> {
-        let zero = T::zero();
+    fn add_rows3(&mut self, b: &[T], rw: &RowWeights<T>) -> Result<(), Error> {
         let (w2, y) = (&rw.w2, &rw.y);
-        let Work {
-            diag,
-            eta,
-            mdiag,
-            b: wb,
-        } = &mut self.work;
-        let b = if masked { &*wb } else { block_b };
-        let new_yy = ((self.yy + w2[0] * y[0] * y[0]) + w2[1] * y[1] * y[1]) + w2[2] * y[2] * y[2];
-        // `t` collects x·0 over every new value: NaN iff one is not finite
-        // (one multiply-add per value instead of a compare and a branch).
-        let mut t = new_yy * zero;
-        for (j, bj) in b.as_slice().chunks_exact(3).enumerate() {
-            let bj = [bj[0], bj[1], bj[2]];
-            diag[j] = fma3(self.info[(j, j)], w2, &bj, &bj);
-            eta[j] = fma3(self.eta[j], w2, &bj, y);
-            t += diag[j] * zero;
-            t += eta[j] * zero;
-            if let Some(s2) = &rw.s2 {
-                mdiag[j] = fma3(self.middle[(j, j)], s2, &bj, &bj);
-                t += mdiag[j] * zero;
-            }
+        let mut s = (y[0].abs() + y[1].abs()) + y[2].abs();
+        for c in b.chunks_exact(3) {
+            s = ((s + c[0].abs()) + c[1].abs()) + c[2].abs();
         }
-        if !t.is_finite() {
+        let bound = match self.next_bound(s * s, rw) {
+            None => self.fits_exactly(b, rw, 3),
+            fast => fast,
+        };
+        if bound.is_none() {
             return Err(Error::NonFinite { what: "overflow" });
         }
-        // Commit: the strict upper triangle, then the checked diagonal and η.
-        add_strict_upper3(&mut self.info, w2, b);
-        if let Some(s2) = &rw.s2 {
-            add_strict_upper3(&mut self.middle, s2, b);
+        add_upper3(&mut self.info, Some(self.eta.as_mut_slice()), w2, y, b);
+        if rw.sigma {
+            add_upper3(&mut self.middle, None, &rw.s2, y, b);
+        }
+        self.commit_rest(rw, bound);
+        Ok(())
+    }
+
+    /// [`Self::add_rows3`] for a block of one or two rows: the same values
+    /// (the unused rows' terms, `+0` each, left out) in loops over the
+    /// rows, out of line, always checked by [`Self::fits_exactly`].
+    #[inline(never)]
+    fn add_rows(&mut self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Result<(), Error> {
+        let bound = self.fits_exactly(b, rw, rows);
+        if bound.is_none() {
+            return Err(Error::NonFinite { what: "overflow" });
+        }
+        add_upper(
+            &mut self.info,
+            Some(self.eta.as_mut_slice()),
+            &rw.w2,
+            &rw.y,
+            b,
+            rows,
+        );
+        if rw.sigma {
+            add_upper(&mut self.middle, None, &rw.s2, &rw.y, b, rows);
+        }
+        self.commit_rest(rw, bound);
+        Ok(())
+    }
+
+    /// The running bound after an update with `q = (Σ |b| + Σ |Δp|)²`, if
+    /// it stays below the limit (see [`Self::add_rows3`]).
+    #[inline(always)]
+    fn next_bound(&self, q: T, rw: &RowWeights<T>) -> Option<T> {
+        let (w2, s2) = (&rw.w2, &rw.s2);
+        let k = (((((w2[0] + w2[1]) + w2[2]) + s2[0]) + s2[1]) + s2[2]) * q;
+        let bound = (self.bound + k) * bound_margin::<T>();
+        (bound <= bound_limit::<T>()).then_some(bound)
+    }
+
+    /// The rest of a commit: `Σ Δpᵀ W² Δp`, the counts, the new bound.
+    #[inline(always)]
+    fn commit_rest(&mut self, rw: &RowWeights<T>, bound: Option<T>) {
+        let (w2, y) = (&rw.w2, &rw.y);
+        self.yy = ((self.yy + w2[0] * y[0] * y[0]) + w2[1] * y[1] * y[1]) + w2[2] * y[2] * y[2];
+        self.equations += rw.equations;
+        if rw.sigma {
             self.sigma_rows += rw.equations;
         }
-        self.eta.copy_from(eta);
-        let sigma = rw.s2.is_some();
-        for j in 0..self.info.nrows() {
-            self.info[(j, j)] = diag[j];
-            if sigma {
-                self.middle[(j, j)] = mdiag[j];
-            }
+        if let Some(bound) = bound {
+            self.bound = bound;
         }
-        self.yy = new_yy;
-        self.equations += rw.equations;
-        Ok(())
+    }
+
+    /// The largest of the new `Λⱼⱼ`, `|ηⱼ|`, `Mⱼⱼ` and `Σ Δpᵀ W² Δp` after
+    /// the update of the first `rows` rows of `B`, computed as the commit
+    /// computes them, if they are all finite (the exact check; the new
+    /// bound).
+    #[cold]
+    #[inline(never)]
+    fn fits_exactly(&self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Option<T> {
+        let (w2, y) = (&rw.w2, &rw.y);
+        let yy = ((self.yy + w2[0] * y[0] * y[0]) + w2[1] * y[1] * y[1]) + w2[2] * y[2] * y[2];
+        let mut ok = yy.is_finite();
+        let mut bound = yy;
+        let columns = b.chunks_exact(3).zip(diagonal(&self.info));
+        for ((c, mut lambda), (mut eta, mut mid)) in
+            columns.zip(self.eta.iter().copied().zip(diagonal(&self.middle)))
+        {
+            for (r, &v) in c.iter().enumerate().take(rows) {
+                let a = w2[r] * v;
+                lambda += v * a;
+                eta += a * y[r];
+                mid += v * (rw.s2[r] * v);
+            }
+            ok &= lambda.is_finite() && eta.is_finite() && mid.is_finite();
+            bound = bound.max(lambda).max(eta.abs()).max(mid);
+        }
+        ok.then_some(bound)
+    }
+
+    /// Sets `bound` to the largest checked value (after an update that took
+    /// the slow path, and after `merge` and `add_moments`).
+    fn refresh_bound(&mut self) {
+        let mut bound = self.yy;
+        for v in diagonal(&self.info).chain(diagonal(&self.middle)) {
+            bound = bound.max(v);
+        }
+        for v in self.eta.iter() {
+            bound = bound.max(v.abs());
+        }
+        self.bound = bound;
     }
 
     /// Adds the statistics of `other` (measurements taken elsewhere, e.g. on
@@ -358,6 +376,7 @@ where
         self.yy = yy;
         self.equations += other.equations;
         self.sigma_rows += other.sigma_rows;
+        self.refresh_bound();
         Ok(())
     }
 
@@ -406,6 +425,7 @@ where
             self.middle.zip_apply(s_upper, |a, s| *a += s * m2);
             self.sigma_rows += n;
         }
+        self.refresh_bound();
         Ok(())
     }
 
@@ -488,45 +508,165 @@ where
 }
 
 /// The checked per-row quantities of one block: `w²`, `w⁴σ²` (with σ), `Δp`
-/// (zero past the block's rows) and the rows with a positive weight.
+/// (all zero past the block's rows) and the rows with a positive weight.
 struct RowWeights<T> {
     w2: [T; 3],
-    s2: Option<[T; 3]>,
+    s2: [T; 3],
+    sigma: bool,
     y: [T; 3],
     equations: usize,
 }
 
-/// `x + Σ_r (k_r u_r) v_r`, summed left to right (three multiply-adds).
-#[inline(always)]
-fn fma3<T: RealField + Copy>(x: T, k: &[T; 3], u: &[T; 3], v: &[T; 3]) -> T {
-    ((x + (k[0] * u[0]) * v[0]) + (k[1] * u[1]) * v[1]) + (k[2] * u[2]) * v[2]
+impl<T: RealField + Copy> RowWeights<T> {
+    /// The weights of the first `rows` rows (`1 ≤ rows ≤ 3`), `None` when a
+    /// weight is negative or NaN or a σ is not positive (NaN included).
+    // `!(w >= 0)` is meant: it is true for NaN, which `w < 0` is not.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline(always)]
+    fn new(
+        dp: &nalgebra::Vector3<T>,
+        w: &nalgebra::Vector3<T>,
+        sigma: Option<&nalgebra::Vector3<T>>,
+        rows: usize,
+    ) -> Option<Self> {
+        let zero = T::zero();
+        let mut rw = Self {
+            w2: [zero; 3],
+            s2: [zero; 3],
+            sigma: sigma.is_some(),
+            y: [zero; 3],
+            equations: 0,
+        };
+        // Row by row, unrolled (three calls, not a loop: the firmware
+        // profile would not unroll it).
+        let mut row = |r: usize| -> Option<()> {
+            if r >= rows {
+                return Some(());
+            }
+            let (wr, k) = (w[r], w[r] * w[r]);
+            if !(wr >= zero) {
+                return None;
+            }
+            rw.w2[r] = k;
+            rw.y[r] = dp[r];
+            rw.equations += usize::from(k > zero);
+            if let Some(s) = sigma {
+                if !(s[r] > zero) {
+                    return None;
+                }
+                rw.s2[r] = k * k * s[r] * s[r];
+            }
+            Some(())
+        };
+        row(0)?;
+        row(1)?;
+        row(2)?;
+        Some(rw)
+    }
 }
 
-/// `m[i][j] += Σ_r b[r][i] k[r] b[r][j]` for `i < j`: the strict upper
-/// triangle of the rank-3 update `Bᵀ K B`, `K = diag(k)`. `B` is 3 × n,
-/// column-major, so column `i` of `B` is three contiguous values and the
-/// inner loop runs over contiguous slices without bounds checks: three
-/// multiply-adds per element, the column's `k b[·][j]` in registers.
-fn add_strict_upper3<T: RealField + Copy, D: Dim>(
+/// `x + Σ_r u_r v_r`, summed left to right (three multiply-adds).
+#[inline(always)]
+fn fma3<T: RealField + Copy>(x: T, u: &[T; 3], v: &[T; 3]) -> T {
+    ((x + u[0] * v[0]) + u[1] * v[1]) + u[2] * v[2]
+}
+
+/// The growth factor of the running bound per update, `1 + 2⁻¹⁰`: it covers
+/// the rounding of the bound and of the sums it bounds (a few units of
+/// `1 + ε` per update), so that the bound stays above every checked value
+/// (up to absolute errors of the order of the smallest normal number, from
+/// underflow, far below the headroom of the limit).
+#[inline(always)]
+fn bound_margin<T: RealField + Copy>() -> T {
+    T::from_subset(&(1.0 + 1.0 / 1024.0))
+}
+
+/// The limit of the running bound, `max/16`: below it no sum of the update
+/// can overflow.
+#[inline(always)]
+fn bound_limit<T: RealField + Copy>() -> T {
+    T::max_value().map_or(T::zero(), |m| m * T::from_subset(&0.0625))
+}
+
+/// The rank-3 update of an upper triangle, column by column: for column `j`
+/// of `B` (3 × n, column-major: three contiguous values), `a = k ∘ bⱼ`
+/// (`k` = `w²` or `w⁴σ²` per row), then `m[i][j] += bᵢ · a` for `i ≤ j` —
+/// the diagonal included — and, with `eta`, `ηⱼ += a · Δp`, in the same
+/// pass. Three multiply-adds per element, summed over the rows in order;
+/// the inner loop runs over contiguous slices without bounds checks, `a` in
+/// registers.
+#[inline(always)]
+fn add_upper3<T: RealField + Copy, D: Dim>(
     m: &mut OMatrix<T, D, D>,
+    eta: Option<&mut [T]>,
     k: &[T; 3],
-    b: &OMatrix<T, U3, D>,
+    y: &[T; 3],
+    b: &[T],
 ) where
     DefaultAllocator: Alloc<D>,
 {
     let n = m.nrows();
-    let bcols = b.as_slice().chunks_exact(3);
-    for ((j, col), bj) in m
+    let bcols = b.chunks_exact(3);
+    let mut etas = eta.map(|e| e.iter_mut());
+    for ((j, column), bj) in m
         .as_mut_slice()
         .chunks_exact_mut(n)
         .enumerate()
         .zip(bcols.clone())
     {
-        let (a0, a1, a2) = (k[0] * bj[0], k[1] * bj[1], k[2] * bj[2]);
-        for (x, bi) in col[..j].iter_mut().zip(bcols.clone()) {
-            *x = ((*x + bi[0] * a0) + bi[1] * a1) + bi[2] * a2;
+        let a = [k[0] * bj[0], k[1] * bj[1], k[2] * bj[2]];
+        if let Some(e) = etas.as_mut().and_then(Iterator::next) {
+            *e = fma3(*e, &a, y);
+        }
+        for (x, bi) in column.iter_mut().zip(bcols.clone()).take(j + 1) {
+            *x = ((*x + bi[0] * a[0]) + bi[1] * a[1]) + bi[2] * a[2];
         }
     }
+}
+
+/// [`add_upper3`] over the first `rows` rows of `B` only.
+fn add_upper<T: RealField + Copy, D: Dim>(
+    m: &mut OMatrix<T, D, D>,
+    eta: Option<&mut [T]>,
+    k: &[T; 3],
+    y: &[T; 3],
+    b: &[T],
+    rows: usize,
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = m.nrows();
+    let bcols = b.chunks_exact(3);
+    let mut etas = eta.map(|e| e.iter_mut());
+    for ((j, column), bj) in m
+        .as_mut_slice()
+        .chunks_exact_mut(n)
+        .enumerate()
+        .zip(bcols.clone())
+    {
+        let mut a = [T::zero(); 3];
+        for ((a, k), b) in a.iter_mut().zip(k).zip(bj).take(rows) {
+            *a = *k * *b;
+        }
+        if let Some(e) = etas.as_mut().and_then(Iterator::next) {
+            for (a, y) in a.iter().zip(y).take(rows) {
+                *e += *a * *y;
+            }
+        }
+        for (x, bi) in column.iter_mut().zip(bcols.clone()).take(j + 1) {
+            for (b, a) in bi.iter().zip(&a).take(rows) {
+                *x += *b * *a;
+            }
+        }
+    }
+}
+
+/// The diagonal of a square matrix.
+fn diagonal<T: RealField + Copy, D: Dim>(m: &OMatrix<T, D, D>) -> impl Iterator<Item = T> + '_
+where
+    DefaultAllocator: Alloc<D>,
+{
+    m.as_slice().iter().step_by(m.nrows() + 1).copied()
 }
 
 /// The full symmetric matrix from its upper triangle.
