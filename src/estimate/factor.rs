@@ -116,7 +116,7 @@ where
         active: OVector<bool, D>,
     ) -> Result<Self, Error> {
         let n = lambda.nrows();
-        if !lambda.iter().all(|v| v.is_finite()) {
+        if !lambda.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -332,7 +332,7 @@ where
                 what: "one eta per parameter",
             });
         }
-        if !eta.iter().all(|v| v.is_finite()) {
+        if !eta.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -340,7 +340,9 @@ where
         let f = Factor::with_mask(lambda, active)?;
         let x = f.solve(eta);
         let inv = f.inverse();
-        if !(x.iter().all(|v| v.is_finite()) && inv.iter().all(|v| v.is_finite())) {
+        if !(x.as_slice().iter().all(|v| v.is_finite())
+            && inv.as_slice().iter().all(|v| v.is_finite()))
+        {
             return Err(Error::NonFinite { what: "estimate" });
         }
         let wrss = (yy - dot(&x, eta)).max(T::zero());

@@ -26,10 +26,10 @@
 use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField, Vector3, U3};
 
-use super::accumulator::{symmetric, Accumulator};
+use super::accumulator::Accumulator;
 use super::factor::Solution;
 use super::irls::Noise;
-use super::linalg::{dot, mat_vec};
+use super::linalg::dot;
 use crate::Error;
 
 /// Moments of the rows of one group and one axis.
@@ -82,9 +82,32 @@ where
 
     /// Residual sum of squares `Σ (y − bᵀX)² = yy − 2Xᵀu + XᵀSX`, clamped at 0.
     pub fn rss(&self, x: &OVector<T, D>) -> T {
-        let s = symmetric(&self.s_upper);
         let two = T::one() + T::one();
-        (self.yy - two * dot(x, &self.u) + dot(&mat_vec(&s, x), x)).max(T::zero())
+        (self.yy - two * dot(x, &self.u) + self.quadratic(x.as_slice())).max(T::zero())
+    }
+
+    /// `XᵀSX` from the upper triangle, with the arithmetic of
+    /// `dot(mat_vec(symmetric(S), X), X)` (`(SX)ᵢ` summed over `k` in index
+    /// order, then `Σᵢ (SX)ᵢ Xᵢ` in index order), bit for bit, without
+    /// building the full `S` or the vector `SX`.
+    fn quadratic(&self, x: &[T]) -> T {
+        let n = self.s_upper.nrows();
+        let s = self.s_upper.as_slice();
+        // (`x` of another length: the common part, never out of bounds.)
+        let x = &x[..x.len().min(n)];
+        let mut q = T::zero();
+        for (i, (col, &xi)) in s.chunks_exact(n.max(1)).zip(x).enumerate() {
+            // Sᵢₖ = S[k, i] (column i) for k < i, S[i, k] (row i) after.
+            let mut y = T::zero();
+            for (&sik, &xk) in col[..i].iter().zip(x) {
+                y += sik * xk;
+            }
+            for (k, &xk) in x.iter().enumerate().skip(i) {
+                y += s[k * n + i] * xk;
+            }
+            q += y * xi;
+        }
+        q
     }
 }
 
@@ -180,13 +203,22 @@ where
                 what: "block size differs from the statistics'",
             });
         }
-        if !b.iter().all(|v| v.is_finite()) {
+        // Over the slices: nalgebra's matrix iterator costs several times
+        // the check itself here.
+        if !b.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "row" });
         }
-        if !dp.iter().all(|v| v.is_finite()) {
+        if !dp.as_slice().iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "dp" });
         }
-        let index = match self.groups.iter().position(|g| g.id == id) {
+        // Rows usually come configuration by configuration: try the last
+        // group first.
+        let last = self.groups.len().checked_sub(1);
+        let found = match last {
+            Some(l) if self.groups[l].id == id => Some(l),
+            _ => self.groups.iter().position(|g| g.id == id),
+        };
+        let index = match found {
             Some(i) => i,
             None => {
                 if self.groups.is_full() {
@@ -198,21 +230,37 @@ where
                 self.groups.len()
             }
         };
-        // Overflow guard on the new diagonals (they bound the off-diagonals).
-        let existing = self.groups.get(index);
+        // Overflow guard on the new diagonals (they bound the off-diagonals),
+        // `u` and `yy`. `t` collects v·0 over every new value: NaN iff one
+        // is not finite (the inputs are), one multiply-add per value
+        // instead of a compare and a branch.
+        let zero = T::zero();
+        let mut t = zero;
         for a in 0..3 {
-            let ax = existing.map(|g| &g.axes[a]);
-            let yy = ax.map_or(T::zero(), |ax| ax.yy);
-            if !(yy + dp[a] * dp[a]).is_finite() {
-                return Err(Error::NonFinite { what: "overflow" });
-            }
-            for i in 0..p {
-                let bi = b[(a, i)];
-                let (s, u) = ax.map_or((T::zero(), T::zero()), |ax| (ax.s_upper[(i, i)], ax.u[i]));
-                if !((s + bi * bi).is_finite() && (u + bi * dp[a]).is_finite()) {
-                    return Err(Error::NonFinite { what: "overflow" });
+            let y = dp[a];
+            let bcols = b.as_slice().chunks_exact(3);
+            match self.groups.get(index).map(|g| &g.axes[a]) {
+                Some(ax) => {
+                    t += (ax.yy + y * y) * zero;
+                    let diag = ax.s_upper.as_slice().iter().step_by(p + 1);
+                    for ((bi, &s), &u) in bcols.zip(diag).zip(ax.u.as_slice()) {
+                        let bi = bi[a];
+                        t += (s + bi * bi) * zero;
+                        t += (u + bi * y) * zero;
+                    }
+                }
+                None => {
+                    t += (zero + y * y) * zero;
+                    for bi in bcols {
+                        let bi = bi[a];
+                        t += (zero + bi * bi) * zero;
+                        t += (zero + bi * y) * zero;
+                    }
                 }
             }
+        }
+        if !t.is_finite() {
+            return Err(Error::NonFinite { what: "overflow" });
         }
         if index == self.groups.len() {
             let dim = self.dim;
@@ -228,13 +276,29 @@ where
                     capacity: G,
                 })?;
         }
-        let g = &mut self.groups[index];
-        for (a, ax) in g.axes.iter_mut().enumerate() {
-            for j in 0..p {
-                for i in 0..=j {
-                    ax.s_upper[(i, j)] += b[(a, i)] * b[(a, j)];
-                }
-                ax.u[j] += b[(a, j)] * dp[a];
+        // `S += b bᵀ` (upper triangle), `u += b y` per axis, each element
+        // summed over the rows in the order they came. Column by column over
+        // the three axes at once: `B` is 3 × n column-major, so column `i`
+        // of `B` is the three axes' `bᵢ`, contiguous, and each column of `S`
+        // is a contiguous slice.
+        let [x, y, z] = &mut self.groups[index].axes;
+        let bcols = b.as_slice().chunks_exact(3);
+        let (sx, sy, sz) = (
+            x.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
+            y.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
+            z.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
+        );
+        for (j, (((cx, cy), cz), bj)) in sx.zip(sy).zip(sz).zip(bcols.clone()).enumerate() {
+            let rows = cx[..=j].iter_mut().zip(&mut cy[..=j]).zip(&mut cz[..=j]);
+            for (((sx, sy), sz), bi) in rows.zip(bcols.clone()) {
+                *sx += bi[0] * bj[0];
+                *sy += bi[1] * bj[1];
+                *sz += bi[2] * bj[2];
+            }
+        }
+        for (a, ax) in [x, y, z].into_iter().enumerate() {
+            for (u, bj) in ax.u.iter_mut().zip(bcols.clone()) {
+                *u += bj[a] * dp[a];
             }
             ax.yy += dp[a] * dp[a];
             ax.n += 1;
@@ -263,30 +327,32 @@ where
                 what: "one sigma and one weight per group",
             });
         }
-        let inv = &fit.lambda_inv;
-        if inv.nrows() != self.dim.value() {
+        let (inv, n) = (&fit.lambda_inv, self.dim.value());
+        if inv.nrows() != n || inv.ncols() != n || fit.x.len() != n {
             return Err(Error::Mismatch {
                 what: "fit of another number of parameters",
             });
         }
+        let two = T::one() + T::one();
         for (((o, d), g), w) in sigma
             .iter_mut()
             .zip(dof.iter_mut())
             .zip(&self.groups)
             .zip(weights)
         {
+            // The three axes side by side: each sum is a chain of dependent
+            // additions (the same, in the same order, as one axis at a
+            // time), and three independent chains keep the processor busy
+            // where one would wait on each addition.
+            let s = g.axes.each_ref().map(|ax| ax.s_upper.as_slice());
+            let tr = traces3(inv.as_slice(), n, s);
+            let q = quadratics3(s, n, fit.x.as_slice());
             for a in 0..3 {
                 let ax = &g.axes[a];
-                // tr(Λ⁻¹ S) from S's upper triangle.
-                let mut tr = T::zero();
-                for c in 0..inv.ncols() {
-                    tr += inv[(c, c)] * ax.s_upper[(c, c)];
-                    for r in 0..c {
-                        tr += (inv[(r, c)] + inv[(r, c)]) * ax.s_upper[(r, c)];
-                    }
-                }
-                let h = w[a] * w[a] * tr;
-                o[a] = group_sigma(ax.rss(&fit.x), ax.n, h);
+                let h = w[a] * w[a] * tr[a];
+                // `AxisMoments::rss`, bit for bit.
+                let rss = (ax.yy - two * dot(&fit.x, &ax.u) + q[a]).max(T::zero());
+                o[a] = group_sigma(rss, ax.n, h);
                 d[a] = group_dof(ax.n, h);
             }
         }
@@ -341,6 +407,48 @@ where
         }
         Ok(acc)
     }
+}
+
+/// `tr(Λ⁻¹ S)` of three `n × n` matrices `S` from their upper triangles
+/// (column-major slices, as `inv`): the diagonal term and then the column's
+/// off-diagonal ones, doubled, column by column.
+fn traces3<T: RealField + Copy>(inv: &[T], n: usize, s: [&[T]; 3]) -> [T; 3] {
+    let mut t = [T::zero(); 3];
+    for c in 0..n {
+        let d = inv[c * n + c];
+        for a in 0..3 {
+            t[a] += d * s[a][c * n + c];
+        }
+        for r in 0..c {
+            let v = inv[c * n + r] + inv[c * n + r];
+            for a in 0..3 {
+                t[a] += v * s[a][c * n + r];
+            }
+        }
+    }
+    t
+}
+
+/// `XᵀSX` of three matrices `S` from their upper triangles, each with the
+/// arithmetic of `AxisMoments::rss` (`(SX)ᵢ` over `k` in index order, then
+/// `Σᵢ (SX)ᵢ Xᵢ`).
+fn quadratics3<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T]) -> [T; 3] {
+    let x = &x[..x.len().min(n)];
+    let mut q = [T::zero(); 3];
+    for (i, &xi) in x.iter().enumerate() {
+        let mut y = [T::zero(); 3];
+        for (k, &xk) in x.iter().enumerate() {
+            // `Sᵢₖ` from the upper triangle.
+            let at = if k < i { i * n + k } else { k * n + i };
+            for a in 0..3 {
+                y[a] += s[a][at] * xk;
+            }
+        }
+        for a in 0..3 {
+            q[a] += y[a] * xi;
+        }
+    }
+    q
 }
 
 /// `σ̂ = √(RSS / (n − h))`: the residual σ of one group and axis from its

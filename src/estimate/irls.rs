@@ -27,7 +27,6 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector3};
 
 use super::accumulator::Accumulator;
 use super::factor::{std_devs, Solution};
-use super::grouped::GroupedStats;
 use super::weights::RobustWeight;
 use crate::Error;
 
@@ -448,31 +447,4 @@ pub fn robust_weights<T: RealField + Copy>(
         *o = s.map(|v| weight.weight(v).unwrap_or(T::zero()));
     }
     Ok(())
-}
-
-impl<T: RealField + Copy, D: Dim, const G: usize> Reweightable<T, D> for GroupedStats<T, D, G>
-where
-    DefaultAllocator: Alloc<D>,
-{
-    fn group_count(&self) -> usize {
-        self.groups().len()
-    }
-
-    fn weighted(
-        &self,
-        weights: &[Vector3<T>],
-        noise: Option<Noise<'_, T>>,
-    ) -> Result<Accumulator<T, D>, Error> {
-        GroupedStats::weighted_noise(self, weights, noise)
-    }
-
-    fn residual_sigma_into(
-        &self,
-        fit: &Solution<T, D>,
-        weights: &[Vector3<T>],
-        sigma: &mut [Vector3<T>],
-        dof: &mut [Vector3<T>],
-    ) -> Result<(), Error> {
-        GroupedStats::residual_sigma_into(self, fit, weights, sigma, dof)
-    }
 }

@@ -28,6 +28,7 @@
 //! | [`accumulator`] | [`Accumulator`]: the streaming sufficient statistics (eq. 9, 10) |
 //! | [`factor`] | [`Factor`], [`Solution`]: the scaled Cholesky and the covariances (eq. 6–8, 10–13) |
 //! | [`grouped`] | [`GroupedStats`]: moments per configuration and axis |
+//! | `grouped_fit` | [`GroupedStats`]' own fits: `Λ`, `η` once from the cells, the sandwich's `M` alone |
 //! | [`weights`] | [`RobustWeight`]: eq. 12 and 14 |
 //! | [`irls`] | [`Reweightable`], [`Fit`]: OLS, WLS, iterative WLS (section 5) |
 //! | [`rank`] | [`identifiability`]: the one column-independence test |
@@ -57,6 +58,7 @@ pub mod factor;
 #[cfg(feature = "defmt")]
 pub mod fmt;
 pub mod grouped;
+mod grouped_fit;
 pub mod irls;
 mod linalg;
 pub mod nested;
