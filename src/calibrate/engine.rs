@@ -6,10 +6,11 @@ use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
 use super::design::Design;
-use super::fit::{fit, FitOut, FitSettings, Method};
+use super::fit::{fit, fit_moments, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
 use super::heldout::ols_heldout;
 use super::linearisation::Linearisation;
+use super::moments::DesignMoments;
 use super::names::Names;
 use super::report::{Absorbed, LeftOut, Parameter};
 use super::residuals::rms_um;
@@ -243,6 +244,11 @@ impl Engine<'_> {
         } else {
             None
         };
+        // Weighted fits: each fold from the moments per configuration and
+        // axis, built once (`moments`); a fold that leaves a parameter
+        // unidentified is refitted from the rows below.
+        let moments =
+            (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
         for g in 0..self.rows.configs.len() {
             if let Some(r) = fast
                 .as_ref()
@@ -251,6 +257,18 @@ impl Engine<'_> {
             {
                 res.extend_from_slice(r);
                 continue;
+            }
+            if let Some(m) = &moments {
+                match fit_moments(m, &d, &cols, Some(g), &self.fit_settings) {
+                    Ok(out) => {
+                        for i in (0..d.rows()).filter(|&i| d.group[i] == g) {
+                            res.push(d.residual(&cols, &out.x, i));
+                        }
+                        continue;
+                    }
+                    Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => {}
+                    Err(e) => return Err(CalibrationError::Core("held-out fit", e)),
+                }
             }
             let mut use_cols = cols.clone();
             let out = loop {

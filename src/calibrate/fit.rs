@@ -5,6 +5,7 @@
 use nalgebra::{Dyn, OMatrix, Vector3, U3};
 
 use super::design::Design;
+use super::moments::DesignMoments;
 pub use super::settings::Method;
 use crate::estimate::{
     group_dof, group_sigma, leverage, nested_test, robust_weights, Accumulator, Block, Fit,
@@ -179,10 +180,43 @@ pub fn fit(
         skip_group,
         floor: instrument.filter(|_| s.weighting == Weighting::Both),
     };
+    fit_source(&view, cols, instrument, s)
+}
+
+/// [`fit`] of all the columns of `m` (the moments of the columns `cols` of
+/// `d`, [`DesignMoments::new`]) without the configuration `skip_group`: the
+/// same fit from the moments per configuration and axis, equal to the
+/// row-by-row one up to rounding ([`super::moments`]).
+///
+/// # Errors
+/// As [`fit`].
+pub fn fit_moments(
+    m: &DesignMoments,
+    d: &Design,
+    cols: &[usize],
+    skip_group: Option<usize>,
+    s: &FitSettings,
+) -> Result<FitOut, Error> {
+    let instrument = d.instrument_sigma.as_deref();
+    let source = m.without(
+        skip_group,
+        instrument.filter(|_| s.weighting == Weighting::Both),
+    );
+    fit_source(&source, cols, instrument, s)
+}
+
+/// The fit of `s.method` on `view` (`cols`: the columns it holds).
+fn fit_source<R: Reweightable<f64, Dyn>>(
+    view: &R,
+    cols: &[usize],
+    instrument: Option<&[Vector3<f64>]>,
+    s: &FitSettings,
+) -> Result<FitOut, Error> {
+    let groups = view.group_count();
     let active = vec![true; cols.len()];
-    let mut weights = vec![Vector3::zeros(); d.groups];
-    let mut sigma = vec![Vector3::zeros(); d.groups];
-    let mut dof = vec![Vector3::zeros(); d.groups];
+    let mut weights = vec![Vector3::zeros(); groups];
+    let mut sigma = vec![Vector3::zeros(); groups];
+    let mut dof = vec![Vector3::zeros(); groups];
     let mut history = Vec::new();
     let step = |f: &Fit<f64, Dyn>, change| Step {
         x: f.solution.x.as_slice().to_vec(),

@@ -33,6 +33,7 @@
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
+//! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
@@ -63,6 +64,7 @@ pub mod geometry;
 pub mod heldout;
 pub mod linearisation;
 pub mod model_file;
+pub mod moments;
 pub mod names;
 pub mod plausibility;
 pub mod predict;
