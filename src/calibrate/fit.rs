@@ -8,8 +8,8 @@ use super::design::Design;
 use super::moments::DesignMoments;
 pub use super::settings::Method;
 use crate::estimate::{
-    group_dof, group_sigma, leverage, nested_test, robust_weights, Accumulator, Block, Fit,
-    IrlsSettings, NestedTest, Noise, Reweightable, RobustWeight, Solution,
+    group_dof, group_sigma, nested_test, robust_weights, Accumulator, Block, Fit, IrlsSettings,
+    NestedTest, Noise, Reweightable, RobustWeight, Solution,
 };
 pub use crate::io::Weighting;
 use crate::Error;
@@ -138,16 +138,21 @@ impl Reweightable<f64, Dyn> for View<'_> {
         let mut ss = vec![Vector3::<f64>::zeros(); self.d.groups];
         let mut h = vec![Vector3::<f64>::zeros(); self.d.groups];
         let mut n = vec![0usize; self.d.groups];
+        // The row's three axes side by side, contiguous.
+        let p = self.cols.len();
+        let mut b = vec![0.0; 3 * p];
         for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
             let r = self.d.residual(self.cols, fit.x.as_slice(), i);
             let g = self.d.group[i];
             ss[g] += r.component_mul(&r);
+            for (k, &c) in self.cols.iter().enumerate() {
+                for a in 0..3 {
+                    b[3 * k + a] = self.d.b[(3 * i + a, c)];
+                }
+            }
+            let q = leverage3(fit.lambda_inv.as_slice(), p, &b);
             for a in 0..3 {
-                h[g][a] += leverage(
-                    &fit.lambda_inv,
-                    |k| self.d.b[(3 * i + a, self.cols[k])],
-                    weights[g][a],
-                );
+                h[g][a] += weights[g][a] * weights[g][a] * q[a];
             }
             n[g] += 1;
         }
@@ -160,6 +165,26 @@ impl Reweightable<f64, Dyn> for View<'_> {
         }
         Ok(())
     }
+}
+
+/// `bᵀ Λ⁻¹ b` of the three axes of one row (`b[3k + a]`: column `k`, axis
+/// `a`; `inv` column-major `p × p`): for each axis the arithmetic of
+/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in index order), bit
+/// for bit, the three axes' sums as independent chains.
+fn leverage3(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3] {
+    let mut q = [0.0; 3];
+    for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
+        let mut s = [0.0; 3];
+        for (r, &v) in col.iter().enumerate() {
+            s[0] += v * b[3 * r];
+            s[1] += v * b[3 * r + 1];
+            s[2] += v * b[3 * r + 2];
+        }
+        for a in 0..3 {
+            q[a] += s[a] * b[3 * c + a];
+        }
+    }
+    q
 }
 
 /// Fits the columns `cols` of `d` (all rows, or all but group `skip_group`)
