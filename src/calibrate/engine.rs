@@ -249,6 +249,12 @@ impl Engine<'_> {
         // unidentified is refitted from the rows below.
         let moments =
             (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
+        let mut rows_of = vec![Vec::new(); self.rows.configs.len()];
+        for (i, &g) in d.group.iter().enumerate() {
+            if let Some(r) = rows_of.get_mut(g) {
+                r.push(i);
+            }
+        }
         for g in 0..self.rows.configs.len() {
             if let Some(r) = fast
                 .as_ref()
@@ -259,15 +265,13 @@ impl Engine<'_> {
                 continue;
             }
             if let Some(m) = &moments {
-                match fit_moments(m, &d, &cols, Some(g), &self.fit_settings) {
-                    Ok(out) => {
-                        for i in (0..d.rows()).filter(|&i| d.group[i] == g) {
-                            res.push(d.residual(&cols, &out.x, i));
-                        }
-                        continue;
+                // An error is left to the refit below, which decides as
+                // before (a column dropped, no held-out error, or the error).
+                if let Ok(out) = fit_moments(m, &d, &cols, Some(g), &self.fit_settings) {
+                    for &i in &rows_of[g] {
+                        res.push(d.residual(&cols, &out.x, i));
                     }
-                    Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => {}
-                    Err(e) => return Err(CalibrationError::Core("held-out fit", e)),
+                    continue;
                 }
             }
             let mut use_cols = cols.clone();
@@ -282,7 +286,7 @@ impl Engine<'_> {
                 }
             };
             let Some(out) = out else { return Ok(None) };
-            for i in (0..d.rows()).filter(|&i| d.group[i] == g) {
+            for &i in &rows_of[g] {
                 res.push(d.residual(&use_cols, &out.x, i));
             }
         }

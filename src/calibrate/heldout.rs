@@ -14,7 +14,8 @@
 //! small solve per group, instead of one fit over all the other rows per
 //! group: linear in the number of configurations, not quadratic. Weighted
 //! fits re-estimate their weights without the group (eq. 14), which this
-//! identity does not reproduce; the engine refits those.
+//! identity does not reproduce; the engine refits those from the moments
+//! per configuration and axis ([`super::moments`]), without the rows.
 
 use nalgebra::{DMatrix, DVector, Vector3};
 

@@ -50,7 +50,8 @@
 //! contract says). RMS is the RMS of the norm of the 3-D position residual
 //! of each row, unweighted; held-out RMS is the same over the predictions of
 //! each configuration from a fit without it (same method; for OLS by the
-//! closed form of [`heldout`], linear in the number of configurations).
+//! closed form of [`heldout`], linear in the number of configurations; for
+//! WLS and IRLS from the moments of [`moments`], built once).
 
 pub mod calibrated;
 pub mod declared;

@@ -18,65 +18,83 @@
 //! engine uses this for the held-out folds only, so every reported estimate
 //! is still the row-by-row one.
 
-use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3};
+use nalgebra::{DMatrix, DVector, Dyn, Vector3};
 
 use super::design::Design;
 use crate::estimate::accumulator::symmetric;
 use crate::estimate::{
-    group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, AxisMoments, Fit,
-    Noise, Reweightable, RobustWeight, Solution,
+    group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Fit, Noise,
+    Reweightable, RobustWeight, Solution,
 };
 use crate::Error;
 
-/// The moments of some columns of a design, per configuration and axis.
+/// The moments of some columns of a design, per configuration and axis,
+/// each `S` as its packed upper triangle (column by column, `S[r, c]` for
+/// `r ≤ c`): `S`, `u`, `yy` and `n` of cell `(g, a)` at index `3g + a`.
 #[derive(Debug, Clone)]
 pub struct DesignMoments {
     /// Columns.
     n: usize,
-    /// Per configuration, per axis x, y, z.
-    cells: Vec<[AxisMoments<f64, Dyn>; 3]>,
+    /// Configurations.
+    groups: usize,
+    /// Packed upper triangles, `n(n+1)/2` per cell.
+    s: Vec<f64>,
+    /// `u = Σ b y`, `n` per cell.
+    u: Vec<f64>,
+    /// `Σ y²` per cell.
+    yy: Vec<f64>,
+    /// Rows per cell.
+    rows: Vec<usize>,
+}
+
+/// `n(n+1)/2`.
+fn packed(n: usize) -> usize {
+    n * (n + 1) / 2
 }
 
 impl DesignMoments {
     /// The moments of the columns `cols` of `d`: one pass over its rows.
     pub fn new(d: &Design, cols: &[usize]) -> Self {
-        let n = cols.len();
-        let zero = || AxisMoments {
-            s_upper: DMatrix::zeros(n, n),
-            u: DVector::zeros(n),
-            yy: 0.0,
-            n: 0,
+        let (n, p, cells) = (cols.len(), packed(cols.len()), 3 * d.groups);
+        let mut m = Self {
+            n,
+            groups: d.groups,
+            s: vec![0.0; cells * p],
+            u: vec![0.0; cells * n],
+            yy: vec![0.0; cells],
+            rows: vec![0; cells],
         };
-        let mut cells: Vec<[AxisMoments<f64, Dyn>; 3]> =
-            (0..d.groups).map(|_| [zero(), zero(), zero()]).collect();
         let mut b = vec![0.0; n];
         for (i, &g) in d.group.iter().enumerate() {
-            let Some(cell) = cells.get_mut(g) else {
+            if g >= d.groups {
                 continue;
-            };
-            for (a, ax) in cell.iter_mut().enumerate() {
-                let r = 3 * i + a;
+            }
+            for a in 0..3 {
+                let (r, cell) = (3 * i + a, 3 * g + a);
                 for (v, &c) in b.iter_mut().zip(cols) {
                     *v = d.b[(r, c)];
                 }
                 let y = d.y[r];
-                let s = ax.s_upper.as_mut_slice();
+                let s = &mut m.s[cell * p..(cell + 1) * p];
+                let u = &mut m.u[cell * n..(cell + 1) * n];
+                let mut k = 0;
                 for (j, &bj) in b.iter().enumerate() {
-                    for (sij, &bi) in s[j * n..=j * n + j].iter_mut().zip(&b) {
+                    for (sij, &bi) in s[k..=k + j].iter_mut().zip(&b) {
                         *sij += bi * bj;
                     }
-                    ax.u[j] += bj * y;
+                    k += j + 1;
+                    u[j] += bj * y;
                 }
-                ax.yy += y * y;
-                ax.n += 1;
+                m.yy[cell] += y * y;
+                m.rows[cell] += 1;
             }
         }
-        Self { n, cells }
+        m
     }
 
     /// The number of configurations.
     pub fn groups(&self) -> usize {
-        self.cells.len()
+        self.groups
     }
 
     /// These moments without configuration `skip` (all of them with
@@ -93,6 +111,17 @@ impl DesignMoments {
             floor,
         }
     }
+
+    /// `S` of cell `c`, packed.
+    fn s(&self, c: usize) -> &[f64] {
+        let p = packed(self.n);
+        &self.s[c * p..(c + 1) * p]
+    }
+
+    /// `u` of cell `c`.
+    fn u(&self, c: usize) -> &[f64] {
+        &self.u[c * self.n..(c + 1) * self.n]
+    }
 }
 
 /// [`DesignMoments`] with at most one configuration left out: a
@@ -105,19 +134,15 @@ pub struct Folded<'a> {
 }
 
 impl Folded<'_> {
-    /// The cells that enter the fit, with their configuration index.
-    fn cells(&self) -> impl Iterator<Item = (usize, &[AxisMoments<f64, Dyn>; 3])> {
+    /// The configurations that enter the fit.
+    fn groups(&self) -> impl Iterator<Item = usize> {
         let skip = self.skip;
-        self.m
-            .cells
-            .iter()
-            .enumerate()
-            .filter(move |(g, _)| Some(*g) != skip)
+        (0..self.m.groups).filter(move |g| Some(*g) != skip)
     }
 
     /// The fit with `weights` (as [`Reweightable::fit_weighted`]; `estimated`:
     /// the weights are eq. 14 of these data's σ): `Λ` and `η` from the
-    /// cells' upper triangles, the solve, σ per cell, the middle term.
+    /// cells' packed triangles, the solve, σ per cell, the middle term.
     fn fit(
         &self,
         weights: &[Vector3<f64>],
@@ -126,24 +151,25 @@ impl Folded<'_> {
         dof: &mut [Vector3<f64>],
         estimated: bool,
     ) -> Result<Fit<f64, Dyn>, Error> {
-        let n = self.m.n;
-        if weights.len() != self.m.groups() {
+        let (n, m) = (self.m.n, self.m);
+        if weights.len() != m.groups {
             return Err(Error::Mismatch {
                 what: "one weight per group",
             });
         }
-        let mut upper = DMatrix::<f64>::zeros(n, n);
+        let mut upper = vec![0.0; packed(n)];
         let mut eta = DVector::<f64>::zeros(n);
         let (mut yy, mut equations) = (0.0, 0);
-        for (g, cell) in self.cells() {
-            for (ax, &w) in cell.iter().zip(weights[g].iter()) {
-                let Some(w2) = moment_weight(w, None, ax.n)? else {
+        for g in self.groups() {
+            for (a, &w) in weights[g].iter().enumerate() {
+                let c = 3 * g + a;
+                let Some(w2) = moment_weight(w, None, m.rows[c])? else {
                     continue;
                 };
-                add_upper(&mut upper, &ax.s_upper, w2);
-                eta.zip_apply(&ax.u, |e, v| *e += v * w2);
-                yy += w2 * ax.yy;
-                equations += ax.n;
+                axpy(&mut upper, m.s(c), w2);
+                axpy(eta.as_mut_slice(), m.u(c), w2);
+                yy += w2 * m.yy[c];
+                equations += m.rows[c];
             }
         }
         if !yy.is_finite() || !upper.iter().chain(eta.iter()).all(|v| v.is_finite()) {
@@ -156,27 +182,32 @@ impl Folded<'_> {
                 parameters,
             });
         }
-        let solution = Solution::new(&symmetric(&upper), &eta, yy, equations, active)?;
+        let solution = Solution::new(&unpack(&upper, n), &eta, yy, equations, active)?;
         self.residual_sigma_into(&solution, weights, sigma, dof)?;
         pool_small_groups(sigma, dof);
         let noise = Noise {
             sigma,
             estimated_from: estimated.then_some(&*dof),
         };
-        let mut middle = DMatrix::<f64>::zeros(n, n);
-        for (g, cell) in self.cells() {
+        let mut middle = vec![0.0; packed(n)];
+        for g in self.groups() {
             let s = noise.sigma(g, &weights[g]);
-            for ((ax, &w), &s) in cell.iter().zip(weights[g].iter()).zip(s.iter()) {
-                let Some(w2) = moment_weight(w, Some(s), ax.n)? else {
+            for (a, (&w, &s)) in weights[g].iter().zip(s.iter()).enumerate() {
+                let c = 3 * g + a;
+                let Some(w2) = moment_weight(w, Some(s), m.rows[c])? else {
                     continue;
                 };
-                add_upper(&mut middle, &ax.s_upper, w2 * w2 * s * s);
+                axpy(&mut middle, m.s(c), w2 * w2 * s * s);
             }
         }
         if !middle.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "overflow" });
         }
-        let covariance = solution.cov_sandwich(&symmetric(&middle));
+        // `Λ⁻¹ M Λ⁻¹` (eq. 11) by nalgebra's blocked product, symmetrised
+        // as `Solution::cov_sandwich` does.
+        let inv = &solution.lambda_inv;
+        let c = inv * unpack(&middle, n) * inv;
+        let covariance = (&c + c.transpose()) * 0.5;
         Ok(Fit {
             solution,
             covariance,
@@ -188,7 +219,7 @@ impl Folded<'_> {
 
 impl Reweightable<f64, Dyn> for Folded<'_> {
     fn group_count(&self) -> usize {
-        self.m.groups()
+        self.m.groups
     }
 
     fn weighted(
@@ -196,21 +227,25 @@ impl Reweightable<f64, Dyn> for Folded<'_> {
         weights: &[Vector3<f64>],
         noise: Option<Noise<'_, f64>>,
     ) -> Result<Accumulator<f64, Dyn>, Error> {
-        let groups = self.m.groups();
+        let (n, groups) = (self.m.n, self.m.groups);
         if weights.len() != groups || noise.is_some_and(|n| !n.fits(groups)) {
             return Err(Error::Mismatch {
                 what: "one weight per group",
             });
         }
-        let mut acc = Accumulator::zeros(Dyn(self.m.n));
-        for (g, cell) in self.cells() {
+        let mut acc = Accumulator::zeros(Dyn(n));
+        for g in self.groups() {
             let s = noise.map(|n| n.sigma(g, &weights[g]));
-            for (a, ax) in cell.iter().enumerate() {
+            for a in 0..3 {
+                let c = 3 * g + a;
+                // `add_moments` takes `S` as an upper-triangular matrix.
+                let s_upper = unpack_upper(self.m.s(c), n);
+                let u = DVector::from_column_slice(self.m.u(c));
                 acc.add_moments(
-                    &ax.s_upper,
-                    &ax.u,
-                    ax.yy,
-                    ax.n,
+                    &s_upper,
+                    &u,
+                    self.m.yy[c],
+                    self.m.rows[c],
                     weights[g][a],
                     s.map(|s| s[a]),
                 )?;
@@ -226,33 +261,37 @@ impl Reweightable<f64, Dyn> for Folded<'_> {
         sigma: &mut [Vector3<f64>],
         dof: &mut [Vector3<f64>],
     ) -> Result<(), Error> {
-        let groups = self.m.groups();
-        if sigma.len() != groups || dof.len() != groups || weights.len() != groups {
+        let (n, m) = (self.m.n, self.m);
+        if sigma.len() != m.groups || dof.len() != m.groups || weights.len() != m.groups {
             return Err(Error::Mismatch {
                 what: "one sigma and one weight per group",
             });
         }
-        let n = self.m.n;
-        let inv = fit.lambda_inv.as_slice();
-        for (g, cell) in self.m.cells.iter().enumerate() {
+        // With `S` packed, `tr(Λ⁻¹ S)` and `xᵀ S x` are dot products with
+        // `Λ⁻¹` and `x xᵀ` packed, their off-diagonal elements doubled.
+        let (inv, x) = (&fit.lambda_inv, &fit.x);
+        let mut inv2 = Vec::with_capacity(packed(n));
+        let mut xx2 = Vec::with_capacity(packed(n));
+        for c in 0..n {
+            for r in 0..=c {
+                let k = if r == c { 1.0 } else { 2.0 };
+                inv2.push(k * 0.5 * (inv[(r, c)] + inv[(c, r)]));
+                xx2.push(k * x[r] * x[c]);
+            }
+        }
+        for g in 0..m.groups {
             if Some(g) == self.skip {
                 // No rows: as the row-by-row source, σ = 0 and ν = 0.
                 sigma[g] = Vector3::repeat(group_sigma(0.0, 0, 0.0));
                 dof[g] = Vector3::repeat(group_dof(0, 0.0));
             } else {
-                for (a, ax) in cell.iter().enumerate() {
-                    // h = w² tr(Λ⁻¹ S), S from its upper triangle.
-                    let s = ax.s_upper.as_slice();
-                    let mut tr = 0.0;
-                    for c in 0..n {
-                        tr += inv[c * n + c] * s[c * n + c];
-                        for r in 0..c {
-                            tr += (inv[c * n + r] + inv[r * n + c]) * s[c * n + r];
-                        }
-                    }
+                for a in 0..3 {
+                    let c = 3 * g + a;
+                    let (tr, xsx) = dot2(&inv2, &xx2, m.s(c));
                     let h = weights[g][a] * weights[g][a] * tr;
-                    sigma[g][a] = group_sigma(ax.rss(&fit.x), ax.n, h);
-                    dof[g][a] = group_dof(ax.n, h);
+                    let rss = (m.yy[c] - 2.0 * dot(x.as_slice(), m.u(c)) + xsx).max(0.0);
+                    sigma[g][a] = group_sigma(rss, m.rows[c], h);
+                    dof[g][a] = group_dof(m.rows[c], h);
                 }
             }
             if let Some(floor) = self.floor.and_then(|f| f.get(g)) {
@@ -299,18 +338,55 @@ fn moment_weight(w: f64, sigma: Option<f64>, n: usize) -> Result<Option<f64>, Er
     Ok((n > 0 && w2 != 0.0).then_some(w2))
 }
 
-/// `m += s k` on the upper triangle.
-fn add_upper(m: &mut OMatrix<f64, Dyn, Dyn>, s: &OMatrix<f64, Dyn, Dyn>, k: f64) {
-    let n = m.nrows().max(1);
-    let cols = m
-        .as_mut_slice()
-        .chunks_exact_mut(n)
-        .zip(s.as_slice().chunks_exact(n));
-    for (j, (mc, sc)) in cols.enumerate() {
-        for (a, &v) in mc[..=j].iter_mut().zip(&sc[..=j]) {
-            *a += v * k;
+/// `y += x k`.
+fn axpy(y: &mut [f64], x: &[f64], k: f64) {
+    for (y, &x) in y.iter_mut().zip(x) {
+        *y += x * k;
+    }
+}
+
+/// `Σ aᵢ bᵢ`.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
+/// `(Σ aᵢ sᵢ, Σ bᵢ sᵢ)` in one pass over `s`, each in four partial sums
+/// (independent chains the processor can overlap).
+fn dot2(a: &[f64], b: &[f64], s: &[f64]) -> (f64, f64) {
+    let (mut p, mut q) = ([0.0; 4], [0.0; 4]);
+    let (ac, bc, sc) = (a.chunks_exact(4), b.chunks_exact(4), s.chunks_exact(4));
+    let (ar, br, sr) = (ac.remainder(), bc.remainder(), sc.remainder());
+    for ((a, b), s) in ac.zip(bc).zip(sc) {
+        for k in 0..4 {
+            p[k] += a[k] * s[k];
+            q[k] += b[k] * s[k];
         }
     }
+    let (mut p0, mut q0) = ((p[0] + p[1]) + (p[2] + p[3]), (q[0] + q[1]) + (q[2] + q[3]));
+    for ((a, b), s) in ar.iter().zip(br).zip(sr) {
+        p0 += a * s;
+        q0 += b * s;
+    }
+    (p0, q0)
+}
+
+/// The `n × n` upper-triangular matrix of a packed triangle.
+fn unpack_upper(packed: &[f64], n: usize) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(n, n);
+    let mut k = 0;
+    for c in 0..n {
+        for r in 0..=c {
+            m[(r, c)] = packed[k];
+            k += 1;
+        }
+    }
+    m
+}
+
+/// The symmetric `n × n` matrix of a packed upper triangle.
+fn unpack(packed: &[f64], n: usize) -> DMatrix<f64> {
+    let m = unpack_upper(packed, n);
+    symmetric(&m)
 }
 
 #[cfg(test)]
