@@ -52,7 +52,8 @@ impl Design {
             } else {
                 Vec::new()
             };
-            let sample = row.sample(&k);
+            let frames = row.frames.frames();
+            let sample = row.sample(&frames, &k);
             for (c, p) in params.iter().enumerate() {
                 let col = p.column_si(&sample)? * names.unit(p).si;
                 for a in 0..3 {

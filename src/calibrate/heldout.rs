@@ -31,9 +31,17 @@ const MIN_EIGENVALUE: f64 = 1e-9;
 /// whose removal leaves the fit singular (the caller refits it). `None`
 /// overall when `Λ` itself is not positive definite.
 pub fn ols_heldout(d: &Design, cols: &[usize]) -> Option<Vec<Option<Vec<Vector3<f64>>>>> {
-    let b = d.b.select_columns(cols);
+    // All columns in order (the engine's case): the design itself, not a
+    // copy of it (with many rows the copy is the largest allocation).
+    let selected;
+    let b = if cols.len() == d.b.ncols() && cols.iter().enumerate().all(|(i, &c)| i == c) {
+        &d.b
+    } else {
+        selected = d.b.select_columns(cols);
+        &selected
+    };
     let y = DVector::from_column_slice(&d.y);
-    let chol = (b.tr_mul(&b)).cholesky()?;
+    let chol = (b.tr_mul(b)).cholesky()?;
     let x = chol.solve(&b.tr_mul(&y));
     if !x.iter().all(|v| v.is_finite()) {
         return None;

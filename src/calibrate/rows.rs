@@ -10,7 +10,7 @@
 //! load. The configurations are the groups of the per-axis noise estimate
 //! (eq. 14).
 
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Vector3};
 
 use super::geometry::{Geometry, J};
 use super::linearisation::Linearisation;
@@ -19,7 +19,8 @@ use super::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
 use crate::model::{angle_urad, Sample, BIN_TOLERANCE_RAD};
 use crate::robot::{
-    equilibrium, EquilibriumSettings, Frames, JointKind, JointLaw, Loading, PointLoad, Wrench,
+    equilibrium, EquilibriumSettings, Frames, JointFrame, JointKind, JointLaw, Loading, PointLoad,
+    Wrench,
 };
 use crate::Error;
 
@@ -69,7 +70,7 @@ pub struct Row {
     /// Frames of the current model in the measurement frame, at the pose
     /// the row's point is at: `q`, or with the exact deflection model the
     /// equilibrium (the loaded one for a deflection).
-    pub frames: Frames<f64, J>,
+    pub frames: RowFrames,
     /// Predicted marker position \[m, measurement frame\] at `frames`.
     pub p: Vector3<f64>,
     /// Joint torques behind the row at `frames`: the load's (deflection
@@ -89,12 +90,51 @@ pub struct Row {
     pub y: Vector3<f64>,
 }
 
+/// A row's [`Frames`] in the memory of the robot's joints (a `Frames` holds
+/// room for [`J`] of them, ~2.5 KB: most of a row, and most of the memory
+/// of a calibration with many rows). [`RowFrames::frames`] rebuilds them
+/// as they were.
+#[derive(Debug, Clone)]
+pub struct RowFrames {
+    joints: Vec<JointFrame<f64>>,
+    q: Vec<f64>,
+    tip: Isometry3<f64>,
+}
+
+impl RowFrames {
+    /// The parts of `f`.
+    pub fn of(f: &Frames<f64, J>) -> Self {
+        Self {
+            joints: f.joints().to_vec(),
+            q: f.q().to_vec(),
+            tip: *f.tip(),
+        }
+    }
+
+    /// The frames, as they were given to [`RowFrames::of`].
+    pub fn frames(&self) -> Frames<f64, J> {
+        // Parts of a `Frames<f64, J>`: they fit.
+        Frames::from_parts(&self.joints, &self.q, self.tip)
+            .unwrap_or_else(|_| unreachable!("the parts of a Frames<f64, J>"))
+    }
+
+    /// The joint values the frames are at.
+    pub fn q(&self) -> &[f64] {
+        &self.q
+    }
+}
+
 impl Row {
-    /// The row as a [`Sample`] for the columns, with the effective
-    /// compliance of each joint (may be empty).
-    pub fn sample<'a>(&'a self, compliance: &'a [f64]) -> Sample<'a, f64, J> {
+    /// The row as a [`Sample`] for the columns at `frames` (the row's own,
+    /// [`RowFrames::frames`]), with the effective compliance of each joint
+    /// (may be empty).
+    pub fn sample<'a>(
+        &'a self,
+        frames: &'a Frames<f64, J>,
+        compliance: &'a [f64],
+    ) -> Sample<'a, f64, J> {
         Sample {
-            frames: &self.frames,
+            frames,
             q: &self.q,
             twists: &self.twists,
             point_m: self.p,
@@ -267,7 +307,7 @@ impl Rows {
                 measured: Vector3::from(measured),
                 line,
                 sigma: sigma.map(Vector3::from),
-                frames: chain.frames(q).map_err(core("forward kinematics"))?,
+                frames: RowFrames::of(&chain.frames(q).map_err(core("forward kinematics"))?),
                 p: Vector3::zeros(),
                 tau: vec![0.0; dof],
                 load: None,
@@ -390,7 +430,7 @@ impl Rows {
                         .torques(&chain, &rigid, &mut row.tau)
                         .map_err(core("torques"))?;
                     row.load = loading.load.map(|l| l.wrench(&rigid));
-                    row.frames = rigid;
+                    row.frames = RowFrames::of(&rigid);
                     row.p = p_rigid;
                     row.twists.clear();
                     row.y = if absolute {
@@ -445,7 +485,7 @@ impl Rows {
                     } else {
                         row.measured - (p - p_rigid) + linear
                     };
-                    row.frames = eq.frames;
+                    row.frames = RowFrames::of(&eq.frames);
                     row.p = p;
                 }
             }
