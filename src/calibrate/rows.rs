@@ -111,6 +111,15 @@ impl RowFrames {
         }
     }
 
+    /// Sets these to the parts of `f`, in the memory they have.
+    pub fn set(&mut self, f: &Frames<f64, J>) {
+        self.joints.clear();
+        self.joints.extend_from_slice(f.joints());
+        self.q.clear();
+        self.q.extend_from_slice(f.q());
+        self.tip = *f.tip();
+    }
+
     /// The frames, as they were given to [`RowFrames::of`].
     pub fn frames(&self) -> Frames<f64, J> {
         // Parts of a `Frames<f64, J>`: they fit.
@@ -261,10 +270,13 @@ impl Rows {
                     .iter()
                     .position(|v| (v - c).abs() <= BIN_TOLERANCE_RAD)
             };
-            centres.sort_by_key(|&c| first(c));
             let mut jb = Vec::new();
             let mut counts = Vec::new();
             if centres.len() <= policy.max_bins {
+                // (Only here: with many distinct values, e.g. random poses,
+                // the key's scan of every value made this sort quadratic
+                // for bins that are then not used.)
+                centres.sort_by_key(|&c| first(c));
                 for c in &centres {
                     let near = |v: &&(f64, &str, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
                     let written = qs
@@ -430,7 +442,7 @@ impl Rows {
                         .torques(&chain, &rigid, &mut row.tau)
                         .map_err(core("torques"))?;
                     row.load = loading.load.map(|l| l.wrench(&rigid));
-                    row.frames = RowFrames::of(&rigid);
+                    row.frames.set(&rigid);
                     row.p = p_rigid;
                     row.twists.clear();
                     row.y = if absolute {
@@ -485,7 +497,7 @@ impl Rows {
                     } else {
                         row.measured - (p - p_rigid) + linear
                     };
-                    row.frames = RowFrames::of(&eq.frames);
+                    row.frames.set(&eq.frames);
                     row.p = p;
                 }
             }
