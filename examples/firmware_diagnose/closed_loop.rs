@@ -25,7 +25,7 @@ use nalgebra::{Const, RealField, SMatrix, Vector3};
 use robcal::estimate::screen::{rank_tests, Augmented, LackOfFit, PureError, Rule};
 use robcal::estimate::{group_dof, group_sigma, leverage, NestedTest, Noise, Solution};
 use robcal::model::effect::{inadmissible, joint_bins, stream_candidates, Effect, JointBins};
-use robcal::model::{in_bin, Layout, Marker, Param, Sample};
+use robcal::model::{Layout, Marker, Param, Sample};
 use robcal::robot::{joint_torques, Frames, PointLoad};
 use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
 
@@ -33,21 +33,21 @@ use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
 pub const J: usize = 6;
 /// Model columns at most (the KR-270's naive model has 5, with the
 /// compensator 9, with one more effect 10).
-pub const NMAX: usize = 12;
+pub const NMAX: usize = 13;
 /// The model's dimension.
 pub type Dm = Const<NMAX>;
 /// Columns of the augmented pass: the model's and every candidate's.
-pub const P: usize = 40;
+pub const P: usize = 32;
 /// `P (P + 1) / 2`.
 pub const L: usize = P * (P + 1) / 2;
 /// Candidates at most.
-pub const K: usize = 32;
+pub const K: usize = 24;
 /// One test's sub-problem: the model and one candidate.
-pub const S: usize = 18;
+pub const S: usize = NMAX;
 /// Angle bins of a joint at most (a compensator has 2 to 8).
 pub const BINS: usize = 8;
 /// Configurations at most.
-pub const GMAX: usize = 24;
+pub const GMAX: usize = 16;
 /// Cells (configuration × marker) at most.
 pub const CELLS: usize = 3 * GMAX;
 /// Effects added at most (`robcal::calibrate::Policy::max_effects` is 8;
@@ -86,8 +86,9 @@ pub trait Data<T: RealField + Copy> {
     fn marker(&self, m: u8) -> Option<Marker<T>>;
     /// Whether the measurements carry time (a drift candidate).
     fn time(&self) -> bool;
-    /// Every deflection, in order.
-    fn for_each(&self, f: impl FnMut(&Meas<T>) -> Result<(), Error>) -> Result<(), Error>;
+    /// Every deflection, in order (a `dyn` callback: one copy of the loop
+    /// in flash, not one per caller).
+    fn for_each(&self, f: &mut dyn FnMut(&Meas<T>) -> Result<(), Error>) -> Result<(), Error>;
 }
 
 /// The rows of a configuration: frames, the load's torques and wrench.
@@ -112,18 +113,26 @@ fn config<T: RealField + Copy, D: Data<T>>(data: &D, g: usize) -> Result<Config<
     })
 }
 
+/// What [`stream`] hands each deflection to: the measurement and its rows.
+type RowSink<'a, T, const C: usize> =
+    dyn FnMut(&Meas<T>, &SMatrix<T, 3, C>) -> Result<(), Error> + 'a;
+
 /// Streams every deflection with its rows `B` for `layout` (columns past it
-/// zero) at the joint compliances `k` \[SI\] (the load centre of mass's
-/// column needs them).
+/// zero). The load centre of mass's column is first order about the joint
+/// law the rows are linearised at; as the host's first-order model
+/// (`--linear`), the device linearises at the nominal robot (no
+/// compliance), where that column is zero: the host never tries
+/// `load_com` there, nor does the device (a host inconsistency, reported
+/// in issue 17: with the fitted compliances it would be tested).
+#[inline(never)]
 fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
     data: &D,
     layout: &Layout<C>,
-    k: &Compliance<T>,
-    mut f: impl FnMut(&Meas<T>, &SMatrix<T, 3, C>) -> Result<(), Error>,
+    f: &mut RowSink<'_, T, C>,
 ) -> Result<(), Error> {
     let mut cached: Option<Config<T>> = None;
     let mut b = SMatrix::<T, 3, C>::zeros();
-    data.for_each(|m| {
+    data.for_each(&mut |m| {
         if cached.as_ref().map(|c| c.g) != Some(m.group) {
             cached = Some(config(data, m.group)?);
         }
@@ -133,10 +142,8 @@ fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
             index: usize::from(m.marker),
             len: 0,
         })?;
-        let kq = k.at(c.frames.q());
         let sample = Sample {
             dt_s: m.dt_s,
-            compliance: &kq,
             ..Sample::deflection(
                 &c.frames,
                 c.frames.point_m(&marker.xyz_m),
@@ -150,60 +157,12 @@ fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
     })
 }
 
-/// The joint compliances of a fitted model \[rad/(N·m)\], per joint and
-/// (for a compensator) per angle bin.
-#[derive(Clone, Copy, Debug)]
-pub struct Compliance<T: RealField + Copy> {
-    /// `(param, value in SI)` of the model's compliance columns.
-    values: [(Param, T); NMAX],
-    len: usize,
-}
-
-impl<T: RealField + Copy> Compliance<T> {
-    fn none() -> Self {
-        Self {
-            values: [(Param::Compliance { joint: 0 }, T::zero()); NMAX],
-            len: 0,
-        }
-    }
-
-    fn of(layout: &Layout<NMAX>, x: &[T]) -> Self {
-        let mut out = Self::none();
-        for (c, &v) in layout.columns().iter().zip(x) {
-            if matches!(
-                c.param,
-                Param::Compliance { .. } | Param::ComplianceAt { .. }
-            ) {
-                out.values[out.len] = (c.param, v * nalgebra::convert::<f64, T>(c.unit.si));
-                out.len += 1;
-            }
-        }
-        out
-    }
-
-    fn at(&self, q: &[T]) -> [T; J] {
-        let mut k = [T::zero(); J];
-        for &(p, v) in &self.values[..self.len] {
-            match p {
-                Param::Compliance { joint } => k[usize::from(joint)] += v,
-                Param::ComplianceAt { joint, angle_urad }
-                    if in_bin(angle_urad, q[usize::from(joint)]) =>
-                {
-                    k[usize::from(joint)] += v
-                }
-                _ => {}
-            }
-        }
-        k
-    }
-}
-
 /// The model as a streaming [`Reweightable`] source (as the firmware's
 /// KR-270 source, at the model's columns).
 struct ModelSource<'a, T: RealField + Copy, D: Data<T>> {
     data: &'a D,
     layout: &'a Layout<NMAX>,
-    k: Compliance<T>,
+    scalar: core::marker::PhantomData<T>,
 }
 
 impl<T: RealField + Copy, D: Data<T>> Reweightable<T, Dm> for ModelSource<'_, T, D> {
@@ -223,7 +182,7 @@ impl<T: RealField + Copy, D: Data<T>> Reweightable<T, Dm> for ModelSource<'_, T,
             });
         }
         let mut acc = Accumulator::new();
-        stream(self.data, self.layout, &self.k, |m, b| {
+        stream(self.data, self.layout, &mut |m, b| {
             let w = weights[m.group];
             let mut block = Block::new(*b, m.dp).with_weights(w);
             if let Some(n) = noise {
@@ -250,7 +209,7 @@ impl<T: RealField + Copy, D: Data<T>> Reweightable<T, Dm> for ModelSource<'_, T,
         let mut rss = [Vector3::<T>::zeros(); GMAX];
         let mut h = [Vector3::<T>::zeros(); GMAX];
         let mut rows = [0usize; GMAX];
-        stream(self.data, self.layout, &self.k, |m, b| {
+        stream(self.data, self.layout, &mut |m, b| {
             let r = m.dp - b * fit.x;
             rss[m.group] += r.component_mul(&r);
             for a in 0..3 {
@@ -293,7 +252,6 @@ fn to_f64<T: RealField + Copy>(v: T) -> f64 {
 fn fit<T: RealField + Copy, D: Data<T>>(
     data: &D,
     layout: &Layout<NMAX>,
-    k: Compliance<T>,
     settings: &IrlsSettings<T>,
 ) -> Result<Fitted<T>, Error> {
     let g = data.groups();
@@ -303,8 +261,11 @@ fn fit<T: RealField + Copy, D: Data<T>>(
             capacity: GMAX,
         });
     }
-    let src = ModelSource { data, layout, k };
-    let k = src.k;
+    let src = ModelSource {
+        data,
+        layout,
+        scalar: core::marker::PhantomData,
+    };
     let mut weights = [Vector3::zeros(); GMAX];
     let mut sigma = [Vector3::zeros(); GMAX];
     let mut dof = [Vector3::zeros(); GMAX];
@@ -319,7 +280,7 @@ fn fit<T: RealField + Copy, D: Data<T>>(
         |_| {},
     )?;
     let (mut ss, mut rows) = (0.0f64, 0usize);
-    stream(data, layout, &k, |m, b| {
+    stream(data, layout, &mut |m, b| {
         let r = m.dp - b * f.solution.x;
         ss += to_f64(r.norm_squared());
         rows += 1;
@@ -355,10 +316,6 @@ pub struct Step {
     pub rms_um: (f64, f64),
 }
 
-/// One round's screening, for the logs and the host test: the candidate
-/// tested, its test, in order of significance.
-pub type Round = heapless::Vec<(Effect, Option<u8>, NestedTest), K>;
-
 /// What the loop found.
 #[derive(Clone, Debug)]
 pub struct Outcome<T: RealField + Copy> {
@@ -368,8 +325,8 @@ pub struct Outcome<T: RealField + Copy> {
     pub steps: heapless::Vec<Step, MAX_EFFECTS>,
     /// The final fit.
     pub last: Fitted<T>,
-    /// The first round's tests, most significant first.
-    pub first_round: Round,
+    /// Candidates tested in the first round.
+    pub first_tried: usize,
     /// The first round's lack of fit.
     pub first_lof: Option<LackOfFit>,
 }
@@ -410,15 +367,6 @@ fn screen<T: RealField + Copy, D: Data<T>>(
     }
     let (aug, cands) =
         stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
-    // The load centre of mass's column is first order about the joint
-    // law the rows are linearised at. The host's first-order model
-    // (`--linear`) never moves its linearisation from the nominal robot
-    // (no compliance) unless `load_com` is in the model, so its column is
-    // zero there and the candidate is never tried; the device does the
-    // same, to take the host's decision (a host inconsistency, reported
-    // in issue 17: with the fitted compliances here, `load_com` would be
-    // tested).
-    let k = Compliance::none();
     let mut sums = Augmented::<T, P, L>::new()?;
     let mut pure = PureError::<T, CELLS>::new();
     // The model fit's residuals `r = Δp − B_A X̂_A` in place of `Δp`: every
@@ -428,7 +376,7 @@ fn screen<T: RealField + Copy, D: Data<T>>(
     // 1 %). The model's columns are the layout's first `n`.
     let mut x = SMatrix::<T, P, 1>::zeros();
     x.as_mut_slice()[..n].copy_from_slice(&cur.x[..n]);
-    stream(data, &aug, &k, |m, b| {
+    stream(data, &aug, &mut |m, b| {
         let r = m.dp - b * x;
         sums.update(b, &r, &cur.weights[m.group])?;
         pure.update(m.group as u16, u16::from(m.marker), &m.dp)
@@ -519,21 +467,19 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
     for p in model {
         layout.push(chain, *p)?;
     }
-    let mut cur = fit(data, &layout, Compliance::none(), settings)?;
+    let mut cur = fit(data, &layout, settings)?;
     let mut out = Outcome {
         declared_rms_um: cur.rms_um,
         steps: heapless::Vec::new(),
         last: cur.clone(),
-        first_round: heapless::Vec::new(),
+        first_tried: 0,
         first_lof: None,
     };
     for round in 0.. {
         let (tests, lof, aug) = screen(data, &cur, &bins)?;
         if round == 0 {
             out.first_lof = lof;
-            for (c, t) in &tests {
-                let _ = out.first_round.push((c.effect, c.joint, *t));
-            }
+            out.first_tried = tests.len();
         }
         let tried = tests.len();
         let mut eligible = tests
@@ -546,8 +492,7 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
         let mut accepted = None;
         for (c, t) in eligible {
             let next_layout = extended(&cur.layout, &aug, c, chain)?;
-            let k = Compliance::of(&cur.layout, &cur.x);
-            let next = match fit(data, &next_layout, k, settings) {
+            let next = match fit(data, &next_layout, settings) {
                 Ok(next) => next,
                 Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => continue,
                 Err(e) => return Err(e),

@@ -23,6 +23,12 @@
 #[allow(dead_code)]
 #[path = "../../examples/firmware_diagnose/closed_loop.rs"]
 mod closed_loop;
+#[allow(dead_code)]
+#[path = "../../examples/firmware/kr270.rs"]
+mod kr270;
+#[allow(dead_code)]
+#[path = "../../examples/firmware_diagnose/table.rs"]
+mod table;
 
 use std::path::PathBuf;
 
@@ -151,7 +157,7 @@ impl<T: RealField + Copy> Data<T> for FileData<T> {
     fn time(&self) -> bool {
         self.time
     }
-    fn for_each(&self, mut f: impl FnMut(&Meas<T>) -> Result<(), Error>) -> Result<(), Error> {
+    fn for_each(&self, f: &mut dyn FnMut(&Meas<T>) -> Result<(), Error>) -> Result<(), Error> {
         self.meas.iter().try_for_each(|(_, m)| f(m))
     }
 }
@@ -258,12 +264,16 @@ fn compare(job: &Job, data: &Measurements, expect: &[(&str, &str)]) {
             if what == "f64" {
                 assert_eq!(s.tried, hs.tried, "{what}: candidates tried");
             } else {
-                // f32 cannot test a candidate whose column is within its
-                // rounding of the model's (measured: the nonlinear
-                // stiffness of a5 once the backlash of a5 is in the model,
-                // F = 0.05 in f64): one fewer tried, the same decision.
+                // In f32 the core leaves out a column more than 97.8 %
+                // explained by the model's (`rank::independence_tolerance`:
+                // 64 √ε, 0.022 on 1 − R²; 1e-6 in f64): f32 cannot estimate
+                // it. Measured: the nonlinear stiffness of a5 once the
+                // backlash of a5 is in the model (F = 0.05 in f64); with
+                // the compensator on a2, the nonlinear stiffness of a2 and
+                // the link compliance of a1. Up to two fewer tried, the
+                // same decision.
                 assert!(
-                    s.tried <= hs.tried && s.tried + 1 >= hs.tried,
+                    s.tried <= hs.tried && s.tried + 2 >= hs.tried,
                     "{what}: candidates tried"
                 );
             }
@@ -282,10 +292,6 @@ fn compare(job: &Job, data: &Measurements, expect: &[(&str, &str)]) {
                 "{what}: rms after"
             );
         }
-    }
-    // The round that added nothing: the same most significant candidate.
-    if let (Some(first), Some(host_first)) = (d64.first_round.first(), h.effects.first()) {
-        assert_eq!(first.0, host_first.effect);
     }
     assert!(rel(d64.last.rms_um, h.rms_um) < 1e-6, "final rms");
 }
@@ -408,4 +414,51 @@ fn synthetic_backlash_and_drift_same_decision() {
         "host names the drift: {expect:?}"
     );
     compare(&job, &data, &expect);
+}
+
+/// The firmware's second case (`examples/firmware_diagnose/table.rs`): the
+/// KR-270 data with a backlash of 0.3 mrad on a5 injected into the loaded
+/// positions (forward kinematics of the pose with a5 turned by
+/// `b · sign(τ5)`). The host, on the CSV so changed, decides as the device
+/// on its flash table with the same injection: compensator on a2, then
+/// backlash on a5.
+#[test]
+fn kr270_with_injected_backlash_same_decision() {
+    let job = Job::load(root().join("setup-naive.toml")).unwrap();
+    let text = std::fs::read_to_string(root().join("measurements.csv")).unwrap();
+    let t = table::Table::<f64>::new(true).unwrap();
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        if i > 0 && f[3].parse::<f64>().unwrap() > 0.0 {
+            let g = f[0].parse::<usize>().unwrap() - 1;
+            let m = f[2].parse::<usize>().unwrap() - 1;
+            let d = t.injected(g).unwrap()[m];
+            for a in 0..3 {
+                let v: f64 = f[10 + a].parse().unwrap();
+                f[10 + a] = format!("{}", v + d[a] * 1e3);
+            }
+        }
+        out += &f.join(",");
+        out.push('\n');
+    }
+    let data = parse_measurements(out.as_bytes(), "injected.csv", &job.robot, &job.setup).unwrap();
+    compare(&job, &data, &[("compensator", "a2"), ("backlash", "a5")]);
+    // The device's own table (the flash table, quantised to 1 nm) decides
+    // the same.
+    let d = table::Table::<f32>::new(true).unwrap();
+    let out = closed_loop::run(
+        &d,
+        &table::naive_model(),
+        &table::settings().unwrap(),
+        &Rule::default(),
+        |_| {},
+    )
+    .unwrap();
+    let got: Vec<_> = out
+        .steps
+        .iter()
+        .map(|s| (s.effect.name(), s.joint))
+        .collect();
+    assert_eq!(got, [("compensator", Some(1)), ("backlash", Some(4))]);
 }

@@ -39,6 +39,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, SMatri
 use super::accumulator::Accumulator;
 use super::distributions;
 use super::nested::{nested_test, NestedTest};
+use super::rank::independent;
 use super::Alloc;
 use crate::Error;
 
@@ -215,6 +216,7 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
     /// # Errors
     /// As [`Augmented::select`]; [`Error::Mismatch`] for more than 64
     /// candidate columns; errors of the model's solve other than those.
+    #[inline(never)]
     pub fn test<D: Dim>(
         &self,
         model: &[usize],
@@ -225,20 +227,53 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
         DefaultAllocator: Alloc<D>,
     {
         let n = model.len();
-        let q = candidate.len();
-        if n + q > MAX_SUB || n + q > dim.value() {
+        if n + candidate.len() > MAX_SUB {
             return Err(Error::Mismatch {
                 what: "candidate does not fit in the sub-problem",
             });
         }
-        // The columns in one list: model, then candidate.
-        let mut cols = [0usize; MAX_SUB];
-        for (k, &c) in model.iter().chain(candidate).enumerate() {
-            cols[k] = c;
+        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
         }
+        // The columns in one list: model, then candidate. A candidate column
+        // without information (`Λ⁰ᵢᵢ ≤ ε² max Λ⁰ₖₖ`, e.g. the torque of a
+        // vertical load about a vertical axis) is left out here, as the
+        // independence test would (`rank::independent`, its first step):
+        // the sub-problem stays the size of what can be tested.
+        let diag = |c: usize| self.plain[packed(c, c)];
+        let dmax = model
+            .iter()
+            .chain(candidate)
+            .fold(T::zero(), |m, &c| m.max(diag(c)));
+        let floor = T::default_epsilon() * T::default_epsilon() * dmax;
+        let mut cols = [0usize; MAX_SUB];
+        cols[..n].copy_from_slice(model);
+        let mut q = 0;
+        for &c in candidate {
+            if diag(c) > floor && diag(c) > T::zero() {
+                cols[n + q] = c;
+                q += 1;
+            }
+        }
+        if q == 0 {
+            return Ok(None);
+        }
+        if n + q > dim.value() {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        let mut informative = [0usize; MAX_SUB];
+        informative[..q].copy_from_slice(&cols[n..n + q]);
+        let candidate = &informative[..q];
         let plain = self.select(&cols[..n + q], dim, false)?;
-        let kept = match plain.identifiable() {
-            Ok(rank) => rank.kept,
+        let all = OVector::<bool, D>::from_element_generic(dim, Const::<1>, true);
+        let kept = match independent(&plain.information(), all.as_slice()) {
+            Ok(kept) => kept,
             Err(_) => return Ok(None),
         };
         let mut len = 0;

@@ -168,7 +168,15 @@ pub fn joint_bins<T: RealField + Copy, const B: usize>(
     let values = &v[..angles.len()];
     let mut sorted = v;
     let sorted = &mut sorted[..angles.len()];
-    sorted.sort_unstable_by(f64::total_cmp);
+    // Insertion sort: a few dozen angles, and a fraction of the flash of
+    // the standard library's sort on a microcontroller.
+    for i in 1..sorted.len() {
+        let mut j = i;
+        while j > 0 && sorted[j].total_cmp(&sorted[j - 1]).is_lt() {
+            sorted.swap(j, j - 1);
+            j -= 1;
+        }
+    }
     // Clusters (sum, count), as the host's `cluster`.
     let mut clusters: heapless::Vec<(f64, usize), MAX_CONFIGS> = heapless::Vec::new();
     for &x in sorted.iter() {
@@ -397,15 +405,14 @@ pub fn inadmissible<'a>(
                 v < 0.0
             }
             Param::Drift { axis: 0 } => {
-                let norm = libm::sqrt(
-                    (0..3)
-                        .map(|axis| {
-                            let d = value(&Param::Drift { axis }).unwrap_or(0.0);
-                            d * d
-                        })
-                        .sum::<f64>(),
-                ) * 3.6;
-                norm > max_drift_mm_per_h
+                // |v| · 3.6 > limit, squared (µm/s → mm/h): no square root.
+                let norm2: f64 = (0..3)
+                    .map(|axis| {
+                        let d = value(&Param::Drift { axis }).unwrap_or(0.0);
+                        d * d
+                    })
+                    .sum();
+                norm2 * 3.6 * 3.6 > max_drift_mm_per_h * max_drift_mm_per_h
             }
             _ => false,
         };
