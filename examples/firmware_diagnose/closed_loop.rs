@@ -31,9 +31,13 @@ use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
 
 /// Joints of the arm.
 pub const J: usize = 6;
-/// Model columns at most (the KR-270's naive model has 5, with the
-/// compensator 9, with one more effect 10).
-pub const NMAX: usize = 13;
+/// Model columns at most, and the size of one test's sub-problem (the
+/// model and the candidate's informative columns): the KR-270's naive
+/// model has 5 (+ 4 compensator bins), with the compensator 9, with the
+/// backlash 10 (+ 1). One size for both: one copy of the solver in flash,
+/// and f32 matrices of 484 bytes on the stack. A larger problem is refused
+/// (`Error::Mismatch`), never truncated.
+pub const NMAX: usize = 11;
 /// The model's dimension.
 pub type Dm = Const<NMAX>;
 /// Columns of the augmented pass: the model's and every candidate's.
@@ -42,7 +46,7 @@ pub const P: usize = 32;
 pub const L: usize = P * (P + 1) / 2;
 /// Candidates at most.
 pub const K: usize = 24;
-/// One test's sub-problem: the model and one candidate.
+/// One test's sub-problem: the model and one candidate ([`NMAX`]).
 pub const S: usize = NMAX;
 /// Angle bins of a joint at most (a compensator has 2 to 8).
 pub const BINS: usize = 8;
