@@ -462,3 +462,54 @@ fn kr270_with_injected_backlash_same_decision() {
         .collect();
     assert_eq!(got, [("compensator", Some(1)), ("backlash", Some(4))]);
 }
+
+/// `Augmented`: a wrong `L` is refused; a bad row (non-finite, negative
+/// weight) is refused with the state unchanged; the sub-problem of some
+/// columns is the accumulator of those columns streamed alone.
+#[test]
+fn augmented_sums_are_the_accumulator_of_the_columns() {
+    use nalgebra::{Dyn, OMatrix, SMatrix, U3};
+    use robcal::estimate::screen::{Augmented, PureError};
+    use robcal::{Accumulator, Block};
+
+    assert!(Augmented::<f64, 4, 9>::new().is_err());
+    let mut aug = Augmented::<f64, 4, 10>::new().unwrap();
+    let cols = [3usize, 0, 2];
+    let mut direct = Accumulator::<f64, Dyn>::zeros(Dyn(3));
+    let mut rng = Rng::new(5);
+    for i in 0..40 {
+        let b = SMatrix::<f64, 3, 4>::from_fn(|_, _| rng.normal());
+        let dp = Vector3::from_fn(|_, _| rng.normal());
+        let w = Vector3::new(1.0, 0.5 + 0.01 * i as f64, 2.0);
+        aug.update(&b, &dp, &w).unwrap();
+        let sub = OMatrix::<f64, U3, Dyn>::from_fn(3, |a, k| b[(a, cols[k])]);
+        direct.update(&Block::new(sub, dp).with_weights(w)).unwrap();
+    }
+    let before = aug.clone();
+    let bad = SMatrix::<f64, 3, 4>::from_element(f64::NAN);
+    assert!(aug
+        .update(&bad, &Vector3::zeros(), &Vector3::repeat(1.0))
+        .is_err());
+    let b = SMatrix::<f64, 3, 4>::from_element(1.0);
+    assert!(aug
+        .update(&b, &Vector3::zeros(), &Vector3::new(1.0, -1.0, 1.0))
+        .is_err());
+    assert_eq!(aug, before, "state unchanged on error");
+    let sel = aug.select(&cols, Dyn(3), true).unwrap();
+    assert_eq!(sel.equations(), direct.equations());
+    let (a, d) = (sel.information(), direct.information());
+    assert!((&a - &d).abs().max() <= 1e-12 * d.abs().max());
+    assert!((sel.eta() - direct.eta()).abs().max() <= 1e-12 * direct.eta().abs().max());
+    assert!(
+        aug.select(&[4], Dyn(1), true).is_err(),
+        "column out of range"
+    );
+    assert!(aug.select(&cols, Dyn(2), true).is_err(), "too many columns");
+
+    let mut pe = PureError::<f64, 1>::new();
+    pe.update(0, 0, &Vector3::repeat(1.0)).unwrap();
+    let before = pe.clone();
+    assert!(pe.update(0, 1, &Vector3::repeat(1.0)).is_err(), "capacity");
+    assert!(pe.update(0, 0, &Vector3::repeat(f64::NAN)).is_err());
+    assert_eq!(pe, before, "state unchanged on error");
+}
