@@ -9,7 +9,6 @@ use super::effects::Candidate;
 use super::fit::FitOut;
 use super::names::Names;
 use super::rows::{revolute, RowKind, Rows};
-use crate::estimate::distributions;
 use crate::estimate::{nested_test, Accumulator, Block};
 
 /// RMS of the norm of 3-D position residuals \[m\], in µm (0 for none).
@@ -20,31 +19,9 @@ pub fn rms_um(res: &[Vector3<f64>]) -> f64 {
     (res.iter().map(|r| r.norm_squared()).sum::<f64>() / res.len() as f64).sqrt() * 1e6
 }
 
-/// Lack of fit from the repetitions: rows with the same configuration,
-/// marker and kind have the same regressors, so the scatter within such a
-/// cell is pure error and the cell means carry the model's lack of fit.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LackOfFit {
-    /// `F = (SS_lof / df_lof) / (SS_pe / df_pe)`.
-    pub f: f64,
-    /// Its p-value.
-    pub p_value: f64,
-    /// Between-cell weighted sum of squares.
-    pub ss_lof: f64,
-    /// Its degrees of freedom (cells · 3 − parameters).
-    pub df_lof: usize,
-    /// Within-cell weighted sum of squares.
-    pub ss_pe: f64,
-    /// Its degrees of freedom.
-    pub df_pe: usize,
-}
-
-impl LackOfFit {
-    /// `SS_lof` above its expectation under noise alone.
-    pub fn excess(&self) -> f64 {
-        (self.ss_lof - self.df_lof as f64 * self.ss_pe / self.df_pe.max(1) as f64).max(0.0)
-    }
-}
+/// Lack of fit from the repetitions (the core's, so that the device's
+/// in-stream diagnosis decides by the same numbers).
+pub use crate::estimate::screen::LackOfFit;
 
 /// The cell (configuration, marker, kind) of each row, and the number of
 /// cells.
@@ -85,18 +62,7 @@ pub fn lack_of_fit(
         df_pe += 3 * (v.len() - 1);
     }
     let df_lof = (3 * n_cells).checked_sub(params)?;
-    if df_lof == 0 || df_pe == 0 || ss_pe <= 0.0 {
-        return None;
-    }
-    let f = (ss_lof / df_lof as f64) / (ss_pe / df_pe as f64);
-    Some(LackOfFit {
-        f,
-        p_value: distributions::f_sf(f, df_lof, df_pe),
-        ss_lof,
-        df_lof,
-        ss_pe,
-        df_pe,
-    })
+    LackOfFit::new(ss_lof, df_lof, ss_pe, df_pe)
 }
 
 /// A variable the residuals may follow: its name, its value per row, and

@@ -345,6 +345,31 @@ where
         self.bound = bound;
     }
 
+    /// The statistics of a subset of columns, as if only they had been
+    /// streamed: `info` upper triangle (row ≤ column) of `Λ`, `η`,
+    /// `Σ Δpᵀ W² Δp` and the number of rows (no σ, so no `M`). For
+    /// [`super::screen::Augmented`], which keeps the sums of more columns
+    /// than it tests at once.
+    pub(crate) fn from_sums(
+        info: OMatrix<T, D, D>,
+        eta: OVector<T, D>,
+        yy: T,
+        equations: usize,
+    ) -> Self {
+        let dim = info.shape_generic().0;
+        let mut acc = Self {
+            info,
+            eta,
+            yy,
+            middle: OMatrix::zeros_generic(dim, dim),
+            equations,
+            sigma_rows: 0,
+            bound: T::zero(),
+        };
+        acc.refresh_bound();
+        acc
+    }
+
     /// Adds the statistics of `other` (measurements taken elsewhere, e.g. on
     /// another core): the result equals feeding both streams to one
     /// accumulator, up to rounding.

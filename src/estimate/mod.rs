@@ -15,6 +15,7 @@
 //!
 //!   Λ of model + candidates ──► rank::identifiability   what the data can identify
 //!                          ──► nested::nested_test     does a candidate explain the residuals
+//!   rows of model + every candidate ──► screen::Augmented (one pass) ──► each candidate's test, the host's rule
 //! ```
 //!
 //! Every type is generic over the scalar `T` (f32 on a microcontroller, f64
@@ -33,6 +34,7 @@
 //! | [`irls`] | [`Reweightable`], [`Fit`]: OLS, WLS, iterative WLS (section 5) |
 //! | [`rank`] | [`identifiability`]: the one column-independence test |
 //! | [`nested`] | [`nested_test`]: the F test of a candidate effect from cross-products |
+//! | [`screen`] | [`screen::Augmented`]: the in-stream diagnosis, `[B | C]` of every candidate in one pass, the host's rule |
 //! | [`distributions`] | χ² and F tail probabilities (no std) |
 //! | `fmt` | with `defmt`: matrices in defmt logs as plain nested lists |
 
@@ -63,6 +65,7 @@ pub mod irls;
 mod linalg;
 pub mod nested;
 pub mod rank;
+pub mod screen;
 pub mod weights;
 
 pub use accumulator::Accumulator;
@@ -75,7 +78,7 @@ pub use irls::{
 };
 pub use nested::{nested_test, NestedTest};
 pub use rank::{
-    identifiability, independence_tolerance, Absorber, Identifiability, IdentifiabilitySettings,
-    Pivoting,
+    identifiability, independence_tolerance, independent, Absorber, Identifiability,
+    IdentifiabilitySettings, Pivoting,
 };
 pub use weights::{inverse_sigma, RobustWeight};

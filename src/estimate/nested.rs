@@ -58,6 +58,7 @@ pub struct NestedTest {
 /// - [`Error::NotIdentifiable`] when a candidate column is (numerically) a
 ///   combination of the model's columns and the candidate's columns before
 ///   it: the data cannot tell that effect from the model.
+#[inline(never)]
 pub fn nested_test<T: RealField + Copy, D: Dim>(
     acc: &Accumulator<T, D>,
     model: &[bool],
@@ -123,7 +124,9 @@ where
     let z = Solution::new(&schur, &g, T::zero(), m, candidate)?;
     let to_f64 = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
     let rss_before = to_f64(fit.wrss);
-    let delta = to_f64(dot(&z.x, &g)).clamp(0.0, rss_before);
+    // Not `clamp`: it panics when a bound is NaN (and links the float
+    // formatting of its message into a firmware).
+    let delta = to_f64(dot(&z.x, &g)).max(0.0).min(rss_before);
     let dof_den = m - p - q;
     let rss_after = rss_before - delta;
     let f = if delta <= 0.0 {

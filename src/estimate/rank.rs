@@ -300,64 +300,15 @@ where
             what: "information",
         });
     }
+    let Pivoted {
+        kept,
+        left_out,
+        s,
+        a,
+        dmin,
+        dmax,
+    } = pivot(lambda, candidates, settings);
     let dim = lambda.shape_generic().0;
-    let flags = || OVector::<bool, D>::from_element_generic(dim, Const::<1>, false);
-    let (mut kept, mut left_out, mut open) = (flags(), flags(), flags());
-    // Scaling; parameters without information are left out outright.
-    let mut s = OVector::<T, D>::zeros_generic(dim, Const::<1>);
-    let dmax_info = (0..n)
-        .filter(|&i| candidates[i])
-        .fold(T::zero(), |m, i| m.max(lambda[(i, i)]));
-    let floor = settings.negligible * dmax_info;
-    for i in (0..n).filter(|&i| candidates[i]) {
-        let d = lambda[(i, i)];
-        if d > floor && d > T::zero() {
-            s[i] = T::one() / d.sqrt();
-            open[i] = true;
-        } else {
-            left_out[i] = true;
-        }
-    }
-    let a = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
-        if open[i] && open[j] {
-            lambda[(i, j)] * s[i] * s[j]
-        } else {
-            T::zero()
-        }
-    });
-    let mut r = a.clone();
-    // Pivoted outer-product Cholesky on the open set.
-    let (mut dmin, mut dmax) = (T::one(), T::zero());
-    loop {
-        let pick = match settings.pivoting {
-            Pivoting::LayoutOrder => (0..n).find(|&i| open[i]),
-            Pivoting::Largest => {
-                (0..n)
-                    .filter(|&i| open[i])
-                    .fold(None, |best: Option<usize>, i| match best {
-                        Some(b) if r[(i, i)] <= r[(b, b)] => Some(b),
-                        _ => Some(i),
-                    })
-            }
-        };
-        let Some(p) = pick else { break };
-        open[p] = false;
-        let d = r[(p, p)];
-        if d.partial_cmp(&settings.tolerance) != Some(core::cmp::Ordering::Greater) {
-            left_out[p] = true;
-            continue;
-        }
-        kept[p] = true;
-        dmin = dmin.min(d);
-        dmax = dmax.max(d);
-        for j in (0..n).filter(|&j| open[j]) {
-            let f = r[(p, j)] / d;
-            for i in (0..n).filter(|&i| open[i]) {
-                let v = r[(i, p)] * f;
-                r[(i, j)] -= v;
-            }
-        }
-    }
     // Regression of each left-out column on all kept columns: plain
     // Cholesky of the kept block (every positive pivot accepted).
     let mut l = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
@@ -419,6 +370,125 @@ where
             T::zero()
         },
     })
+}
+
+/// The pivoted Cholesky of [`identifiability`] alone: which candidates are
+/// kept (the rest of [`identifiability`] explains the left-out ones).
+struct Pivoted<T: RealField + Copy, D: Dim>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    kept: OVector<bool, D>,
+    left_out: OVector<bool, D>,
+    s: OVector<T, D>,
+    a: OMatrix<T, D, D>,
+    dmin: T,
+    dmax: T,
+}
+
+/// `lambda` finite and `candidates` of its size (checked by the callers).
+fn pivot<T: RealField + Copy, D: Dim>(
+    lambda: &OMatrix<T, D, D>,
+    candidates: &[bool],
+    settings: &IdentifiabilitySettings<T>,
+) -> Pivoted<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = lambda.nrows();
+    let dim = lambda.shape_generic().0;
+    let flags = || OVector::<bool, D>::from_element_generic(dim, Const::<1>, false);
+    let (mut kept, mut left_out, mut open) = (flags(), flags(), flags());
+    // Scaling; parameters without information are left out outright.
+    let mut s = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+    let dmax_info = (0..n)
+        .filter(|&i| candidates[i])
+        .fold(T::zero(), |m, i| m.max(lambda[(i, i)]));
+    let floor = settings.negligible * dmax_info;
+    for i in (0..n).filter(|&i| candidates[i]) {
+        let d = lambda[(i, i)];
+        if d > floor && d > T::zero() {
+            s[i] = T::one() / d.sqrt();
+            open[i] = true;
+        } else {
+            left_out[i] = true;
+        }
+    }
+    let a = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
+        if open[i] && open[j] {
+            lambda[(i, j)] * s[i] * s[j]
+        } else {
+            T::zero()
+        }
+    });
+    let mut r = a.clone();
+    // Pivoted outer-product Cholesky on the open set.
+    let (mut dmin, mut dmax) = (T::one(), T::zero());
+    loop {
+        let pick = match settings.pivoting {
+            Pivoting::LayoutOrder => (0..n).find(|&i| open[i]),
+            Pivoting::Largest => {
+                (0..n)
+                    .filter(|&i| open[i])
+                    .fold(None, |best: Option<usize>, i| match best {
+                        Some(b) if r[(i, i)] <= r[(b, b)] => Some(b),
+                        _ => Some(i),
+                    })
+            }
+        };
+        let Some(p) = pick else { break };
+        open[p] = false;
+        let d = r[(p, p)];
+        if d.partial_cmp(&settings.tolerance) != Some(core::cmp::Ordering::Greater) {
+            left_out[p] = true;
+            continue;
+        }
+        kept[p] = true;
+        dmin = dmin.min(d);
+        dmax = dmax.max(d);
+        for j in (0..n).filter(|&j| open[j]) {
+            let f = r[(p, j)] / d;
+            for i in (0..n).filter(|&i| open[i]) {
+                let v = r[(i, p)] * f;
+                r[(i, j)] -= v;
+            }
+        }
+    }
+    Pivoted {
+        kept,
+        left_out,
+        s,
+        a,
+        dmin,
+        dmax,
+    }
+}
+
+/// Which `candidates` are kept, as [`identifiability`] with the default
+/// settings decides, without the regressions that explain the left-out
+/// ones (the device's in-stream diagnosis needs the flags alone:
+/// [`super::screen`]).
+///
+/// # Errors
+/// As [`identifiability`].
+pub fn independent<T: RealField + Copy, D: Dim>(
+    lambda: &OMatrix<T, D, D>,
+    candidates: &[bool],
+) -> Result<OVector<bool, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    if candidates.len() != lambda.nrows() {
+        return Err(Error::Mismatch {
+            what: "one candidate flag per parameter",
+        });
+    }
+    if !lambda.iter().all(|v| v.is_finite()) {
+        return Err(Error::NonFinite {
+            what: "information",
+        });
+    }
+    Ok(pivot(lambda, candidates, &IdentifiabilitySettings::default()).kept)
 }
 
 impl<T: RealField + Copy, D: Dim> Accumulator<T, D>

@@ -13,9 +13,11 @@
 //! | [`param`] | [`Param`]: the one vocabulary of parameters; [`Unit`]s and SI factors |
 //! | [`sample`] | [`Sample`]: what one measurement carries at the current model |
 //! | [`columns`] | `∂p/∂x` of every parameter: geometric (eq. 2), elastostatic (eq. 3), effects |
+//! | [`effect`] | [`effect::Effect`]: the effect library's names; the candidates of a stream of deflections as masks over one layout |
 //! | [`layout`] | [`Layout`]: a fixed-capacity list of parameters for the device and the rows it fills |
 
 pub mod columns;
+pub mod effect;
 pub mod layout;
 pub mod param;
 pub mod sample;

@@ -1,0 +1,534 @@
+//! The closed loop on the device (issue 17): fit the model by iterative
+//! WLS over a stream of deflections, then in **one more pass** accumulate the
+//! cross-products of the model's columns and of every candidate effect's
+//! (`robcal::estimate::screen::Augmented`) and the pure error of the
+//! repetitions (`PureError`), test every candidate from them with the
+//! host's rule (nested F test, Bonferroni over the candidates tried, share
+//! of the lack of fit), add the most significant one whose estimate is
+//! physical, refit, and repeat. No row is stored: memory is
+//! `O((N+K)² + G)`.
+//!
+//! Generic over the scalar (f32 on the device, f64 in the host test that
+//! compares it with `robcal calibrate --linear`,
+//! `host-tests/tests/device_diagnosis.rs`) and over the data ([`Data`]: the
+//! firmware's flash table, or a measurement file on the host).
+//!
+//! What the device does not do that the host does (documented, not
+//! hidden): the leave-one-configuration-out check (an effect is added on
+//! the host only if the held-out RMS drops: `G` refits per candidate), the
+//! identifiability pruning of the extended model (`extended` on the host;
+//! the device's candidate columns are already independent of the model by
+//! the test), and the geometric effects (absolute rows, Gauss–Newton): see
+//! `robcal::model::effect`.
+
+use nalgebra::{Const, RealField, SMatrix, Vector3};
+use robcal::estimate::screen::{rank_tests, Augmented, LackOfFit, PureError, Rule};
+use robcal::estimate::{group_dof, group_sigma, leverage, NestedTest, Noise, Solution};
+use robcal::model::effect::{inadmissible, joint_bins, stream_candidates, Effect, JointBins};
+use robcal::model::{Layout, Marker, Param, Sample};
+use robcal::robot::{joint_torques, Frames, PointLoad};
+use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
+
+/// Joints of the arm.
+pub const J: usize = 6;
+/// Model columns at most, and the size of one test's sub-problem (the
+/// model and the candidate's informative columns): the KR-270's naive
+/// model has 5 (+ 4 compensator bins), with the compensator 9, with the
+/// backlash 10 (+ 1). One size for both: one copy of the solver in flash,
+/// and f32 matrices of 484 bytes on the stack. A larger problem is refused
+/// (`Error::Mismatch`), never truncated.
+pub const NMAX: usize = 11;
+/// The model's dimension.
+pub type Dm = Const<NMAX>;
+/// Columns of the augmented pass: the model's and every candidate's.
+pub const P: usize = 32;
+/// `P (P + 1) / 2`.
+pub const L: usize = P * (P + 1) / 2;
+/// Candidates at most.
+pub const K: usize = 24;
+/// One test's sub-problem: the model and one candidate ([`NMAX`]).
+pub const S: usize = NMAX;
+/// Angle bins of a joint at most (a compensator has 2 to 8).
+pub const BINS: usize = 8;
+/// Configurations at most.
+pub const GMAX: usize = 16;
+/// Cells (configuration × marker) at most.
+pub const CELLS: usize = 3 * GMAX;
+/// Effects added at most (`robcal::calibrate::Policy::max_effects` is 8;
+/// the device's model capacity allows fewer).
+pub const MAX_EFFECTS: usize = 3;
+/// `Policy::max_drift_mm_per_h`.
+pub const MAX_DRIFT_MM_PER_H: f64 = 5.0;
+
+/// One measured deflection: its configuration (the group of the weights),
+/// marker, time between the unloaded and the loaded measurement, and `Δp`.
+#[derive(Clone, Copy, Debug)]
+pub struct Meas<T: RealField + Copy> {
+    /// Configuration index.
+    pub group: usize,
+    /// Marker index.
+    pub marker: u8,
+    /// `t_loaded − t_unloaded` \[s\] (0 without time).
+    pub dt_s: T,
+    /// Loaded − unloaded position \[m\].
+    pub dp: Vector3<T>,
+}
+
+/// What the loop needs of a data set: the robot, its configurations (angles
+/// and load), the markers, and a stream of the deflections (sorted by
+/// configuration, so that the rows of a configuration are computed once).
+pub trait Data<T: RealField + Copy> {
+    /// The arm.
+    fn chain(&self) -> &Chain<T, J>;
+    /// Number of configurations.
+    fn groups(&self) -> usize;
+    /// Joint angles of configuration `g` \[rad\].
+    fn q(&self, g: usize) -> [T; J];
+    /// The load of configuration `g`.
+    fn load(&self, g: usize) -> PointLoad<T>;
+    /// Marker `m`.
+    fn marker(&self, m: u8) -> Option<Marker<T>>;
+    /// Whether the measurements carry time (a drift candidate).
+    fn time(&self) -> bool;
+    /// Every deflection, in order (a `dyn` callback: one copy of the loop
+    /// in flash, not one per caller).
+    fn for_each(&self, f: &mut dyn FnMut(&Meas<T>) -> Result<(), Error>) -> Result<(), Error>;
+}
+
+/// The rows of a configuration: frames, the load's torques and wrench.
+struct Config<T: RealField + Copy> {
+    g: usize,
+    frames: Frames<T, J>,
+    tau: [T; J],
+    wrench: robcal::robot::Wrench<T>,
+}
+
+fn config<T: RealField + Copy, D: Data<T>>(data: &D, g: usize) -> Result<Config<T>, Error> {
+    let q = data.q(g);
+    let frames = data.chain().frames(&q)?;
+    let wrench = data.load(g).wrench(&frames);
+    let mut tau = [T::zero(); J];
+    joint_torques(&frames, &wrench, &mut tau)?;
+    Ok(Config {
+        g,
+        frames,
+        tau,
+        wrench,
+    })
+}
+
+/// What [`stream`] hands each deflection to: the measurement and its rows.
+type RowSink<'a, T, const C: usize> =
+    dyn FnMut(&Meas<T>, &SMatrix<T, 3, C>) -> Result<(), Error> + 'a;
+
+/// Streams every deflection with its rows `B` for `layout` (columns past it
+/// zero). The load centre of mass's column is first order about the joint
+/// law the rows are linearised at; as the host's first-order model
+/// (`--linear`), the device linearises at the nominal robot (no
+/// compliance), where that column is zero: the host never tries
+/// `load_com` there, nor does the device (a host inconsistency, reported
+/// in issue 17: with the fitted compliances it would be tested).
+#[inline(never)]
+fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
+    data: &D,
+    layout: &Layout<C>,
+    f: &mut RowSink<'_, T, C>,
+) -> Result<(), Error> {
+    let mut cached: Option<Config<T>> = None;
+    let mut b = SMatrix::<T, 3, C>::zeros();
+    data.for_each(&mut |m| {
+        if cached.as_ref().map(|c| c.g) != Some(m.group) {
+            cached = Some(config(data, m.group)?);
+        }
+        let c = cached.as_ref().ok_or(Error::Mismatch { what: "no rows" })?;
+        let marker = data.marker(m.marker).ok_or(Error::OutOfRange {
+            what: "marker",
+            index: usize::from(m.marker),
+            len: 0,
+        })?;
+        let sample = Sample {
+            dt_s: m.dt_s,
+            ..Sample::deflection(
+                &c.frames,
+                c.frames.point_m(&marker.xyz_m),
+                m.marker,
+                &c.tau,
+                Some(c.wrench),
+            )
+        };
+        layout.fill(&sample, &mut b)?;
+        f(m, &b)
+    })
+}
+
+/// The model as a streaming [`Reweightable`] source (as the firmware's
+/// KR-270 source, at the model's columns).
+struct ModelSource<'a, T: RealField + Copy, D: Data<T>> {
+    data: &'a D,
+    layout: &'a Layout<NMAX>,
+    scalar: core::marker::PhantomData<T>,
+}
+
+impl<T: RealField + Copy, D: Data<T>> Reweightable<T, Dm> for ModelSource<'_, T, D> {
+    fn group_count(&self) -> usize {
+        self.data.groups()
+    }
+
+    fn weighted(
+        &self,
+        weights: &[Vector3<T>],
+        noise: Option<Noise<'_, T>>,
+    ) -> Result<Accumulator<T, Dm>, Error> {
+        let g = self.data.groups();
+        if weights.len() != g || noise.is_some_and(|n| !n.fits(g)) {
+            return Err(Error::Mismatch {
+                what: "one weight (and sigma) per group",
+            });
+        }
+        let mut acc = Accumulator::new();
+        stream(self.data, self.layout, &mut |m, b| {
+            let w = weights[m.group];
+            let mut block = Block::new(*b, m.dp).with_weights(w);
+            if let Some(n) = noise {
+                block = block.with_sigma(n.sigma(m.group, &w));
+            }
+            acc.update(&block)
+        })?;
+        Ok(acc)
+    }
+
+    fn residual_sigma_into(
+        &self,
+        fit: &Solution<T, Dm>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
+    ) -> Result<(), Error> {
+        let g = self.data.groups();
+        if sigma.len() != g || dof.len() != g || weights.len() != g || g > GMAX {
+            return Err(Error::Mismatch {
+                what: "one sigma and one weight per group",
+            });
+        }
+        let mut rss = [Vector3::<T>::zeros(); GMAX];
+        let mut h = [Vector3::<T>::zeros(); GMAX];
+        let mut rows = [0usize; GMAX];
+        stream(self.data, self.layout, &mut |m, b| {
+            let r = m.dp - b * fit.x;
+            rss[m.group] += r.component_mul(&r);
+            for a in 0..3 {
+                h[m.group][a] += leverage(&fit.lambda_inv, |c| b[(a, c)], weights[m.group][a]);
+            }
+            rows[m.group] += 1;
+            Ok(())
+        })?;
+        for i in 0..g {
+            sigma[i] = Vector3::from_fn(|a, _| group_sigma(rss[i][a], rows[i], h[i][a]));
+            dof[i] = Vector3::from_fn(|a, _| group_dof(rows[i], h[i][a]));
+        }
+        Ok(())
+    }
+}
+
+/// A fitted model: its layout, estimate (reported units), weights and RMS.
+#[derive(Clone, Debug)]
+pub struct Fitted<T: RealField + Copy> {
+    /// The model's columns.
+    pub layout: Layout<NMAX>,
+    /// The estimate, one per column.
+    pub x: [T; NMAX],
+    /// Weights per configuration and axis (eq. 14) of the final fit.
+    pub weights: [Vector3<T>; GMAX],
+    /// RMS of the position residuals \[µm\] (as the host's `rms_um`).
+    pub rms_um: f64,
+    /// IRLS iterations.
+    pub iterations: usize,
+}
+
+fn to_f64<T: RealField + Copy>(v: T) -> f64 {
+    nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN)
+}
+
+/// Iterative WLS of `layout` over the stream, to convergence, and the RMS
+/// of its residuals (one more pass). Not inlined: its frame stays out of
+/// the loop's.
+#[inline(never)]
+fn fit<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    layout: &Layout<NMAX>,
+    settings: &IrlsSettings<T>,
+) -> Result<Fitted<T>, Error> {
+    let g = data.groups();
+    if g > GMAX {
+        return Err(Error::CapacityExceeded {
+            what: "configurations",
+            capacity: GMAX,
+        });
+    }
+    let src = ModelSource {
+        data,
+        layout,
+        scalar: core::marker::PhantomData,
+    };
+    let mut weights = [Vector3::zeros(); GMAX];
+    let mut sigma = [Vector3::zeros(); GMAX];
+    let mut dof = [Vector3::zeros(); GMAX];
+    let mut active = [false; NMAX];
+    active[..layout.len()].fill(true);
+    let f: Fit<T, Dm> = src.fit_irls(
+        settings,
+        &active,
+        &mut weights[..g],
+        &mut sigma[..g],
+        &mut dof[..g],
+        |_| {},
+    )?;
+    let (mut ss, mut rows) = (0.0f64, 0usize);
+    stream(data, layout, &mut |m, b| {
+        let r = m.dp - b * f.solution.x;
+        ss += to_f64(r.norm_squared());
+        rows += 1;
+        Ok(())
+    })?;
+    let mut x = [T::zero(); NMAX];
+    x.copy_from_slice(f.solution.x.as_slice());
+    Ok(Fitted {
+        layout: layout.clone(),
+        x,
+        weights,
+        rms_um: if rows == 0 {
+            0.0
+        } else {
+            libm::sqrt(ss / rows as f64) * 1e6
+        },
+        iterations: f.iterations,
+    })
+}
+
+/// One effect added.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// The effect.
+    pub effect: Effect,
+    /// Its joint.
+    pub joint: Option<u8>,
+    /// Its test.
+    pub test: NestedTest,
+    /// Candidates tested in its round (the Bonferroni count).
+    pub tried: usize,
+    /// RMS before and after \[µm\].
+    pub rms_um: (f64, f64),
+}
+
+/// What the loop found.
+#[derive(Clone, Debug)]
+pub struct Outcome<T: RealField + Copy> {
+    /// The declared model's fit.
+    pub declared_rms_um: f64,
+    /// The effects added, in order.
+    pub steps: heapless::Vec<Step, MAX_EFFECTS>,
+    /// The final fit.
+    pub last: Fitted<T>,
+    /// Candidates tested in the first round.
+    pub first_tried: usize,
+    /// The first round's lack of fit.
+    pub first_lof: Option<LackOfFit>,
+}
+
+/// Column indices of a bit mask.
+fn indices(mask: u64, out: &mut [usize; 64]) -> usize {
+    let mut n = 0;
+    for i in 0..64 {
+        if mask & (1u64 << i) != 0 {
+            out[n] = i;
+            n += 1;
+        }
+    }
+    n
+}
+
+/// The screening of one round on `cur`: one pass over the stream, every
+/// candidate tested. Returns the candidates' tests (most significant first,
+/// with their candidate), the lack of fit, and the augmented layout.
+#[allow(clippy::type_complexity)]
+#[inline(never)]
+fn screen<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    cur: &Fitted<T>,
+    bins: &[JointBins<BINS>; J],
+) -> Result<
+    (
+        heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K>,
+        Option<LackOfFit>,
+        Layout<P>,
+    ),
+    Error,
+> {
+    let n = cur.layout.len();
+    let mut model = [Param::Compliance { joint: 0 }; NMAX];
+    for (m, c) in model.iter_mut().zip(cur.layout.columns()) {
+        *m = c.param;
+    }
+    let (aug, cands) =
+        stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
+    let mut sums = Augmented::<T, P, L>::new()?;
+    let mut pure = PureError::<T, CELLS>::new();
+    // The model fit's residuals `r = Δp − B_A X̂_A` in place of `Δp`: every
+    // test is the same (`r` differs from `Δp` by a combination of the
+    // model's columns), and the scores `B_Cᵀ W² r` are summed directly
+    // instead of as a difference of large sums (in f32 that moved F by
+    // 1 %). The model's columns are the layout's first `n`.
+    let mut x = SMatrix::<T, P, 1>::zeros();
+    x.as_mut_slice()[..n].copy_from_slice(&cur.x[..n]);
+    stream(data, &aug, &mut |m, b| {
+        let r = m.dp - b * x;
+        sums.update(b, &r, &cur.weights[m.group])?;
+        pure.update(m.group as u16, u16::from(m.marker), &m.dp)
+    })?;
+    let model_cols: [usize; NMAX] = core::array::from_fn(|i| i);
+    let mut tests: heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K> =
+        heapless::Vec::new();
+    let mut cols = [0usize; 64];
+    for c in &cands {
+        let q = indices(c.test, &mut cols);
+        let r = sums.test(&model_cols[..n], &cols[..q], Const::<S>)?;
+        if let Some(t) = r {
+            // Within capacity: one test per candidate.
+            let _ = tests.push((*c, t));
+        }
+    }
+    rank_tests(&mut tests);
+    // The model's weighted RSS at these weights, for the lack of fit.
+    let acc = sums.select(&model_cols[..n], Const::<S>, true)?;
+    let mut active = [false; S];
+    active[..n].fill(true);
+    let wrss = to_f64(acc.solve_active(&active)?.wrss);
+    let lof = pure.lack_of_fit(wrss, &cur.weights[..data.groups()], n);
+    Ok((tests, lof, aug))
+}
+
+/// The model with a candidate added (the host's `extended`, without its
+/// identifiability pruning): its parameters where the ones it replaces
+/// were, else at the end.
+fn extended(
+    model: &Layout<NMAX>,
+    aug: &Layout<P>,
+    c: &robcal::model::effect::StreamCandidate,
+    chain: &Chain<impl RealField + Copy, J>,
+) -> Result<Layout<NMAX>, Error> {
+    let col = |i: usize| aug.columns()[i].param;
+    let removed = |p: &Param| aug.index_of(p).is_some_and(|i| c.remove & (1u64 << i) != 0);
+    let params = model.columns();
+    let at = params
+        .iter()
+        .position(|p| removed(&p.param))
+        .unwrap_or(params.len());
+    let mut out = Layout::new();
+    for p in params[..at].iter().filter(|p| !removed(&p.param)) {
+        out.push(chain, p.param)?;
+    }
+    let mut idx = [0usize; 64];
+    let na = indices(c.add, &mut idx);
+    for &i in &idx[..na] {
+        if model.index_of(&col(i)).is_none() {
+            out.push(chain, col(i))?;
+        }
+    }
+    for p in params[at..].iter().filter(|p| !removed(&p.param)) {
+        out.push(chain, p.param)?;
+    }
+    Ok(out)
+}
+
+/// The closed loop: the declared `model`, then rounds of screening until
+/// no candidate passes the `rule` with a physical estimate (or
+/// [`MAX_EFFECTS`]). `log` gets each step as it is taken.
+///
+/// # Errors
+/// From the fits and the screening.
+pub fn run<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    model: &[Param],
+    settings: &IrlsSettings<T>,
+    rule: &Rule,
+    mut log: impl FnMut(&Step),
+) -> Result<Outcome<T>, Error> {
+    let chain = data.chain();
+    let g = data.groups();
+    // Each joint's angle bins from the configurations.
+    let mut bins: [JointBins<BINS>; J] = core::array::from_fn(|_| JointBins {
+        angles_urad: heapless::Vec::new(),
+        compensator_ok: false,
+    });
+    let mut angles = [T::zero(); GMAX];
+    for (j, b) in bins.iter_mut().enumerate() {
+        for (i, a) in angles[..g].iter_mut().enumerate() {
+            *a = data.q(i)[j];
+        }
+        *b = joint_bins(&angles[..g])?;
+    }
+    let mut layout = Layout::new();
+    for p in model {
+        layout.push(chain, *p)?;
+    }
+    let mut cur = fit(data, &layout, settings)?;
+    let mut out = Outcome {
+        declared_rms_um: cur.rms_um,
+        steps: heapless::Vec::new(),
+        last: cur.clone(),
+        first_tried: 0,
+        first_lof: None,
+    };
+    for round in 0.. {
+        let (tests, lof, aug) = screen(data, &cur, &bins)?;
+        if round == 0 {
+            out.first_lof = lof;
+            out.first_tried = tests.len();
+        }
+        let tried = tests.len();
+        let mut eligible = tests
+            .iter()
+            .filter(|(_, t)| rule.eligible(t, tried, lof.as_ref()))
+            .peekable();
+        if eligible.peek().is_none() || out.steps.is_full() {
+            break;
+        }
+        let mut accepted = None;
+        for (c, t) in eligible {
+            let next_layout = extended(&cur.layout, &aug, c, chain)?;
+            let next = match fit(data, &next_layout, settings) {
+                Ok(next) => next,
+                Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => continue,
+                Err(e) => return Err(e),
+            };
+            let mut params = [Param::Compliance { joint: 0 }; NMAX];
+            let mut x = [0.0; NMAX];
+            for (i, col) in next.layout.columns().iter().enumerate() {
+                params[i] = col.param;
+                x[i] = to_f64(next.x[i]);
+            }
+            let mut idx = [0usize; 64];
+            let na = indices(c.add, &mut idx);
+            let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
+            let m = next.layout.len();
+            if inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_some() {
+                continue;
+            }
+            accepted = Some((*c, *t, next));
+            break;
+        }
+        let Some((c, t, next)) = accepted else { break };
+        let step = Step {
+            effect: c.effect,
+            joint: c.joint,
+            test: t,
+            tried,
+            rms_um: (cur.rms_um, next.rms_um),
+        };
+        log(&step);
+        let _ = out.steps.push(step);
+        cur = next;
+    }
+    out.last = cur;
+    Ok(out)
+}

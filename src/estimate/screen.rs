@@ -1,0 +1,510 @@
+//! In-stream diagnosis: which effect the model lacks, decided from
+//! cross-products accumulated in one pass, without storing rows.
+//!
+//! The host's closed loop (`calibrate::diagnosis`) keeps every row in
+//! memory and, for each candidate effect with columns `C`, builds the
+//! cross-products of `[B_A | B_C]` (the model's columns `A`, eq. 4, then
+//! the candidate's), keeps the candidate columns that the unweighted
+//! columns tell apart from the model's ([`super::rank`]) and runs the
+//! nested F test ([`super::nested_test`]) at the model fit's weights `W`
+//! (eq. 9, 12, 14). Every quantity it needs is an entry of
+//!
+//! ```text
+//!   Λ = Σ [B_A | B_C]ᵀ W² [B_A | B_C],   η = Σ [B_A | B_C]ᵀ W² Δp,   Σ Δpᵀ W² Δp, m
+//!   Λ⁰ = Σ [B_A | B_C]ᵀ [B_A | B_C]   (unweighted: the independence test, as the host's)
+//! ```
+//!
+//! over the model's columns *and every candidate's columns at once*
+//! (`K` of them): [`Augmented`] accumulates them in one stream, `O((N+K)²)`
+//! scalars (packed upper triangles, no `M`), and [`Augmented::test`] cuts
+//! out the principal sub-problem `[A | C]` of one candidate and runs the
+//! host's path on it: the same arithmetic on the same sums.
+//!
+//! The host's multiple-testing rule ([`Rule`]): a candidate is eligible when
+//! `p · tried < α` (Bonferroni over the candidates tested) and, when the
+//! lack of fit against the repetitions is significant, when its `ΔRSS`
+//! explains at least `min_share` of the lack-of-fit sum of squares above its
+//! noise expectation. The lack of fit needs the pure error: the scatter of
+//! the repetitions within each cell (configuration, marker), where the rows
+//! share their regressors, so that it does not depend on the fit;
+//! [`PureError`] keeps it per cell, `O(G)`, and
+//! `SS_lof = RSS_w − SS_pe` at the fit's weights.
+//!
+//! Memory: `2·(N+K)(N+K+1)/2 + (N+K)` scalars for [`Augmented`] and seven
+//! per cell for [`PureError`]; each test works on an accumulator of the
+//! size of the model plus one candidate.
+
+use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, SMatrix, Vector3};
+
+use super::accumulator::Accumulator;
+use super::distributions;
+use super::nested::{nested_test, NestedTest};
+use super::rank::independent;
+use super::Alloc;
+use crate::Error;
+
+/// Most columns of one sub-problem (model plus one candidate).
+pub const MAX_SUB: usize = 64;
+
+/// Index of `(i, j)`, `i ≤ j`, in a packed upper triangle (column-major).
+fn packed(i: usize, j: usize) -> usize {
+    let (i, j) = if i <= j { (i, j) } else { (j, i) };
+    j * (j + 1) / 2 + i
+}
+
+/// The weighted and unweighted cross-products of `P` columns (the model's
+/// and every candidate's), accumulated in one stream. `L` must be
+/// `P (P + 1) / 2` (the packed upper triangle; checked by [`Augmented::new`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Augmented<T: RealField + Copy, const P: usize, const L: usize> {
+    /// `Λ = Σ Bᵀ W² B`, packed upper triangle.
+    info: [T; L],
+    /// `Λ⁰ = Σ Bᵀ B`, packed upper triangle.
+    plain: [T; L],
+    /// `η = Σ Bᵀ W² Δp`.
+    eta: [T; P],
+    /// `Σ Δpᵀ W² Δp`.
+    yy: T,
+    /// Rows with a positive weight.
+    equations: usize,
+}
+
+impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
+    /// Empty sums.
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] when `L ≠ P (P + 1) / 2`.
+    pub fn new() -> Result<Self, Error> {
+        if L != P * (P + 1) / 2 {
+            return Err(Error::Mismatch {
+                what: "L must be P (P + 1) / 2",
+            });
+        }
+        Ok(Self {
+            info: [T::zero(); L],
+            plain: [T::zero(); L],
+            eta: [T::zero(); P],
+            yy: T::zero(),
+            equations: 0,
+        })
+    }
+
+    /// Rows with a positive weight accumulated so far.
+    pub fn equations(&self) -> usize {
+        self.equations
+    }
+
+    /// Adds one measurement: the three rows `b` (x, y, z) of all `P`
+    /// columns (zero past the layout), `Δp` and the weight of each row
+    /// (eq. 9). Unchanged on error.
+    ///
+    /// # Errors
+    /// [`Error::NonFinite`] for a non-finite entry or weight, or when a sum
+    /// would overflow (checked on the diagonals, which bound the rest);
+    /// [`Error::OutOfRange`] for a negative weight.
+    pub fn update(
+        &mut self,
+        b: &SMatrix<T, 3, P>,
+        dp: &Vector3<T>,
+        w: &Vector3<T>,
+    ) -> Result<(), Error> {
+        if !(b.iter().all(|v| v.is_finite())
+            && dp.iter().all(|v| v.is_finite())
+            && w.iter().all(|v| v.is_finite()))
+        {
+            return Err(Error::NonFinite { what: "row" });
+        }
+        if w.iter().any(|v| *v < T::zero()) {
+            return Err(Error::OutOfRange {
+                what: "weight",
+                index: 0,
+                len: 0,
+            });
+        }
+        let w2 = w.component_mul(w);
+        // The diagonals and Σ Δpᵀ W² Δp after the update bound every other
+        // sum (Cauchy–Schwarz): check them before changing anything.
+        let mut yy = self.yy;
+        for a in 0..3 {
+            yy += w2[a] * dp[a] * dp[a];
+        }
+        let mut ok = yy.is_finite();
+        for j in 0..P {
+            let d = packed(j, j);
+            let (mut s, mut s0) = (self.info[d], self.plain[d]);
+            for a in 0..3 {
+                s += w2[a] * b[(a, j)] * b[(a, j)];
+                s0 += b[(a, j)] * b[(a, j)];
+            }
+            ok &= s.is_finite() && s0.is_finite();
+        }
+        if !ok {
+            return Err(Error::NonFinite { what: "overflow" });
+        }
+        for j in 0..P {
+            for i in 0..=j {
+                let k = packed(i, j);
+                for a in 0..3 {
+                    let bb = b[(a, i)] * b[(a, j)];
+                    self.info[k] += w2[a] * bb;
+                    self.plain[k] += bb;
+                }
+            }
+            for a in 0..3 {
+                self.eta[j] += w2[a] * b[(a, j)] * dp[a];
+            }
+        }
+        self.yy = yy;
+        self.equations += w.iter().filter(|v| **v > T::zero()).count();
+        Ok(())
+    }
+
+    /// The accumulator of the columns `cols` (in that order; columns of
+    /// `dim` past them are zero): weighted, or the unweighted `Λ⁰` (then
+    /// `η` and `Σ Δpᵀ Δp` are zero).
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] when `cols` does not fit in `dim`;
+    /// [`Error::OutOfRange`] for a column `≥ P`.
+    pub fn select<D: Dim>(
+        &self,
+        cols: &[usize],
+        dim: D,
+        weighted: bool,
+    ) -> Result<Accumulator<T, D>, Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        if cols.len() > dim.value() {
+            return Err(Error::Mismatch {
+                what: "more columns than the sub-problem's size",
+            });
+        }
+        if let Some(&c) = cols.iter().find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
+        }
+        let sums = if weighted { &self.info } else { &self.plain };
+        let mut info = OMatrix::<T, D, D>::zeros_generic(dim, dim);
+        let mut eta = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+        for (j, &cj) in cols.iter().enumerate() {
+            for (i, &ci) in cols.iter().enumerate().take(j + 1) {
+                info[(i, j)] = sums[packed(ci, cj)];
+            }
+            if weighted {
+                eta[j] = self.eta[cj];
+            }
+        }
+        let yy = if weighted { self.yy } else { T::zero() };
+        Ok(Accumulator::from_sums(info, eta, yy, self.equations))
+    }
+
+    /// The host's test of one candidate: of its columns `candidate`, those
+    /// the unweighted columns tell apart from the model's `model` and from
+    /// the candidate's before them ([`super::rank`]); the nested F test of
+    /// adding them to the model ([`nested_test`]) at the accumulated
+    /// weights. `dim` holds the sub-problem (`model.len() + candidate.len()`
+    /// columns at least; `Dyn` on the host, `Const<S>` on the device).
+    ///
+    /// `Ok(None)` when nothing of the candidate is left after the model or
+    /// the data cannot test it (no degrees of freedom left, a column the
+    /// model absorbs): the host does not count it as tried either.
+    ///
+    /// # Errors
+    /// As [`Augmented::select`]; [`Error::Mismatch`] for more than 64
+    /// candidate columns; errors of the model's solve other than those.
+    #[inline(never)]
+    pub fn test<D: Dim>(
+        &self,
+        model: &[usize],
+        candidate: &[usize],
+        dim: D,
+    ) -> Result<Option<NestedTest>, Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        let n = model.len();
+        if n + candidate.len() > MAX_SUB {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
+        }
+        // The columns in one list: model, then candidate. A candidate column
+        // without information (`Λ⁰ᵢᵢ ≤ ε² max Λ⁰ₖₖ`, e.g. the torque of a
+        // vertical load about a vertical axis) is left out here, as the
+        // independence test would (`rank::independent`, its first step):
+        // the sub-problem stays the size of what can be tested.
+        let diag = |c: usize| self.plain[packed(c, c)];
+        let dmax = model
+            .iter()
+            .chain(candidate)
+            .fold(T::zero(), |m, &c| m.max(diag(c)));
+        let floor = T::default_epsilon() * T::default_epsilon() * dmax;
+        let mut cols = [0usize; MAX_SUB];
+        cols[..n].copy_from_slice(model);
+        let mut q = 0;
+        for &c in candidate {
+            if diag(c) > floor && diag(c) > T::zero() {
+                cols[n + q] = c;
+                q += 1;
+            }
+        }
+        if q == 0 {
+            return Ok(None);
+        }
+        if n + q > dim.value() {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        let mut informative = [0usize; MAX_SUB];
+        informative[..q].copy_from_slice(&cols[n..n + q]);
+        let candidate = &informative[..q];
+        let plain = self.select(&cols[..n + q], dim, false)?;
+        let all = OVector::<bool, D>::from_element_generic(dim, Const::<1>, true);
+        let kept = match independent(&plain.information(), all.as_slice()) {
+            Ok(kept) => kept,
+            Err(_) => return Ok(None),
+        };
+        let mut len = 0;
+        for (k, &c) in candidate.iter().enumerate() {
+            if kept[n + k] {
+                cols[n + len] = c;
+                len += 1;
+            }
+        }
+        if len == 0 {
+            return Ok(None);
+        }
+        let acc = self.select(&cols[..n + len], dim, true)?;
+        let mut m = OVector::<bool, D>::from_element_generic(dim, Const::<1>, false);
+        let mut cm = m.clone();
+        for k in 0..n {
+            m[k] = true;
+        }
+        for k in n..n + len {
+            cm[k] = true;
+        }
+        let fit = match acc.solve_active(m.as_slice()) {
+            Ok(fit) => fit,
+            Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        match nested_test(&acc, m.as_slice(), &fit, cm.as_slice()) {
+            Ok(t) => Ok(Some(t)),
+            Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// The lack-of-fit test against the repetitions: rows of one cell
+/// (configuration, marker, kind) share their regressors, so the scatter
+/// within a cell is pure error and the cell means carry the lack of fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LackOfFit {
+    /// `F = (SS_lof / df_lof) / (SS_pe / df_pe)`.
+    pub f: f64,
+    /// Its p-value.
+    pub p_value: f64,
+    /// Between-cell weighted sum of squares.
+    pub ss_lof: f64,
+    /// Its degrees of freedom (cells · 3 − parameters).
+    pub df_lof: usize,
+    /// Within-cell weighted sum of squares.
+    pub ss_pe: f64,
+    /// Its degrees of freedom.
+    pub df_pe: usize,
+}
+
+impl LackOfFit {
+    /// The test from its sums of squares; `None` without degrees of
+    /// freedom on either side or without pure error.
+    pub fn new(ss_lof: f64, df_lof: usize, ss_pe: f64, df_pe: usize) -> Option<Self> {
+        if df_lof == 0 || df_pe == 0 || ss_pe <= 0.0 {
+            return None;
+        }
+        let f = (ss_lof / df_lof as f64) / (ss_pe / df_pe as f64);
+        Some(Self {
+            f,
+            p_value: distributions::f_sf(f, df_lof, df_pe),
+            ss_lof,
+            df_lof,
+            ss_pe,
+            df_pe,
+        })
+    }
+
+    /// `SS_lof` above its expectation under noise alone.
+    pub fn excess(&self) -> f64 {
+        (self.ss_lof - self.df_lof as f64 * self.ss_pe / self.df_pe.max(1) as f64).max(0.0)
+    }
+}
+
+/// One cell's running moments of `Δp` (Welford).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Cell<T> {
+    group: u16,
+    key: u16,
+    n: u32,
+    mean: [T; 3],
+    m2: [T; 3],
+}
+
+/// The pure error of the repetitions, per cell, in one stream: `C` cells
+/// at most (the device's configurations × markers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PureError<T: RealField + Copy, const C: usize> {
+    cells: heapless::Vec<Cell<T>, C>,
+}
+
+impl<T: RealField + Copy, const C: usize> Default for PureError<T, C> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<T: RealField + Copy, const C: usize> PureError<T, C> {
+    /// No cell yet.
+    pub const fn new() -> Self {
+        Self {
+            cells: heapless::Vec::new(),
+        }
+    }
+
+    /// Adds one measurement `Δp` of cell `key` (e.g. the marker) of
+    /// configuration `group` (the group of the weights). Unchanged on error.
+    ///
+    /// # Errors
+    /// [`Error::NonFinite`]; [`Error::CapacityExceeded`] past `C` cells.
+    pub fn update(&mut self, group: u16, key: u16, dp: &Vector3<T>) -> Result<(), Error> {
+        if !dp.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite { what: "row" });
+        }
+        let i = match self
+            .cells
+            .iter()
+            .position(|c| c.group == group && c.key == key)
+        {
+            Some(i) => i,
+            None => {
+                let cell = Cell {
+                    group,
+                    key,
+                    n: 0,
+                    mean: [T::zero(); 3],
+                    m2: [T::zero(); 3],
+                };
+                self.cells.push(cell).map_err(|_| Error::CapacityExceeded {
+                    what: "pure-error cells",
+                    capacity: C,
+                })?;
+                self.cells.len() - 1
+            }
+        };
+        let c = &mut self.cells[i];
+        c.n += 1;
+        let n: T = nalgebra::convert(f64::from(c.n));
+        for a in 0..3 {
+            let d = dp[a] - c.mean[a];
+            c.mean[a] += d / n;
+            c.m2[a] += d * (dp[a] - c.mean[a]);
+        }
+        Ok(())
+    }
+
+    /// Number of cells.
+    pub fn cells(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// The lack-of-fit test of a fit of `params` parameters with weighted
+    /// RSS `wrss` at the weights `weights` (one per group and axis, eq. 14):
+    /// `SS_pe = Σ w² · scatter`, `SS_lof = RSS_w − SS_pe`. `None` as
+    /// [`LackOfFit::new`], or for a group without a weight.
+    pub fn lack_of_fit(
+        &self,
+        wrss: f64,
+        weights: &[Vector3<T>],
+        params: usize,
+    ) -> Option<LackOfFit> {
+        let to = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
+        let (mut ss_pe, mut df_pe) = (0.0, 0usize);
+        for c in &self.cells {
+            let w = weights.get(usize::from(c.group))?;
+            for a in 0..3 {
+                ss_pe += to(w[a] * w[a]) * to(c.m2[a]);
+            }
+            df_pe += 3 * (c.n as usize).saturating_sub(1);
+        }
+        let df_lof = (3 * self.cells.len()).checked_sub(params)?;
+        LackOfFit::new((wrss - ss_pe).max(0.0), df_lof, ss_pe, df_pe)
+    }
+}
+
+/// The host's decision constants for adding an effect
+/// (`calibrate::Policy`'s `alpha` and `min_share`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Rule {
+    /// Significance level (Bonferroni: `p · tried < α`). 0.01.
+    pub alpha: f64,
+    /// Share of the excess lack of fit an effect must explain when the lack
+    /// of fit is significant. 0.1.
+    pub min_share: f64,
+}
+
+impl Default for Rule {
+    fn default() -> Self {
+        Self {
+            alpha: 0.01,
+            min_share: 0.1,
+        }
+    }
+}
+
+impl Rule {
+    /// Whether a test passes among `tried` tests, given the model's lack of
+    /// fit (the host's rule, `calibrate::diagnosis::run`).
+    pub fn eligible(&self, t: &NestedTest, tried: usize, lof: Option<&LackOfFit>) -> bool {
+        let significant = t.p_value * (tried.max(1) as f64) < self.alpha;
+        let share_ok = match lof {
+            Some(l) if l.p_value < self.alpha && l.excess() > 0.0 => {
+                t.delta_rss >= self.min_share * l.excess()
+            }
+            _ => true,
+        };
+        significant && share_ok
+    }
+}
+
+/// Orders tests as the host does: by p-value, then by F (largest first);
+/// stable (insertion sort: a device tests a few dozen candidates).
+pub fn rank_tests<I: Copy>(tests: &mut [(I, NestedTest)]) {
+    for i in 1..tests.len() {
+        let mut j = i;
+        while j > 0 && before(&tests[j].1, &tests[j - 1].1) {
+            tests.swap(j, j - 1);
+            j -= 1;
+        }
+    }
+}
+
+fn before(a: &NestedTest, b: &NestedTest) -> bool {
+    match a.p_value.total_cmp(&b.p_value) {
+        core::cmp::Ordering::Less => true,
+        core::cmp::Ordering::Equal => b.f.total_cmp(&a.f) == core::cmp::Ordering::Less,
+        core::cmp::Ordering::Greater => false,
+    }
+}
