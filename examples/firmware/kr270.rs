@@ -108,9 +108,18 @@ pub fn q_rad<T: RealField + Copy>(g: usize) -> [T; J] {
     Q_CDEG[g].map(|cdeg| c::<T>(f64::from(cdeg) * 0.01) * T::pi() / c(180.0))
 }
 
-/// `Δp` of a deflection \[m\].
+/// `Δp` of a deflection \[m\]: the count of nanometres times the quantum
+/// in `T`. The table's counts are below 2²⁴ (checked by the generator,
+/// `examples/firmware_table.rs`), so they are exact in f32 as in f64 and
+/// the product is the only rounding: in f64 the same value as
+/// `f64::from(count) * 1e-9`; in f32 no soft-float f64 arithmetic on the
+/// device (through f64 it cost ~400 instructions per deflection on the
+/// Cortex-M4F).
 pub fn dp_m<T: RealField + Copy>(d: &Deflection) -> Vector3<T> {
-    Vector3::from_fn(|a, _| c::<T>(f64::from(d.dp[a]) * DP_QUANTUM_M))
+    let quantum: T = c(DP_QUANTUM_M);
+    // `f64::from(v as f32)`: exact for |v| < 2²⁴, and `as f32` back is the
+    // identity, which the compiler folds: no f64 arithmetic in f32.
+    Vector3::from_fn(|a, _| c::<T>(f64::from(d.dp[a] as f32)) * quantum)
 }
 
 /// The experiment as a streaming [`Reweightable`] source over the flash
