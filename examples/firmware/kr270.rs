@@ -620,11 +620,15 @@ impl<T: RealField + Copy> Kr270<T> {
                 what: "one weight (and sigma) per group",
             });
         }
-        let x_ref = if estimated {
-            self.x_last.get()
-        } else {
-            SVector::zeros()
-        };
+        // Inactive parameters are held at zero: so is their reference.
+        let mut x_ref = SVector::<T, N>::zeros();
+        if estimated {
+            for ((r, &x), &on) in x_ref.iter_mut().zip(self.x_last.get().iter()).zip(active) {
+                if on {
+                    *r = x;
+                }
+            }
+        }
         let info = match self.pending.take() {
             Some(p) if p.weights[..] == *weights && p.x_ref == x_ref => p.info,
             _ => {
@@ -659,15 +663,8 @@ impl<T: RealField + Copy> Kr270<T> {
             });
         }
         let mut solution = Solution::new(&info.lambda, &info.eta, info.yy, info.equations, active)?;
-        for (x, (&r, &on)) in solution
-            .x
-            .iter_mut()
-            .zip(x_ref.iter().zip(solution.active.iter()))
-        {
-            if on {
-                *x += r;
-            }
-        }
+        // Zero where inactive in both.
+        solution.x += x_ref;
         let x = solution.x;
         let fused = self.fused();
         let mut next_w = [Vector3::zeros(); G];
@@ -744,16 +741,13 @@ fn check_weights<T: RealField + Copy>(weights: &[Vector3<T>]) -> Result<(), Erro
             what: "one weight (and sigma) per group",
         });
     }
-    // The checks of the core's `add_moments`.
-    for &v in weights.iter().flat_map(|w| w.iter()) {
-        if !v.is_finite() {
-            return Err(Error::NonFinite { what: "weight" });
-        }
-        if v < T::zero() {
-            return Err(Error::NotPositive { what: "weight" });
-        }
+    // The checks of the core's `add_moments`, on the first bad weight.
+    let bad = |v: &&T| !(v.is_finite() && **v >= T::zero());
+    match weights.iter().flat_map(|w| w.iter()).find(bad) {
+        None => Ok(()),
+        Some(v) if v.is_finite() => Err(Error::NotPositive { what: "weight" }),
+        Some(_) => Err(Error::NonFinite { what: "weight" }),
     }
-    Ok(())
 }
 
 fn finite(ok: bool) -> Result<(), Error> {

@@ -177,6 +177,31 @@ fn fused_passes_equal_unfused_bit_for_bit() {
     check::<f32>();
 }
 
+/// `η` is summed about the last estimate: a fit with fewer parameters
+/// after one with all of them must not keep the dropped ones in its
+/// reference (they are held at zero). Against `GroupedStats`, f64.
+#[test]
+fn reweighted_fit_with_fewer_parameters() {
+    fn run<R: Reweightable<f64, Dn>>(r: &R) -> Fit<f64, Dn> {
+        let weight = kr270::settings::<f64>().unwrap().weight;
+        let mut w = vec![Vector3::zeros(); G];
+        let mut s = vec![Vector3::zeros(); G];
+        let mut n = vec![Vector3::zeros(); G];
+        r.fit_ols(&[true; N], &mut w, &mut s, &mut n).unwrap();
+        let mut active = [true; N];
+        active[N - 1] = false;
+        r.fit_reweighted(&weight, &active, &mut w, &mut s, &mut n)
+            .unwrap()
+    }
+    let src = Kr270::<f64>::new().unwrap();
+    let (a, b) = (run(&src), run(&kr270::grouped(&src).unwrap()));
+    assert_eq!(a.solution.x[N - 1], 0.0);
+    let sd = b.std();
+    for i in 0..N - 1 {
+        assert!((a.solution.x[i] - b.solution.x[i]).abs() <= 1e-9 * sd[i]);
+    }
+}
+
 /// f32 rounding no longer decides when the iteration stops: the f32 fit
 /// takes the f64 fit's iterations (it took 7, then 12, while `η` was summed
 /// about zero from every deflection on its own).
