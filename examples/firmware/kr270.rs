@@ -526,7 +526,6 @@ impl<T: RealField + Copy> Kr270<T> {
             mut middle,
             mut next,
         } = sweep;
-
         if fit.is_some() {
             // Configurations without rows.
             sigma.fill(Vector3::zeros());
