@@ -5,6 +5,9 @@
 #   - the firmware fails (its semihosting exit status is non-zero),
 #   - a failure self-test (wrong reference, panic, HardFault) does NOT fail,
 #   - it exceeds the budget: 64 KiB flash, 16 KiB RAM including stack,
+#   - the whole KR-270 iterative WLS takes more than 10 M instructions on
+#     the Cortex-M4F (issue 17; counted by the QEMU plugin tools/insnmark.c
+#     during the same run, as tools/insn-count.sh does),
 #   - the firmware's flash table (examples/firmware/kr270_table.rs) is stale
 #     against data/kr270 (host build: `--example firmware_table -- --check`).
 # Installs what it needs on a fresh Debian machine with rustup: the two
@@ -29,25 +32,58 @@ llvm_bin="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //
 
 flash_budget=$((64 * 1024))
 ram_budget=$((16 * 1024))
+# The whole KR-270 iterative WLS on the Cortex-M4F (firmware profile).
+irls_budget=10000000
+irls_phase='kr270 whole iterative WLS'
+out=${CARGO_TARGET_DIR:-target}/insn-count
+mkdir -p "$out"
+plugin=$out/libinsnmark.so
+if [ ! -f "$plugin" ] || [ tools/insnmark.c -nt "$plugin" ]; then
+    gcc -O2 -shared -fPIC -fvisibility=hidden -o "$plugin" tools/insnmark.c
+fi
 passed=0
 failed=0
 pass() { echo "firmware: ok: $*"; passed=$((passed + 1)); }
 fail() { echo "firmware: FAILED: $*" >&2; failed=$((failed + 1)); }
 
 log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+marks=$(mktemp)
+trap 'rm -f "$log" "$marks"' EXIT
 for target in "${targets[@]}"; do
     # The aliases `cargo firmware` / `cargo firmware-m3` (.cargo/config.toml).
     run=(cargo run --quiet --profile firmware --target "$target" --example firmware --)
     cargo build --quiet --profile firmware --target "$target" --example firmware
+    elf=${CARGO_TARGET_DIR:-target}/$target/firmware/examples/firmware
+    mark=$("$llvm_bin/llvm-nm" "$elf" | awk '$3 == "bench_mark" { print $1 }')
 
-    if "${run[@]}" 2>&1 | tee "$log"; then
+    # The checks, with the instruction counter (tools/qemu-run.sh passes
+    # QEMU_EXTRA to QEMU).
+    rm -f "$marks"
+    if QEMU_EXTRA="-plugin $plugin,mark=0x$mark -d plugin -D $marks" \
+        "${run[@]}" 2>&1 | tee "$log"; then
         pass "$target: firmware checks"
     else
         fail "$target: firmware checks"
     fi
 
-    elf=${CARGO_TARGET_DIR:-target}/$target/firmware/examples/firmware
+    # Phase K's count: mark(2K+1) - mark(2K) - the bracket (phase 0), as
+    # tools/insn-count.sh.
+    irls=$(awk -v name="$irls_phase" '
+        FNR == NR && /insnmark: mark/ { m[$3] = $5; next }
+        FNR != NR && match($0, /bench phase [0-9]+: .*/) {
+            s = substr($0, RSTART + 12, RLENGTH - 12); k = s + 0
+            if (k == 0) overhead = m[1] - m[0]
+            if (index(s, name)) print m[2 * k + 1] - m[2 * k] - overhead
+        }' "$marks" "$log")
+    echo "firmware: $target: whole KR-270 iterative WLS ${irls:-?} instructions"
+    if [ "$target" = thumbv7em-none-eabihf ]; then
+        if [ -n "$irls" ] && [ "$irls" -le "$irls_budget" ]; then
+            pass "$target: KR-270 iterative WLS within $irls_budget instructions"
+        else
+            fail "$target: KR-270 iterative WLS over $irls_budget instructions (${irls:-not measured})"
+        fi
+    fi
+
     read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
         { s[$1] = $2 }
         END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],

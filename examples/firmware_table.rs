@@ -16,7 +16,8 @@
 //!   CSV gives it to 0.1 kg; checked here);
 //! - per deflection, `KEYS`: configuration and marker index in one byte
 //!   (`config << 2 | marker`), and `DP_NM`: `Δp = p_loaded − p_unloaded`
-//!   (x, y, z, base frame) as `i32` in nanometres. Rounding moves a
+//!   (x, y, z, base frame) as `i32` in nanometres, each below 2²⁴ (16.7 mm,
+//!   checked here) so that f32 holds it exactly. Rounding moves a
 //!   coordinate by at most 0.5 nm (RMS 0.29 nm), 3e-5 of the smallest σ of
 //!   Table 1 (17 µm) and 2e-6 of the largest (153 µm); what it does to the
 //!   estimate is measured below (≈ 1e-5 σ) and written into the table.
@@ -119,8 +120,10 @@ fn main() -> Result<(), Box<dyn StdError>> {
         let units = dp / DP_QUANTUM_M;
         let stored = units.map(f64::round);
         for a in 0..3 {
-            if stored[a].abs() > f64::from(i32::MAX) {
-                return Err(format!("deflection {} m does not fit i32", dp[a]).into());
+            // Below 2²⁴: exact in f32, which the device converts it to
+            // without going through f64 (`kr270::dp_m`).
+            if stored[a].abs() >= 16_777_216.0 {
+                return Err(format!("deflection {} m is not below 2^24 nm", dp[a]).into());
             }
             let err = (stored[a] - units[a]).abs() * DP_QUANTUM_M;
             max_err = max_err.max(err);

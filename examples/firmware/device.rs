@@ -108,8 +108,9 @@ fn fit(fault: SelfTest) -> bool {
 /// streamed from flash on every pass, rows computed from the joint angles,
 /// the iterative WLS to convergence, the estimates ± 3σ logged and checked
 /// against the host's f64 result. The costs of its parts are bench phases:
-/// the rows of one configuration, one pass of each kind, the OLS start,
-/// one iteration, and the whole iterative WLS (whose result is checked).
+/// the rows of one configuration, the OLS start (two passes), one
+/// iteration (one pass: `kr270::Kr270::sweep`), and the whole iterative
+/// WLS (whose result is checked).
 #[inline(never)]
 fn kr270_fit(k: &mut usize, fault: SelfTest) -> bool {
     let src = Kr270::<f32>::new().unwrap_or_else(|e| fail("KR-270 model", e));
@@ -204,7 +205,6 @@ fn kr270_report(fit: &kr270::Estimate<f32>, fault: SelfTest) -> bool {
 #[inline(never)]
 fn kr270_parts(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSettings<f32>) {
     kr270_rows(k, src);
-    kr270_passes(k, src);
     kr270_iteration(k, src, settings);
 }
 
@@ -223,48 +223,18 @@ fn kr270_rows(k: &mut usize, src: &Kr270<f32>) {
 }
 
 #[inline(never)]
-fn kr270_passes(k: &mut usize, src: &Kr270<f32>) {
-    let ones = [nalgebra::Vector3::new(1.0f32, 1.0, 1.0); G];
-    let acc = phase(
-        k,
-        "kr270 pass: weighted statistics f32 (270 rows streamed)",
-        || src.weighted(&ones, None),
-    )
-    .unwrap_or_else(|e| fail("weighted pass", e));
-    info!(
-        "one pass: {=usize} equations, eta = {=[?]}",
-        acc.equations(),
-        acc.eta().as_slice()
-    );
-    let fit = solution(&acc);
-    let mut sigma = [nalgebra::Vector3::zeros(); G];
-    let mut dof = [nalgebra::Vector3::zeros(); G];
-    phase(
-        k,
-        "kr270 pass: residual sigma f32 (270 rows streamed)",
-        || src.residual_sigma_into(&fit, &ones, &mut sigma, &mut dof),
-    )
-    .unwrap_or_else(|e| fail("residual pass", e));
-}
-
-#[inline(never)]
-fn solution(acc: &Accumulator<f32, kr270::Dn>) -> robcal::estimate::Solution<f32, kr270::Dn> {
-    acc.solve().unwrap_or_else(|e| fail("solve", e))
-}
-
-#[inline(never)]
 fn kr270_iteration(k: &mut usize, src: &Kr270<f32>, settings: &robcal::IrlsSettings<f32>) {
     let active = [true; kr270::N];
     let mut weights = [nalgebra::Vector3::zeros(); G];
     let mut sigma = [nalgebra::Vector3::zeros(); G];
     let mut dof = [nalgebra::Vector3::zeros(); G];
-    phase(k, "kr270 OLS start f32 (3 passes, 2 solves)", || {
+    phase(k, "kr270 OLS start f32 (2 passes, solve, sandwich)", || {
         src.fit_ols(&active, &mut weights, &mut sigma, &mut dof)
     })
     .unwrap_or_else(|e| fail("OLS", e));
     let one = phase(
         k,
-        "kr270 one IRLS iteration f32 (weights, 3 passes, solve, sandwich)",
+        "kr270 one IRLS iteration f32 (weights, solve, 1 pass, sandwich)",
         || {
             src.fit_reweighted(
                 &settings.weight,

@@ -4,8 +4,9 @@
 //!
 //! - `irls/stream`: the firmware's streaming source (`examples/firmware/kr270.rs`)
 //!   in f64: every pass recomputes the rows from the joint angles (15
-//!   forward kinematics) and streams the 270 deflections through an
-//!   `Accumulator`; memory O(N² + G).
+//!   forward kinematics) and takes each marker's repetitions together, one
+//!   pass per fit (residual σ, sandwich, the next fit's `Λ`, `η`); memory
+//!   O(N² + G).
 //! - `irls/grouped`: `GroupedStats<f64, 9, 15>` built once from the rows
 //!   (included in the time), then re-weighted from the statistics.
 //! - `irls/dense_qr`: the same iteration on the stored 810 × 9 matrix
@@ -14,7 +15,8 @@
 //!   Rows are computed once, outside the timing (the baseline is the batch
 //!   solver, not the model).
 //! - `wls/*`: one weighted fit (no iteration): streamed pass + solve vs dense
-//!   QR, with the weights of the first WLS step.
+//!   QR, with the weights of the first WLS step (the source's generic
+//!   `weighted` pass: every deflection through an `Accumulator`).
 
 #[allow(dead_code)]
 #[path = "../../examples/firmware/kr270.rs"]
