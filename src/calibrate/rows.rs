@@ -24,6 +24,9 @@ use crate::robot::{
 };
 use crate::Error;
 
+/// Which kinds of rows there are: the core's, for its candidate rule.
+pub use crate::model::effect::DataKinds;
+
 /// When a row's equilibrium has settled: the next Newton step below
 /// 1e-13 rad (or m); 50 steps at most (an industrial robot needs 2 or 3).
 const EQUILIBRIUM: EquilibriumSettings<f64> = EquilibriumSettings {
@@ -155,17 +158,6 @@ impl Row {
             compliance,
         }
     }
-}
-
-/// Which kinds of rows there are (what the data can show).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DataKinds {
-    /// Deflection rows (a load).
-    pub deflections: bool,
-    /// Absolute rows (geometric calibration).
-    pub absolute: bool,
-    /// A time column.
-    pub time: bool,
 }
 
 /// Every row of a data set, its configurations, and the angle bins of its
