@@ -174,3 +174,36 @@ fn the_device_lists_the_hosts_candidates_for_deflections() {
         }
     }
 }
+
+#[test]
+fn host_and_device_judge_estimates_alike() {
+    use robcal::calibrate::Policy;
+    let n = names(&[JointKind::Revolute; 2], 1);
+    let policy = Policy::default();
+    let drift = [0, 1, 2].map(|axis| Param::Drift { axis });
+    let limit = policy.max_drift_mm_per_h / 3.6;
+    let judge = |v: [f64; 3]| {
+        let host = robcal::calibrate::effects::inadmissible(&n, &policy, &drift, &v, &drift);
+        let device =
+            robcal::model::effect::inadmissible(&drift, &v, &drift, policy.max_drift_mm_per_h);
+        assert_eq!(host.is_some(), device.is_some(), "{v:?}");
+        device.is_some()
+    };
+    // To the last bit either side of the limit, along an axis and not.
+    for ulps in -40i64..=40 {
+        let x = f64::from_bits((limit.to_bits() as i64 + ulps) as u64);
+        judge([x, 0.0, 0.0]);
+        judge([0.0, 0.0, -x]);
+        judge([x * 0.6, x * 0.8, 0.0]);
+    }
+    assert!(!judge([limit * 0.99, 0.0, 0.0]));
+    assert!(judge([limit * 0.6, limit * 0.81, 0.0]));
+    for p in [Param::Compliance { joint: 1 }, Param::Backlash { joint: 0 }] {
+        for v in [-1e-300, 0.0, 1e-300] {
+            let host = robcal::calibrate::effects::inadmissible(&n, &policy, &[p], &[v], &[p]);
+            let device = robcal::model::effect::inadmissible(&[p], &[v], &[p], 1.0);
+            assert_eq!(host.is_some(), device.is_some());
+            assert_eq!(device, (v < 0.0).then_some(p));
+        }
+    }
+}

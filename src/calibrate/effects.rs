@@ -16,7 +16,8 @@ use core::convert::Infallible;
 use super::names::Names;
 use super::rows::{revolute, DataKinds};
 use super::settings::Policy;
-use crate::model::{effect, Param};
+use crate::model::effect::{self, Unphysical};
+use crate::model::Param;
 
 pub use crate::model::effect::Effect;
 
@@ -94,13 +95,11 @@ pub fn candidates(
 }
 
 /// Why the estimate `x` of `params` is not physical for the effect
-/// parameters `added`, if it is not. Physics, not tuning:
-/// - a compliance (`k_<joint>`, `k_<joint>@<angle>`) is ≥ 0: a joint
-///   yields in the direction of its torque;
-/// - a backlash (`δq = b · sign τ`) is ≥ 0: the joint rests on the side of
-///   its play that its torque pushes it to;
-/// - a gear cyclic error is at most [`Policy::max_cyclic_mrad`];
-/// - a drift is at most [`Policy::max_drift_mm_per_h`].
+/// parameters `added`, if it is not: the core's rule
+/// ([`effect::unphysical`]: a compliance or a backlash below zero, a drift
+/// above [`Policy::max_drift_mm_per_h`]), and a gear cyclic error above
+/// [`Policy::max_cyclic_mrad`] (a gear's transmission error is a fraction
+/// of a milliradian to a few; an effect only absolute data show).
 pub fn inadmissible(
     names: &Names,
     policy: &Policy,
@@ -110,33 +109,30 @@ pub fn inadmissible(
 ) -> Option<String> {
     let value = |p: &Param| params.iter().position(|u| u == p).map(|i| x[i]);
     for p in added {
-        let Some(v) = value(p) else { continue };
-        let bad = match *p {
-            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
-                (v < 0.0).then(|| format!("{} = {v:.3} {} < 0", names.name(p), names.unit(p).name))
-            }
-            Param::GearCyclic { joint, cos: false } => {
-                let c = value(&Param::GearCyclic { joint, cos: true }).unwrap_or(0.0);
-                let amp = v.hypot(c);
-                (amp > policy.max_cyclic_mrad).then(|| {
-                    format!(
-                        "gear_cyclic_{} amplitude {amp:.3} mrad > {} mrad",
-                        names.joint(joint),
-                        policy.max_cyclic_mrad
-                    )
-                })
-            }
-            Param::Drift { axis: 0 } => {
-                // µm/s → mm/h.
-                let norm = (0..3)
-                    .map(|axis| value(&Param::Drift { axis }).unwrap_or(0.0).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-                    * 3.6;
-                (norm > policy.max_drift_mm_per_h)
-                    .then(|| format!("drift {norm:.3} mm/h > {} mm/h", policy.max_drift_mm_per_h))
-            }
-            _ => None,
+        let bad = match effect::unphysical(p, value, policy.max_drift_mm_per_h) {
+            Some(Unphysical::Negative(v)) => Some(format!(
+                "{} = {v:.3} {} < 0",
+                names.name(p),
+                names.unit(p).name
+            )),
+            Some(Unphysical::Drift(norm)) => Some(format!(
+                "drift {norm:.3} mm/h > {} mm/h",
+                policy.max_drift_mm_per_h
+            )),
+            None => match (*p, value(p)) {
+                (Param::GearCyclic { joint, cos: false }, Some(v)) => {
+                    let c = value(&Param::GearCyclic { joint, cos: true }).unwrap_or(0.0);
+                    let amp = v.hypot(c);
+                    (amp > policy.max_cyclic_mrad).then(|| {
+                        format!(
+                            "gear_cyclic_{} amplitude {amp:.3} mrad > {} mrad",
+                            names.joint(joint),
+                            policy.max_cyclic_mrad
+                        )
+                    })
+                }
+                _ => None,
+            },
         };
         if bad.is_some() {
             return bad;

@@ -457,11 +457,54 @@ pub fn stream_candidates<
     Ok((layout, out))
 }
 
-/// The first of `added` whose estimate is not physical (the host's
-/// `calibrate::effects::inadmissible`, for the effects of a stream): a
-/// compliance or a backlash below zero, or a drift of more than
-/// `max_drift_mm_per_h` (norm over x, y, z; the estimate in µm/s). `x[i]`
-/// is the estimate of `params[i]` in its reported unit.
+/// Why an estimate is not physical ([`unphysical`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Unphysical {
+    /// A compliance or a backlash below zero: its value.
+    Negative(f64),
+    /// A drift faster than the limit: its norm \[mm/h\].
+    Drift(f64),
+}
+
+/// Whether the estimate of `p` is physical, the rule for the effects a
+/// stream of deflections can add (the host adds the gear cyclic limit,
+/// `calibrate::effects::inadmissible`). Physics, not tuning:
+/// - a compliance (`k_<joint>`, `k_<joint>@<angle>`) is ≥ 0: a joint
+///   yields in the direction of its torque;
+/// - a backlash (`δq = b · sign τ`) is ≥ 0: the joint rests on the side of
+///   its play that its torque pushes it to;
+/// - a drift (judged at its x component, over x, y, z; estimated in µm/s)
+///   is at most `max_drift_mm_per_h`.
+///
+/// `value(q)` is the estimate of `q` in its reported unit, `None` when `q`
+/// is not estimated (then `p` is not judged).
+pub fn unphysical(
+    p: &Param,
+    value: impl Fn(&Param) -> Option<f64>,
+    max_drift_mm_per_h: f64,
+) -> Option<Unphysical> {
+    let v = value(p)?;
+    match *p {
+        Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
+            (v < 0.0).then_some(Unphysical::Negative(v))
+        }
+        Param::Drift { axis: 0 } => {
+            let norm2: f64 = (0..3)
+                .map(|axis| {
+                    let d = value(&Param::Drift { axis }).unwrap_or(0.0);
+                    d * d
+                })
+                .sum();
+            // µm/s → mm/h.
+            let norm = libm::sqrt(norm2) * 3.6;
+            (norm > max_drift_mm_per_h).then_some(Unphysical::Drift(norm))
+        }
+        _ => None,
+    }
+}
+
+/// The first of `added` whose estimate is not physical ([`unphysical`]).
+/// `x[i]` is the estimate of `params[i]` in its reported unit.
 pub fn inadmissible<'a>(
     params: &[Param],
     x: &[f64],
@@ -474,27 +517,8 @@ pub fn inadmissible<'a>(
             .position(|u| u == p)
             .and_then(|i| x.get(i).copied())
     };
-    for p in added {
-        let Some(v) = value(p) else { continue };
-        let bad = match *p {
-            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
-                v < 0.0
-            }
-            Param::Drift { axis: 0 } => {
-                // |v| · 3.6 > limit, squared (µm/s → mm/h): no square root.
-                let norm2: f64 = (0..3)
-                    .map(|axis| {
-                        let d = value(&Param::Drift { axis }).unwrap_or(0.0);
-                        d * d
-                    })
-                    .sum();
-                norm2 * 3.6 * 3.6 > max_drift_mm_per_h * max_drift_mm_per_h
-            }
-            _ => false,
-        };
-        if bad {
-            return Some(*p);
-        }
-    }
-    None
+    added
+        .into_iter()
+        .find(|p| unphysical(p, value, max_drift_mm_per_h).is_some())
+        .copied()
 }
