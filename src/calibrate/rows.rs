@@ -17,6 +17,7 @@ use super::linearisation::Linearisation;
 use super::names::Names;
 use super::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
+use crate::model::bins::{by_first_appearance, clusters};
 use crate::model::{angle_urad, Sample, BIN_TOLERANCE_RAD};
 use crate::robot::{
     equilibrium, EquilibriumSettings, Frames, JointFrame, JointKind, JointLaw, Loading, PointLoad,
@@ -183,24 +184,6 @@ pub struct Rows {
     pub file: String,
 }
 
-/// Values within `tol` of a running cluster mean, merged; the cluster
-/// means, sorted.
-fn cluster(values: &[f64], tol: f64) -> Vec<f64> {
-    let mut v: Vec<f64> = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let mut out: Vec<(f64, usize)> = Vec::new();
-    for x in v {
-        match out.last_mut() {
-            Some((c, n)) if (x - *c / *n as f64).abs() <= tol => {
-                *c += x;
-                *n += 1;
-            }
-            _ => out.push((x, 1)),
-        }
-    }
-    out.into_iter().map(|(c, n)| c / n as f64).collect()
-}
-
 impl Rows {
     /// The rows of `data`: its deflections, and its absolute positions when
     /// `absolute` (or when there is no deflection). Frames, torques and the
@@ -256,19 +239,17 @@ impl Rows {
                     .collect()
             };
             let values: Vec<f64> = qs.iter().map(|v| v.0).collect();
-            let mut centres = cluster(&values, BIN_TOLERANCE_RAD);
-            let first = |c: f64| {
-                values
-                    .iter()
-                    .position(|v| (v - c).abs() <= BIN_TOLERANCE_RAD)
-            };
+            let mut sorted = values.clone();
+            sorted.sort_by(f64::total_cmp);
+            let mut centres = Vec::new();
+            clusters(&sorted, |c| centres.push(c));
             let mut jb = Vec::new();
             let mut counts = Vec::new();
             if centres.len() <= policy.max_bins {
                 // (Only here: with many distinct values, e.g. random poses,
                 // the key's scan of every value made this sort quadratic
                 // for bins that are then not used.)
-                centres.sort_by_key(|&c| first(c));
+                by_first_appearance(&mut centres, &values);
                 for c in &centres {
                     let near = |v: &&(f64, &str, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
                     let written = qs
