@@ -17,12 +17,16 @@ use super::linearisation::Linearisation;
 use super::names::Names;
 use super::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
+use crate::model::bins::{by_first_appearance, clusters};
 use crate::model::{angle_urad, Sample, BIN_TOLERANCE_RAD};
 use crate::robot::{
     equilibrium, EquilibriumSettings, Frames, JointFrame, JointKind, JointLaw, Loading, PointLoad,
     Wrench,
 };
 use crate::Error;
+
+/// Which kinds of rows there are: the core's, for its candidate rule.
+pub use crate::model::effect::DataKinds;
 
 /// When a row's equilibrium has settled: the next Newton step below
 /// 1e-13 rad (or m); 50 steps at most (an industrial robot needs 2 or 3).
@@ -157,17 +161,6 @@ impl Row {
     }
 }
 
-/// Which kinds of rows there are (what the data can show).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DataKinds {
-    /// Deflection rows (a load).
-    pub deflections: bool,
-    /// Absolute rows (geometric calibration).
-    pub absolute: bool,
-    /// A time column.
-    pub time: bool,
-}
-
 /// Every row of a data set, its configurations, and the angle bins of its
 /// joints.
 #[derive(Debug, Clone)]
@@ -189,24 +182,6 @@ pub struct Rows {
     pub com: Vector3<f64>,
     /// The measurement file (for errors).
     pub file: String,
-}
-
-/// Values within `tol` of a running cluster mean, merged; the cluster
-/// means, sorted.
-fn cluster(values: &[f64], tol: f64) -> Vec<f64> {
-    let mut v: Vec<f64> = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let mut out: Vec<(f64, usize)> = Vec::new();
-    for x in v {
-        match out.last_mut() {
-            Some((c, n)) if (x - *c / *n as f64).abs() <= tol => {
-                *c += x;
-                *n += 1;
-            }
-            _ => out.push((x, 1)),
-        }
-    }
-    out.into_iter().map(|(c, n)| c / n as f64).collect()
 }
 
 impl Rows {
@@ -264,19 +239,17 @@ impl Rows {
                     .collect()
             };
             let values: Vec<f64> = qs.iter().map(|v| v.0).collect();
-            let mut centres = cluster(&values, BIN_TOLERANCE_RAD);
-            let first = |c: f64| {
-                values
-                    .iter()
-                    .position(|v| (v - c).abs() <= BIN_TOLERANCE_RAD)
-            };
+            let mut sorted = values.clone();
+            sorted.sort_by(f64::total_cmp);
+            let mut centres = Vec::new();
+            clusters(&sorted, |c| centres.push(c));
             let mut jb = Vec::new();
             let mut counts = Vec::new();
             if centres.len() <= policy.max_bins {
                 // (Only here: with many distinct values, e.g. random poses,
                 // the key's scan of every value made this sort quadratic
                 // for bins that are then not used.)
-                centres.sort_by_key(|&c| first(c));
+                by_first_appearance(&mut centres, &values);
                 for c in &centres {
                     let near = |v: &&(f64, &str, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
                     let written = qs

@@ -168,8 +168,8 @@ impl Default for Policy {
             max_steps: 50,
             max_halvings: 10,
             max_bins: 32,
-            compensator_bins: (2, 8),
-            compensator_min_configs: 2,
+            compensator_bins: crate::model::bins::COMPENSATOR_BINS,
+            compensator_min_configs: crate::model::bins::COMPENSATOR_MIN_CONFIGS,
             max_cyclic_mrad: 10.0,
             max_drift_mm_per_h: 5.0,
             min_torque_nm: 1e-3,
@@ -186,11 +186,11 @@ impl Policy {
     /// Whether a joint's angle bins, seen in `bin_configs` configurations
     /// each, make a compensator candidate.
     pub fn compensator_eligible(&self, bin_configs: &[usize]) -> bool {
-        let (lo, hi) = self.compensator_bins;
-        (lo..=hi).contains(&bin_configs.len())
-            && bin_configs
-                .iter()
-                .all(|&n| n >= self.compensator_min_configs)
+        crate::model::bins::compensator_eligible(
+            bin_configs,
+            self.compensator_bins,
+            self.compensator_min_configs,
+        )
     }
 }
 

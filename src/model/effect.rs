@@ -1,25 +1,31 @@
-//! The effect library's vocabulary (data contract §6) and the candidates a
-//! device can test from a stream of deflections (`no_std`).
+//! The effect library's vocabulary (data contract §6), its rule, and the
+//! candidates a device can test from a stream of deflections (`no_std`).
 //!
-//! The host's loop (`calibrate::effects::candidates`) lists, for a model,
-//! every effect it lacks. A device that streams **deflections** (loaded −
-//! unloaded position of a marker, eq. 3) carries per measurement the joint
-//! angles, the load's torques and wrench, and optionally the time: from
-//! those it computes the columns of every effect that acts on a deflection —
-//! compensator (per-angle compliance), joint compliance, nonlinear stiffness,
-//! backlash, link compliance, load centre of mass, drift. The geometric
-//! effects (joint offset, joint frame, gear cyclic, marker, base) act on
-//! absolute positions only (their deflection columns are zero) and need the
-//! host's Gauss–Newton on the geometry: [`stream_candidates`] lists the
-//! former, in the host's order and with the host's conditions, as bit masks
+//! The rule, [`candidates`], exists once: for a model and what the data
+//! carry ([`DataKinds`]), every effect the model lacks, the parameters it
+//! tests, removes and adds, in one order. The host's loop
+//! (`calibrate::effects::candidates`) turns them into owned lists with
+//! joint and marker names; a device, [`stream_candidates`].
+//!
+//! A device that streams **deflections** (loaded − unloaded position of a
+//! marker, eq. 3) carries per measurement the joint angles, the load's
+//! torques and wrench, and optionally the time: from those it computes the
+//! columns of every effect that acts on a deflection — compensator
+//! (per-angle compliance), joint compliance, nonlinear stiffness, backlash,
+//! link compliance, load centre of mass, drift. The geometric effects
+//! (joint offset, joint frame, gear cyclic, marker, base) act on absolute
+//! positions only (their deflection columns are zero) and need the host's
+//! Gauss–Newton on the geometry: with no absolute rows the rule lists none
+//! of them. [`stream_candidates`] gives the rule's candidates as bit masks
 //! over one [`Layout`] that holds the model's columns first and then every
 //! candidate's ([`crate::estimate::screen::Augmented`] accumulates them in
 //! one pass).
 
 use nalgebra::RealField;
 
+pub use super::bins::{joint_bins, JointBins, MAX_CONFIGS};
 use super::layout::Layout;
-use super::param::{angle_urad, Param, BIN_TOLERANCE_RAD};
+use super::param::Param;
 use crate::robot::{Chain, JointKind};
 use crate::Error;
 
@@ -105,6 +111,242 @@ impl core::fmt::Display for Effect {
     }
 }
 
+/// Which kinds of rows a data set has (what it can show).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DataKinds {
+    /// Deflection rows (a load).
+    pub deflections: bool,
+    /// Absolute rows (geometric calibration).
+    pub absolute: bool,
+    /// A time column.
+    pub time: bool,
+}
+
+/// The parameters a [`Candidate`] adds to the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Params<'a> {
+    /// One compliance per angle bin of `joint` (`k_<joint>@<angle>`).
+    Bins {
+        /// The joint.
+        joint: u8,
+        /// Its bins \[µrad\].
+        angles_urad: &'a [i32],
+    },
+    /// The first `len` of `list`.
+    List {
+        /// The parameters (padded with the first).
+        list: [Param; 6],
+        /// How many.
+        len: u8,
+    },
+}
+
+impl Params<'_> {
+    fn of(ps: &[Param]) -> Self {
+        let mut list = [ps[0]; 6];
+        list[..ps.len()].copy_from_slice(ps);
+        Params::List {
+            list,
+            len: ps.len() as u8,
+        }
+    }
+
+    /// How many parameters.
+    pub fn len(&self) -> usize {
+        match self {
+            Params::Bins { angles_urad, .. } => angles_urad.len(),
+            Params::List { len, .. } => usize::from(*len),
+        }
+    }
+
+    /// Whether there is none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The `i`-th parameter.
+    pub fn get(&self, i: usize) -> Option<Param> {
+        match self {
+            Params::Bins { joint, angles_urad } => {
+                angles_urad.get(i).map(|&angle_urad| Param::ComplianceAt {
+                    joint: *joint,
+                    angle_urad,
+                })
+            }
+            Params::List { list, len } => list[..usize::from(*len)].get(i).copied(),
+        }
+    }
+
+    /// The parameters, in order.
+    pub fn iter(&self) -> impl Iterator<Item = Param> + '_ {
+        (0..self.len()).filter_map(|i| self.get(i))
+    }
+}
+
+/// One candidate extension of a model ([`candidates`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate<'a> {
+    /// The effect.
+    pub effect: Effect,
+    /// Joint index, for per-joint effects.
+    pub joint: Option<u8>,
+    /// Marker index, for [`Effect::Marker`].
+    pub marker: Option<u8>,
+    /// Parameters the model gains when the effect is accepted.
+    pub add: Params<'a>,
+    /// How many of `add`'s first parameters are not tested: 1 for a
+    /// compensator on a joint whose constant compliance is in the model
+    /// (the constant stays during the test, so the bins minus one are
+    /// tested), else 0.
+    pub untested: usize,
+    /// The parameter the model loses when the effect is accepted (the
+    /// constant compliance a compensator replaces).
+    pub remove: Option<Param>,
+}
+
+impl Candidate<'_> {
+    /// Parameters whose significance is tested (added to the model as it
+    /// is).
+    pub fn test(&self) -> impl Iterator<Item = Param> + '_ {
+        self.add.iter().skip(self.untested)
+    }
+}
+
+/// The effect library's rule (data contract §6), the one both the host's
+/// loop (`calibrate::effects::candidates`) and a device's
+/// ([`stream_candidates`]) are built on: every effect `model` lacks that the
+/// data can show, in this order, each passed to `emit`:
+///
+/// per joint `j` (`dof` joints; `revolute(j)` its kind), with deflection or
+/// absolute rows:
+/// 1. `compensator`, when the joint has no angle bins in the model and
+///    `bins(j)` gives its bins (`Some` when they make a compensator
+///    candidate): one compliance per bin; with a constant `k_j` in the
+///    model the bins minus one are tested and `k_j` is removed on
+///    acceptance;
+/// 2. `joint_compliance` (`k_j`), when the joint has no compliance;
+/// 3. `nonlinear_stiffness`, when it has one;
+/// 4. `backlash`;
+///
+/// with deflection rows, for a revolute joint:
+/// 5. `link_compliance`;
+///
+/// with absolute rows:
+/// 6. `joint_offset`, when the joint has neither an offset nor a frame
+///    error;
+/// 7. `geometry` (six frame errors), when it has no frame error and is not
+///    the first joint (whose frame error is, to first order, the base's:
+///    `base_frame`);
+/// 8. `gear_cyclic` (sine, cosine), for a revolute joint;
+///
+/// then, for the model:
+/// 9. `load_com`, with deflection rows and a compliance in the model (the
+///    load's position only moves a deflection through a compliance);
+/// 10. `drift`, with a time column;
+/// 11. `marker` for each of the `markers` markers, with absolute rows;
+/// 12. `base_frame`, with absolute rows.
+///
+/// An effect already in the model (any of its parameters) is not a
+/// candidate. `emit`'s first error ends the list and is returned.
+///
+/// # Errors
+/// `emit`'s.
+pub fn candidates<'b, E>(
+    model: &[Param],
+    dof: usize,
+    revolute: impl Fn(usize) -> bool,
+    markers: u8,
+    data: DataKinds,
+    bins: impl Fn(usize) -> Option<&'b [i32]>,
+    mut emit: impl FnMut(Candidate<'b>) -> Result<(), E>,
+) -> Result<(), E> {
+    let has = |p: &Param| model.contains(p);
+    let any = |f: &dyn Fn(&Param) -> bool| model.iter().any(f);
+    let one = |effect, joint, ps: &[Param]| Candidate {
+        effect,
+        joint,
+        marker: None,
+        add: Params::of(ps),
+        untested: 0,
+        remove: None,
+    };
+    let any_compliance = any(&|p| p.is_compliance());
+    for j in 0..dof {
+        let joint = j as u8;
+        let on = Some(joint);
+        let k = Param::Compliance { joint };
+        let binned = any(&|p| matches!(p, Param::ComplianceAt { joint: i, .. } if *i == joint));
+        let compliant = has(&k) || binned;
+        if data.deflections || data.absolute {
+            if let Some(angles_urad) = bins(j).filter(|_| !binned) {
+                emit(Candidate {
+                    effect: Effect::Compensator,
+                    joint: on,
+                    marker: None,
+                    add: Params::Bins { joint, angles_urad },
+                    untested: usize::from(has(&k)),
+                    remove: has(&k).then_some(k),
+                })?;
+            }
+            if !compliant {
+                emit(one(Effect::JointCompliance, on, &[k]))?;
+            }
+            let p = Param::NonlinearStiffness { joint };
+            if compliant && !has(&p) {
+                emit(one(Effect::NonlinearStiffness, on, &[p]))?;
+            }
+            let p = Param::Backlash { joint };
+            if !has(&p) {
+                emit(one(Effect::Backlash, on, &[p]))?;
+            }
+        }
+        let p = Param::LinkCompliance { joint };
+        if data.deflections && revolute(j) && !has(&p) {
+            emit(one(Effect::LinkCompliance, on, &[p]))?;
+        }
+        if data.absolute {
+            let p = Param::JointOffset { joint };
+            let frame = any(&|p| matches!(p, Param::JointFrame { joint: i, .. } if *i == joint));
+            if !has(&p) && !frame {
+                emit(one(Effect::JointOffset, on, &[p]))?;
+            }
+            if !frame && j > 0 {
+                let ps = [0, 1, 2, 3, 4, 5].map(|axis| Param::JointFrame { joint, axis });
+                emit(one(Effect::Geometry, on, &ps))?;
+            }
+            if revolute(j) && !has(&Param::GearCyclic { joint, cos: false }) {
+                let ps = [false, true].map(|cos| Param::GearCyclic { joint, cos });
+                emit(one(Effect::GearCyclic, on, &ps))?;
+            }
+        }
+    }
+    if data.deflections && any_compliance && !any(&|p| matches!(p, Param::LoadCom { .. })) {
+        let ps = [0, 1, 2].map(|axis| Param::LoadCom { axis });
+        emit(one(Effect::LoadCom, None, &ps))?;
+    }
+    if data.time && !any(&|p| matches!(p, Param::Drift { .. })) {
+        let ps = [0, 1, 2].map(|axis| Param::Drift { axis });
+        emit(one(Effect::Drift, None, &ps))?;
+    }
+    if data.absolute {
+        for m in 0..markers {
+            if !any(&|p| matches!(p, Param::Marker { marker, .. } if *marker == m)) {
+                let ps = [0, 1, 2].map(|axis| Param::Marker { marker: m, axis });
+                emit(Candidate {
+                    marker: Some(m),
+                    ..one(Effect::Marker, None, &ps)
+                })?;
+            }
+        }
+        if !any(&|p| matches!(p, Param::Base { .. })) {
+            let ps = [0, 1, 2, 3, 4, 5].map(|axis| Param::Base { axis });
+            emit(one(Effect::BaseFrame, None, &ps))?;
+        }
+    }
+    Ok(())
+}
+
 /// One candidate of a stream: the effect, its joint, and its parameters as
 /// bit masks over the columns of the augmented [`Layout`] (bit `i` =
 /// column `i`).
@@ -122,110 +364,6 @@ pub struct StreamCandidate {
     pub remove: u64,
     /// Columns the model gains.
     pub add: u64,
-}
-
-/// The angle bins of one joint: its distinct angles \[µrad\] over the
-/// configurations, in order of first appearance, and whether they make a
-/// compensator candidate.
-#[derive(Debug, Clone, PartialEq)]
-pub struct JointBins<const B: usize> {
-    /// The bins (empty when the joint takes more than `B` angles).
-    pub angles_urad: heapless::Vec<i32, B>,
-    /// 2 to 8 bins (`calibrate::Policy::compensator_bins`), each seen in at
-    /// least 2 configurations (`compensator_min_configs`).
-    pub compensator_ok: bool,
-}
-
-/// Most configurations [`joint_bins`] takes.
-pub const MAX_CONFIGS: usize = 64;
-
-/// The host's angle bins of one joint (`calibrate::rows`): `angles` holds
-/// the joint's angle \[rad\] in each configuration, once; angles within
-/// [`BIN_TOLERANCE_RAD`] of a cluster's running mean join it (sorted), the
-/// bins are the clusters' means in order of first appearance.
-///
-/// # Errors
-/// [`Error::CapacityExceeded`] for more than [`MAX_CONFIGS`] angles;
-/// [`Error::NonFinite`].
-pub fn joint_bins<T: RealField + Copy, const B: usize>(
-    angles: &[T],
-) -> Result<JointBins<B>, Error> {
-    if angles.len() > MAX_CONFIGS {
-        return Err(Error::CapacityExceeded {
-            what: "configurations",
-            capacity: MAX_CONFIGS,
-        });
-    }
-    let mut v = [0.0f64; MAX_CONFIGS];
-    for (o, a) in v.iter_mut().zip(angles) {
-        *o = nalgebra::try_convert::<T, f64>(*a).unwrap_or(f64::NAN);
-        if !o.is_finite() {
-            return Err(Error::NonFinite {
-                what: "joint angle",
-            });
-        }
-    }
-    let values = &v[..angles.len()];
-    let mut sorted = v;
-    let sorted = &mut sorted[..angles.len()];
-    // Insertion sort: a few dozen angles, and a fraction of the flash of
-    // the standard library's sort on a microcontroller.
-    for i in 1..sorted.len() {
-        let mut j = i;
-        while j > 0 && sorted[j].total_cmp(&sorted[j - 1]).is_lt() {
-            sorted.swap(j, j - 1);
-            j -= 1;
-        }
-    }
-    // Clusters (sum, count), as the host's `cluster`.
-    let mut clusters: heapless::Vec<(f64, usize), MAX_CONFIGS> = heapless::Vec::new();
-    for &x in sorted.iter() {
-        match clusters.last_mut() {
-            Some((c, n)) if libm::fabs(x - *c / *n as f64) <= BIN_TOLERANCE_RAD => {
-                *c += x;
-                *n += 1;
-            }
-            // At most one cluster per angle: within capacity.
-            _ => {
-                let _ = clusters.push((x, 1));
-            }
-        }
-    }
-    let first = |c: f64| {
-        values
-            .iter()
-            .position(|x| libm::fabs(x - c) <= BIN_TOLERANCE_RAD)
-            .unwrap_or(usize::MAX)
-    };
-    let mut centres: heapless::Vec<f64, MAX_CONFIGS> =
-        clusters.iter().map(|(c, n)| c / *n as f64).collect();
-    // Stable insertion sort by first appearance.
-    for i in 1..centres.len() {
-        let mut j = i;
-        while j > 0 && first(centres[j]) < first(centres[j - 1]) {
-            centres.swap(j, j - 1);
-            j -= 1;
-        }
-    }
-    let mut out = JointBins {
-        angles_urad: heapless::Vec::new(),
-        compensator_ok: false,
-    };
-    if centres.len() > B {
-        return Ok(out);
-    }
-    let mut ok = (2..=8).contains(&centres.len());
-    for &c in &centres {
-        let configs = values
-            .iter()
-            .filter(|x| libm::fabs(*x - c) <= BIN_TOLERANCE_RAD)
-            .count();
-        ok &= configs >= 2;
-        // `centres.len() ≤ B`.
-        let _ = out.angles_urad.push(angle_urad(c));
-    }
-    out.compensator_ok = ok;
-    Ok(out)
 }
 
 /// The column of `p` in `layout`, pushed if it is not there; its bit.
@@ -247,12 +385,12 @@ fn bit<T: RealField + Copy, const J: usize, const P: usize>(
     Ok(1u64 << i)
 }
 
-/// Every effect of a stream of deflections that `model` lacks, in the
-/// host's order and under the host's conditions (`calibrate::effects::
-/// candidates` with deflection rows, no absolute rows, a time column when
-/// `time`), and the augmented layout: `model` first (columns `0..n`), then
-/// every candidate's parameters. `bins[j]` are joint `j`'s angle bins
-/// ([`joint_bins`]).
+/// Every effect of a stream of deflections that `model` lacks: the rule
+/// [`candidates`] with deflection rows, no absolute rows and a time column
+/// when `time` (what the host's loop lists for the same data), as bit masks
+/// over the augmented layout: `model` first (columns `0..n`), then every
+/// candidate's parameters in the order the candidates add them. `bins[j]`
+/// are joint `j`'s angle bins ([`joint_bins`]).
 ///
 /// # Errors
 /// [`Error::CapacityExceeded`] when the layout (`P`, at most 64) or the
@@ -280,112 +418,93 @@ pub fn stream_candidates<
     for p in model {
         layout.push(chain, *p)?;
     }
-    let has = |p: &Param| model.contains(p);
-    let any = |f: &dyn Fn(&Param) -> bool| model.iter().any(f);
     let mut out: heapless::Vec<StreamCandidate, K> = heapless::Vec::new();
-    let mut add = |c: StreamCandidate| {
-        out.push(c).map_err(|_| Error::CapacityExceeded {
+    let data = DataKinds {
+        deflections: true,
+        absolute: false,
+        time,
+    };
+    let revolute = |j: usize| chain.joints().get(j).map(|jt| jt.kind) == Some(JointKind::Revolute);
+    let compensator = |j: usize| bins[j].compensator_ok.then_some(&bins[j].angles_urad[..]);
+    candidates(model, dof, revolute, 0, data, compensator, |c| {
+        let (mut test, mut add) = (0u64, 0u64);
+        for i in 0..c.add.len() {
+            let m = match c.add.get(i) {
+                Some(p) => bit(&mut layout, chain, p)?,
+                None => 0,
+            };
+            add |= m;
+            if i >= c.untested {
+                test |= m;
+            }
+        }
+        let remove = match c.remove {
+            Some(p) => bit(&mut layout, chain, p)?,
+            None => 0,
+        };
+        out.push(StreamCandidate {
+            effect: c.effect,
+            joint: c.joint,
+            test,
+            remove,
+            add,
+        })
+        .map_err(|_| Error::CapacityExceeded {
             what: "candidates",
             capacity: K,
         })
-    };
-    let any_compliance = any(&|p| p.is_compliance());
-    for j in 0..dof {
-        let joint = j as u8;
-        let k = Param::Compliance { joint };
-        let binned = any(&|p| matches!(p, Param::ComplianceAt { joint: i, .. } if *i == joint));
-        let compliant = has(&k) || binned;
-        let jb = &bins[j];
-        if !binned && jb.compensator_ok {
-            let (mut test, mut all) = (0u64, 0u64);
-            for (b, &angle_urad) in jb.angles_urad.iter().enumerate() {
-                let m = bit(
-                    &mut layout,
-                    chain,
-                    Param::ComplianceAt { joint, angle_urad },
-                )?;
-                all |= m;
-                // With a constant k in the model the bins minus one are
-                // tested (k stays); on acceptance k is replaced by the bins.
-                if !(has(&k) && b == 0) {
-                    test |= m;
-                }
-            }
-            let remove = if has(&k) {
-                bit(&mut layout, chain, k)?
-            } else {
-                0
-            };
-            add(StreamCandidate {
-                effect: Effect::Compensator,
-                joint: Some(joint),
-                test,
-                remove,
-                add: all,
-            })?;
-        }
-        let mut single = |effect, p: Param, layout: &mut Layout<P>| -> Result<(), Error> {
-            let m = bit(layout, chain, p)?;
-            add(StreamCandidate {
-                effect,
-                joint: Some(joint),
-                test: m,
-                remove: 0,
-                add: m,
-            })
-        };
-        if !compliant {
-            single(Effect::JointCompliance, k, &mut layout)?;
-        }
-        let p = Param::NonlinearStiffness { joint };
-        if compliant && !has(&p) {
-            single(Effect::NonlinearStiffness, p, &mut layout)?;
-        }
-        let p = Param::Backlash { joint };
-        if !has(&p) {
-            single(Effect::Backlash, p, &mut layout)?;
-        }
-        let p = Param::LinkCompliance { joint };
-        let revolute = chain.joints().get(j).map(|jt| jt.kind) == Some(JointKind::Revolute);
-        if revolute && !has(&p) {
-            single(Effect::LinkCompliance, p, &mut layout)?;
-        }
-    }
-    let mut triple = |effect, ps: [Param; 3], layout: &mut Layout<P>| -> Result<(), Error> {
-        let mut m = 0;
-        for p in ps {
-            m |= bit(layout, chain, p)?;
-        }
-        add(StreamCandidate {
-            effect,
-            joint: None,
-            test: m,
-            remove: 0,
-            add: m,
-        })
-    };
-    if any_compliance && !any(&|p| matches!(p, Param::LoadCom { .. })) {
-        triple(
-            Effect::LoadCom,
-            [0, 1, 2].map(|axis| Param::LoadCom { axis }),
-            &mut layout,
-        )?;
-    }
-    if time && !any(&|p| matches!(p, Param::Drift { .. })) {
-        triple(
-            Effect::Drift,
-            [0, 1, 2].map(|axis| Param::Drift { axis }),
-            &mut layout,
-        )?;
-    }
+    })?;
     Ok((layout, out))
 }
 
-/// The first of `added` whose estimate is not physical (the host's
-/// `calibrate::effects::inadmissible`, for the effects of a stream): a
-/// compliance or a backlash below zero, or a drift of more than
-/// `max_drift_mm_per_h` (norm over x, y, z; the estimate in µm/s). `x[i]`
-/// is the estimate of `params[i]` in its reported unit.
+/// Why an estimate is not physical ([`unphysical`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Unphysical {
+    /// A compliance or a backlash below zero: its value.
+    Negative(f64),
+    /// A drift faster than the limit: its norm \[mm/h\].
+    Drift(f64),
+}
+
+/// Whether the estimate of `p` is physical, the rule for the effects a
+/// stream of deflections can add (the host adds the gear cyclic limit,
+/// `calibrate::effects::inadmissible`). Physics, not tuning:
+/// - a compliance (`k_<joint>`, `k_<joint>@<angle>`) is ≥ 0: a joint
+///   yields in the direction of its torque;
+/// - a backlash (`δq = b · sign τ`) is ≥ 0: the joint rests on the side of
+///   its play that its torque pushes it to;
+/// - a drift (judged at its x component, over x, y, z; estimated in µm/s)
+///   is at most `max_drift_mm_per_h`.
+///
+/// `value(q)` is the estimate of `q` in its reported unit, `None` when `q`
+/// is not estimated (then `p` is not judged).
+pub fn unphysical(
+    p: &Param,
+    value: impl Fn(&Param) -> Option<f64>,
+    max_drift_mm_per_h: f64,
+) -> Option<Unphysical> {
+    let v = value(p)?;
+    match *p {
+        Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
+            (v < 0.0).then_some(Unphysical::Negative(v))
+        }
+        Param::Drift { axis: 0 } => {
+            let norm2: f64 = (0..3)
+                .map(|axis| {
+                    let d = value(&Param::Drift { axis }).unwrap_or(0.0);
+                    d * d
+                })
+                .sum();
+            // µm/s → mm/h.
+            let norm = libm::sqrt(norm2) * 3.6;
+            (norm > max_drift_mm_per_h).then_some(Unphysical::Drift(norm))
+        }
+        _ => None,
+    }
+}
+
+/// The first of `added` whose estimate is not physical ([`unphysical`]).
+/// `x[i]` is the estimate of `params[i]` in its reported unit.
 pub fn inadmissible<'a>(
     params: &[Param],
     x: &[f64],
@@ -398,27 +517,8 @@ pub fn inadmissible<'a>(
             .position(|u| u == p)
             .and_then(|i| x.get(i).copied())
     };
-    for p in added {
-        let Some(v) = value(p) else { continue };
-        let bad = match *p {
-            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. } => {
-                v < 0.0
-            }
-            Param::Drift { axis: 0 } => {
-                // |v| · 3.6 > limit, squared (µm/s → mm/h): no square root.
-                let norm2: f64 = (0..3)
-                    .map(|axis| {
-                        let d = value(&Param::Drift { axis }).unwrap_or(0.0);
-                        d * d
-                    })
-                    .sum();
-                norm2 * 3.6 * 3.6 > max_drift_mm_per_h * max_drift_mm_per_h
-            }
-            _ => false,
-        };
-        if bad {
-            return Some(*p);
-        }
-    }
-    None
+    added
+        .into_iter()
+        .find(|p| unphysical(p, value, max_drift_mm_per_h).is_some())
+        .copied()
 }

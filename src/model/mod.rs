@@ -13,9 +13,11 @@
 //! | [`param`] | [`Param`]: the one vocabulary of parameters; [`Unit`]s and SI factors |
 //! | [`sample`] | [`Sample`]: what one measurement carries at the current model |
 //! | [`columns`] | `∂p/∂x` of every parameter: geometric (eq. 2), elastostatic (eq. 3), effects |
-//! | [`effect`] | [`effect::Effect`]: the effect library's names; the candidates of a stream of deflections as masks over one layout |
+//! | [`effect`] | [`effect::Effect`]: the effect library's names; its rule [`effect::candidates`] (which effects a model lacks, on which parameters, in which order: the host's loop and the device's both use it); the candidates of a stream of deflections as masks over one layout |
+//! | [`bins`] | the angle-bin rule (the compensator's bins): [`bins::clusters`], [`bins::by_first_appearance`], [`bins::compensator_eligible`]; [`bins::joint_bins`] for the device, `calibrate::rows` on the host |
 //! | [`layout`] | [`Layout`]: a fixed-capacity list of parameters for the device and the rows it fills |
 
+pub mod bins;
 pub mod columns;
 pub mod effect;
 pub mod layout;
