@@ -386,6 +386,7 @@ where
     /// Eq. 8 / 11, the sandwich `Λ⁻¹ M Λ⁻¹` with
     /// `M = Bᵀ W² Σ² W² B` (e.g. [`super::Accumulator::middle`]).
     #[must_use]
+    #[inline(never)]
     pub fn cov_sandwich(&self, middle: &OMatrix<T, D, D>) -> OMatrix<T, D, D> {
         let c = mat_mul(&mat_mul(&self.lambda_inv, middle), &self.lambda_inv);
         // Symmetrise what rounding left asymmetric.

@@ -301,22 +301,52 @@ fn fit_with<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let acc = src.weighted(weights, None)?;
-    let solution = acc.solve_active(active)?;
+    let solution = solve_weighted(src, weights, active)?;
     src.residual_sigma_into(&solution, weights, sigma, dof)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = src.weighted(weights, Some(noise))?.middle();
-    let covariance = solution.cov_sandwich(&middle);
+    let covariance = sandwich(src, weights, noise, &solution)?;
     Ok(Fit {
         solution,
         covariance,
         iterations: 0,
         converged: false,
     })
+}
+
+/// The first half of [`fit_with`]: the weighted sums and their solve.
+/// Not inlined (nor [`sandwich`]): each one's temporaries are on the
+/// stack only while it runs, not under the other's stream (a device's
+/// stack is the sum of the frames of one call chain).
+#[inline(never)]
+fn solve_weighted<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+    src: &R,
+    weights: &[Vector3<T>],
+    active: &[bool],
+) -> Result<Solution<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    src.weighted(weights, None)?.solve_active(active)
+}
+
+/// The second half of [`fit_with`]: the sandwich covariance of `solution`
+/// with the middle term of `noise`.
+#[inline(never)]
+fn sandwich<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+    src: &R,
+    weights: &[Vector3<T>],
+    noise: Noise<'_, T>,
+    solution: &Solution<T, D>,
+) -> Result<OMatrix<T, D, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let middle = src.weighted(weights, Some(noise))?.middle();
+    Ok(solution.cov_sandwich(&middle))
 }
 
 /// The noise of the sandwich's middle term (eq. 8, 11): σ per group and
