@@ -245,19 +245,33 @@ pub struct Fitted<T: RealField + Copy> {
     pub iterations: usize,
 }
 
+impl<T: RealField + Copy> Fitted<T> {
+    /// No model yet (a buffer for [`fit`]).
+    fn empty() -> Self {
+        Self {
+            layout: Layout::new(),
+            x: [T::zero(); NMAX],
+            weights: [Vector3::zeros(); GMAX],
+            rms_um: 0.0,
+            iterations: 0,
+        }
+    }
+}
+
 fn to_f64<T: RealField + Copy>(v: T) -> f64 {
     nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN)
 }
 
 /// Iterative WLS of `layout` over the stream, to convergence, and the RMS
-/// of its residuals (one more pass). Not inlined: its frame stays out of
-/// the loop's.
+/// of its residuals (one more pass), into `out` (unchanged on error). Not
+/// inlined: its frame stays out of the loop's.
 #[inline(never)]
 fn fit<T: RealField + Copy, D: Data<T>>(
     data: &D,
     layout: &Layout<NMAX>,
     settings: &IrlsSettings<T>,
-) -> Result<Fitted<T>, Error> {
+    out: &mut Fitted<T>,
+) -> Result<(), Error> {
     let g = data.groups();
     if g > GMAX {
         return Err(Error::CapacityExceeded {
@@ -275,14 +289,46 @@ fn fit<T: RealField + Copy, D: Data<T>>(
     let mut dof = [Vector3::zeros(); GMAX];
     let mut active = [false; NMAX];
     active[..layout.len()].fill(true);
-    let f: Fit<T, Dm> = src.fit_irls(
-        settings,
-        &active,
-        &mut weights[..g],
-        &mut sigma[..g],
-        &mut dof[..g],
-        |_| {},
-    )?;
+    // `Reweightable::fit_irls` step for step (the same fits, the same
+    // convergence test), with one fit on the stack instead of two: the
+    // previous estimate is all the test needs of it, and each fit is
+    // written in place of the last (`res = …`: the call's result slot).
+    if settings.max_iterations == 0 {
+        return Err(Error::OutOfRange {
+            what: "max_iterations",
+            index: 0,
+            len: 0,
+        });
+    }
+    let mut res: Result<Fit<T, Dm>, Error> =
+        src.fit_ols(&active, &mut weights[..g], &mut sigma[..g], &mut dof[..g]);
+    let mut iterations = 0;
+    for k in 1..=settings.max_iterations {
+        let prev = match &res {
+            Ok(f) => f.solution.x,
+            Err(_) => break,
+        };
+        res = src.fit_reweighted(
+            &settings.weight,
+            &active,
+            &mut weights[..g],
+            &mut sigma[..g],
+            &mut dof[..g],
+        );
+        let Ok(f) = &res else { break };
+        let std = f.std();
+        let mut change = T::zero();
+        for i in 0..active.len() {
+            if active[i] && std[i] > T::zero() {
+                change = change.max((f.solution.x[i] - prev[i]).abs() / std[i]);
+            }
+        }
+        iterations = k;
+        if change < settings.tolerance {
+            break;
+        }
+    }
+    let f = res.as_ref().map_err(|e| *e)?;
     let (mut ss, mut rows) = (0.0f64, 0usize);
     stream(data, layout, &mut |m, b| {
         let r = m.dp - b * f.solution.x;
@@ -290,19 +336,16 @@ fn fit<T: RealField + Copy, D: Data<T>>(
         rows += 1;
         Ok(())
     })?;
-    let mut x = [T::zero(); NMAX];
-    x.copy_from_slice(f.solution.x.as_slice());
-    Ok(Fitted {
-        layout: layout.clone(),
-        x,
-        weights,
-        rms_um: if rows == 0 {
-            0.0
-        } else {
-            libm::sqrt(ss / rows as f64) * 1e6
-        },
-        iterations: f.iterations,
-    })
+    out.layout = layout.clone();
+    out.x.copy_from_slice(f.solution.x.as_slice());
+    out.weights = weights;
+    out.rms_um = if rows == 0 {
+        0.0
+    } else {
+        libm::sqrt(ss / rows as f64) * 1e6
+    };
+    out.iterations = iterations;
+    Ok(())
 }
 
 /// One effect added.
@@ -347,32 +390,61 @@ fn indices(mask: u64, out: &mut [usize; 64]) -> usize {
     n
 }
 
+/// What one round's screening leaves to the loop: the augmented layout,
+/// the candidates, their tests (most significant first, by index into
+/// `cands`) and the lack of fit. Owned by the loop and filled in place
+/// (no returned copies); the sums themselves live only in [`screen`].
+struct Round {
+    aug: Layout<P>,
+    cands: heapless::Vec<robcal::model::effect::StreamCandidate, K>,
+    tests: heapless::Vec<(u8, NestedTest), K>,
+    lof: Option<LackOfFit>,
+}
+
+/// The sums of one screening pass (`Augmented`, `PureError`): built in
+/// place by [`screen`], dropped when it returns.
+struct Sums<T: RealField + Copy> {
+    aug: Augmented<T, P, L>,
+    pure: PureError<T, CELLS>,
+}
+
+/// The candidates of the model `layout` into `round` (their layout after
+/// the model's columns). Not inlined: the returned copies stay in its frame.
+#[inline(never)]
+fn candidates<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    layout: &Layout<NMAX>,
+    bins: &[JointBins<BINS>; J],
+    round: &mut Round,
+) -> Result<(), Error> {
+    let n = layout.len();
+    let mut model = [Param::Compliance { joint: 0 }; NMAX];
+    for (m, c) in model.iter_mut().zip(layout.columns()) {
+        *m = c.param;
+    }
+    (round.aug, round.cands) =
+        stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
+    Ok(())
+}
+
 /// The screening of one round on `cur`: one pass over the stream, every
-/// candidate tested. Returns the candidates' tests (most significant first,
-/// with their candidate), the lack of fit, and the augmented layout.
-#[allow(clippy::type_complexity)]
+/// candidate tested (the model factored once), into `round`. Not inlined:
+/// its sums are on the stack only while it runs, not during the fits.
 #[inline(never)]
 fn screen<T: RealField + Copy, D: Data<T>>(
     data: &D,
     cur: &Fitted<T>,
     bins: &[JointBins<BINS>; J],
-) -> Result<
-    (
-        heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K>,
-        Option<LackOfFit>,
-        Layout<P>,
-    ),
-    Error,
-> {
+    round: &mut Round,
+) -> Result<(), Error> {
     let n = cur.layout.len();
-    let mut model = [Param::Compliance { joint: 0 }; NMAX];
-    for (m, c) in model.iter_mut().zip(cur.layout.columns()) {
-        *m = c.param;
-    }
-    let (aug, cands) =
-        stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
-    let mut sums = Augmented::<T, P, L>::new()?;
-    let mut pure = PureError::<T, CELLS>::new();
+    candidates(data, &cur.layout, bins, round)?;
+    round.tests.clear();
+    round.lof = None;
+    let mut sums = Sums {
+        aug: Augmented::<T, P, L>::new()?,
+        pure: PureError::<T, CELLS>::new(),
+    };
     // The model fit's residuals `r = Δp − B_A X̂_A` in place of `Δp`: every
     // test is the same (`r` differs from `Δp` by a combination of the
     // model's columns), and the scores `B_Cᵀ W² r` are summed directly
@@ -380,31 +452,32 @@ fn screen<T: RealField + Copy, D: Data<T>>(
     // 1 %). The model's columns are the layout's first `n`.
     let mut x = SMatrix::<T, P, 1>::zeros();
     x.as_mut_slice()[..n].copy_from_slice(&cur.x[..n]);
-    stream(data, &aug, &mut |m, b| {
+    stream(data, &round.aug, &mut |m, b| {
         let r = m.dp - b * x;
-        sums.update(b, &r, &cur.weights[m.group])?;
-        pure.update(m.group as u16, u16::from(m.marker), &m.dp)
+        sums.aug.update(b, &r, &cur.weights[m.group])?;
+        sums.pure.update(m.group as u16, u16::from(m.marker), &m.dp)
     })?;
     let model_cols: [usize; NMAX] = core::array::from_fn(|i| i);
-    let mut tests: heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K> =
-        heapless::Vec::new();
+    // The model's fit at these weights, once for every candidate and for
+    // the lack of fit (its weighted RSS).
+    let fit = sums.aug.solve_model(&model_cols[..n], Const::<S>)?;
     let mut cols = [0usize; 64];
-    for c in &cands {
+    for (i, c) in round.cands.iter().enumerate() {
         let q = indices(c.test, &mut cols);
-        let r = sums.test(&model_cols[..n], &cols[..q], Const::<S>)?;
+        let r = sums
+            .aug
+            .test_fitted(&model_cols[..n], &fit, &cols[..q], Const::<S>)?;
         if let Some(t) = r {
-            // Within capacity: one test per candidate.
-            let _ = tests.push((*c, t));
+            // Within capacity: one test per candidate (K ≤ 255).
+            let _ = round.tests.push((i as u8, t));
         }
     }
-    rank_tests(&mut tests);
-    // The model's weighted RSS at these weights, for the lack of fit.
-    let acc = sums.select(&model_cols[..n], Const::<S>, true)?;
-    let mut active = [false; S];
-    active[..n].fill(true);
-    let wrss = to_f64(acc.solve_active(&active)?.wrss);
-    let lof = pure.lack_of_fit(wrss, &cur.weights[..data.groups()], n);
-    Ok((tests, lof, aug))
+    rank_tests(&mut round.tests);
+    let wrss = to_f64(fit.wrss);
+    round.lof = sums
+        .pure
+        .lack_of_fit(wrss, &cur.weights[..data.groups()], n);
+    Ok(())
 }
 
 /// The model with a candidate added (the host's `extended`, without its
@@ -440,6 +513,38 @@ fn extended(
     Ok(out)
 }
 
+/// The model with candidate `c` added, refitted into `next`: whether the
+/// fit identifies it and its estimate is physical. Not inlined: the fit's
+/// frame is on the stack only while it runs.
+#[inline(never)]
+fn admissible<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    cur: &Fitted<T>,
+    aug: &Layout<P>,
+    c: &robcal::model::effect::StreamCandidate,
+    settings: &IrlsSettings<T>,
+    next: &mut Fitted<T>,
+) -> Result<bool, Error> {
+    let chain = data.chain();
+    let next_layout = extended(&cur.layout, aug, c, chain)?;
+    match fit(data, &next_layout, settings, next) {
+        Ok(()) => {}
+        Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(false),
+        Err(e) => return Err(e),
+    }
+    let mut params = [Param::Compliance { joint: 0 }; NMAX];
+    let mut x = [0.0; NMAX];
+    for (i, col) in next.layout.columns().iter().enumerate() {
+        params[i] = col.param;
+        x[i] = to_f64(next.x[i]);
+    }
+    let mut idx = [0usize; 64];
+    let na = indices(c.add, &mut idx);
+    let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
+    let m = next.layout.len();
+    Ok(inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_none())
+}
+
 /// The closed loop: the declared `model`, then rounds of screening until
 /// no candidate passes the `rule` with a physical estimate (or
 /// [`MAX_EFFECTS`]). `log` gets each step as it is taken.
@@ -471,64 +576,56 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
     for p in model {
         layout.push(chain, *p)?;
     }
-    let mut cur = fit(data, &layout, settings)?;
+    // `out.last` is the current fit, `next` the buffer of a candidate's.
     let mut out = Outcome {
-        declared_rms_um: cur.rms_um,
+        declared_rms_um: 0.0,
         steps: heapless::Vec::new(),
-        last: cur.clone(),
+        last: Fitted::empty(),
         first_tried: 0,
         first_lof: None,
     };
-    for round in 0.. {
-        let (tests, lof, aug) = screen(data, &cur, &bins)?;
-        if round == 0 {
+    fit(data, &layout, settings, &mut out.last)?;
+    out.declared_rms_um = out.last.rms_um;
+    let mut next = Fitted::empty();
+    let mut round = Round {
+        aug: Layout::new(),
+        cands: heapless::Vec::new(),
+        tests: heapless::Vec::new(),
+        lof: None,
+    };
+    for r in 0.. {
+        screen(data, &out.last, &bins, &mut round)?;
+        let lof = round.lof;
+        if r == 0 {
             out.first_lof = lof;
-            out.first_tried = tests.len();
+            out.first_tried = round.tests.len();
         }
-        let tried = tests.len();
-        let mut eligible = tests
-            .iter()
-            .filter(|(_, t)| rule.eligible(t, tried, lof.as_ref()))
-            .peekable();
-        if eligible.peek().is_none() || out.steps.is_full() {
+        let tried = round.tests.len();
+        if out.steps.is_full() {
             break;
         }
         let mut accepted = None;
-        for (c, t) in eligible {
-            let next_layout = extended(&cur.layout, &aug, c, chain)?;
-            let next = match fit(data, &next_layout, settings) {
-                Ok(next) => next,
-                Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => continue,
-                Err(e) => return Err(e),
-            };
-            let mut params = [Param::Compliance { joint: 0 }; NMAX];
-            let mut x = [0.0; NMAX];
-            for (i, col) in next.layout.columns().iter().enumerate() {
-                params[i] = col.param;
-                x[i] = to_f64(next.x[i]);
-            }
-            let mut idx = [0usize; 64];
-            let na = indices(c.add, &mut idx);
-            let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
-            let m = next.layout.len();
-            if inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_some() {
+        for (i, t) in &round.tests {
+            if !rule.eligible(t, tried, lof.as_ref()) {
                 continue;
             }
-            accepted = Some((*c, *t, next));
-            break;
+            let c = &round.cands[usize::from(*i)];
+            if admissible(data, &out.last, &round.aug, c, settings, &mut next)? {
+                accepted = Some((*c, *t));
+                break;
+            }
         }
-        let Some((c, t, next)) = accepted else { break };
+        let Some((c, t)) = accepted else { break };
         let step = Step {
             effect: c.effect,
             joint: c.joint,
             test: t,
             tried,
-            rms_um: (cur.rms_um, next.rms_um),
+            rms_um: (out.last.rms_um, next.rms_um),
         };
         log(&step);
         let _ = out.steps.push(step);
-        cur = next;
+        core::mem::swap(&mut out.last, &mut next);
     }
-    out.last = cur;
     Ok(out)
 }

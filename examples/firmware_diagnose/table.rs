@@ -56,6 +56,7 @@ impl<T: RealField + Copy> Table<T> {
     ///
     /// # Errors
     /// From the kinematics.
+    #[inline(never)]
     pub fn injected(&self, g: usize) -> Result<[Vector3<T>; 3], Error> {
         let q = self.q(g);
         let frames = self.chain.frames(&q)?;
