@@ -308,7 +308,7 @@ where
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let covariance = sandwich(src, weights, noise, &solution)?;
+    let covariance = solution.cov_sandwich(&middle(src, weights, noise)?);
     Ok(Fit {
         solution,
         covariance,
@@ -318,7 +318,7 @@ where
 }
 
 /// The first half of [`fit_with`]: the weighted sums and their solve.
-/// Not inlined (nor [`sandwich`]): each one's temporaries are on the
+/// Not inlined (nor [`middle`]): each one's temporaries are on the
 /// stack only while it runs, not under the other's stream (a device's
 /// stack is the sum of the frames of one call chain).
 #[inline(never)]
@@ -330,23 +330,41 @@ fn solve_weighted<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    src.weighted(weights, None)?.solve_active(active)
+    // By reference: the sums are not moved out of the result (a copy).
+    match &src.weighted(weights, None) {
+        Ok(acc) => solve(acc, active),
+        Err(e) => Err(*e),
+    }
 }
 
-/// The second half of [`fit_with`]: the sandwich covariance of `solution`
-/// with the middle term of `noise`.
+/// [`Accumulator::solve_active`], not inlined: the solve's temporaries are
+/// not in the frame that waits for the stream.
 #[inline(never)]
-fn sandwich<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+fn solve<T: RealField + Copy, D: Dim>(
+    acc: &Accumulator<T, D>,
+    active: &[bool],
+) -> Result<Solution<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    acc.solve_active(active)
+}
+
+/// The second half of [`fit_with`]: the sandwich's middle term with
+/// `noise`.
+#[inline(never)]
+fn middle<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
     src: &R,
     weights: &[Vector3<T>],
     noise: Noise<'_, T>,
-    solution: &Solution<T, D>,
 ) -> Result<OMatrix<T, D, D>, Error>
 where
     DefaultAllocator: Alloc<D>,
 {
-    let middle = src.weighted(weights, Some(noise))?.middle();
-    Ok(solution.cov_sandwich(&middle))
+    match &src.weighted(weights, Some(noise)) {
+        Ok(acc) => Ok(acc.middle()),
+        Err(e) => Err(*e),
+    }
 }
 
 /// The noise of the sandwich's middle term (eq. 8, 11): σ per group and
