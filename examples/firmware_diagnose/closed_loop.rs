@@ -27,7 +27,7 @@ use robcal::estimate::{group_dof, group_sigma, leverage, NestedTest, Noise, Solu
 use robcal::model::effect::{inadmissible, joint_bins, stream_candidates, Effect, JointBins};
 use robcal::model::{Layout, Marker, Param, Sample};
 use robcal::robot::{joint_torques, Frames, PointLoad};
-use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
+use robcal::{Accumulator, Block, Chain, Error, IrlsSettings, Reweightable};
 
 /// Joints of the arm.
 pub const J: usize = 6;
@@ -103,18 +103,33 @@ struct Config<T: RealField + Copy> {
     wrench: robcal::robot::Wrench<T>,
 }
 
-fn config<T: RealField + Copy, D: Data<T>>(data: &D, g: usize) -> Result<Config<T>, Error> {
+/// The rows of configuration `g` into `cached` (`None` on error). Not
+/// inlined: the kinematics' temporaries are on the stack only while it runs.
+#[inline(never)]
+fn config<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    g: usize,
+    cached: &mut Option<Config<T>>,
+) -> Result<(), Error> {
     let q = data.q(g);
-    let frames = data.chain().frames(&q)?;
-    let wrench = data.load(g).wrench(&frames);
-    let mut tau = [T::zero(); J];
-    joint_torques(&frames, &wrench, &mut tau)?;
-    Ok(Config {
+    // The frames computed into the cache itself (no copy of them here).
+    *cached = None;
+    let c = cached.insert(Config {
         g,
-        frames,
-        tau,
-        wrench,
-    })
+        frames: data.chain().frames(&q)?,
+        tau: [T::zero(); J],
+        wrench: robcal::robot::Wrench {
+            force_n: Vector3::zeros(),
+            point_m: Vector3::zeros(),
+            moment_nm: Vector3::zeros(),
+        },
+    });
+    c.wrench = data.load(g).wrench(&c.frames);
+    let done = joint_torques(&c.frames, &c.wrench, &mut c.tau);
+    if done.is_err() {
+        *cached = None;
+    }
+    done
 }
 
 /// What [`stream`] hands each deflection to: the measurement and its rows.
@@ -138,7 +153,7 @@ fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
     let mut b = SMatrix::<T, 3, C>::zeros();
     data.for_each(&mut |m| {
         if cached.as_ref().map(|c| c.g) != Some(m.group) {
-            cached = Some(config(data, m.group)?);
+            config(data, m.group, &mut cached)?;
         }
         let c = cached.as_ref().ok_or(Error::Mismatch { what: "no rows" })?;
         let marker = data.marker(m.marker).ok_or(Error::OutOfRange {
@@ -262,6 +277,52 @@ fn to_f64<T: RealField + Copy>(v: T) -> f64 {
     nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN)
 }
 
+/// The OLS start's estimate (`Reweightable::fit_ols`). Not inlined: its fit
+/// is not on the stack during the reweighted ones.
+#[inline(never)]
+fn ols<T: RealField + Copy, D: Data<T>>(
+    src: &ModelSource<'_, T, D>,
+    active: &[bool],
+    weights: &mut [Vector3<T>],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+) -> Result<SMatrix<T, NMAX, 1>, Error> {
+    match &src.fit_ols(active, weights, sigma, dof) {
+        Ok(f) => Ok(f.solution.x),
+        Err(e) => Err(*e),
+    }
+}
+
+/// One reweighted fit (`Reweightable::fit_reweighted`): its estimate into
+/// `x`, and the largest move of a parameter from the previous `x` in its
+/// standard deviations (`Reweightable::fit_irls`'s convergence test). Not
+/// inlined, as [`ols`].
+#[inline(never)]
+fn reweighted<T: RealField + Copy, D: Data<T>>(
+    src: &ModelSource<'_, T, D>,
+    settings: &IrlsSettings<T>,
+    active: &[bool],
+    weights: &mut [Vector3<T>],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+    x: &mut SMatrix<T, NMAX, 1>,
+) -> Result<T, Error> {
+    let next = src.fit_reweighted(&settings.weight, active, weights, sigma, dof);
+    let f = match &next {
+        Ok(f) => f,
+        Err(e) => return Err(*e),
+    };
+    let std = f.std();
+    let mut change = T::zero();
+    for i in 0..active.len() {
+        if active[i] && std[i] > T::zero() {
+            change = change.max((f.solution.x[i] - x[i]).abs() / std[i]);
+        }
+    }
+    *x = f.solution.x;
+    Ok(change)
+}
+
 /// Iterative WLS of `layout` over the stream, to convergence, and the RMS
 /// of its residuals (one more pass), into `out` (unchanged on error). Not
 /// inlined: its frame stays out of the loop's.
@@ -291,8 +352,9 @@ fn fit<T: RealField + Copy, D: Data<T>>(
     active[..layout.len()].fill(true);
     // `Reweightable::fit_irls` step for step (the same fits, the same
     // convergence test), with one fit on the stack instead of two: the
-    // previous estimate is all the test needs of it, and each fit is
-    // written in place of the last (`res = …`: the call's result slot).
+    // previous estimate is all the test needs of the previous fit, and
+    // each fit lives in the frame of the helper that made it ([`ols`],
+    // [`reweighted`]).
     if settings.max_iterations == 0 {
         return Err(Error::OutOfRange {
             what: "max_iterations",
@@ -300,44 +362,38 @@ fn fit<T: RealField + Copy, D: Data<T>>(
             len: 0,
         });
     }
-    let mut res: Result<Fit<T, Dm>, Error> =
-        src.fit_ols(&active, &mut weights[..g], &mut sigma[..g], &mut dof[..g]);
+    let mut x = ols(
+        &src,
+        &active,
+        &mut weights[..g],
+        &mut sigma[..g],
+        &mut dof[..g],
+    )?;
     let mut iterations = 0;
     for k in 1..=settings.max_iterations {
-        let prev = match &res {
-            Ok(f) => f.solution.x,
-            Err(_) => break,
-        };
-        res = src.fit_reweighted(
-            &settings.weight,
+        let change = reweighted(
+            &src,
+            settings,
             &active,
             &mut weights[..g],
             &mut sigma[..g],
             &mut dof[..g],
-        );
-        let Ok(f) = &res else { break };
-        let std = f.std();
-        let mut change = T::zero();
-        for i in 0..active.len() {
-            if active[i] && std[i] > T::zero() {
-                change = change.max((f.solution.x[i] - prev[i]).abs() / std[i]);
-            }
-        }
+            &mut x,
+        )?;
         iterations = k;
         if change < settings.tolerance {
             break;
         }
     }
-    let f = res.as_ref().map_err(|e| *e)?;
     let (mut ss, mut rows) = (0.0f64, 0usize);
     stream(data, layout, &mut |m, b| {
-        let r = m.dp - b * f.solution.x;
+        let r = m.dp - b * x;
         ss += to_f64(r.norm_squared());
         rows += 1;
         Ok(())
     })?;
     out.layout = layout.clone();
-    out.x.copy_from_slice(f.solution.x.as_slice());
+    out.x.copy_from_slice(x.as_slice());
     out.weights = weights;
     out.rms_um = if rows == 0 {
         0.0
