@@ -301,16 +301,25 @@ fn fit_with<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let solution = solve_weighted(src, weights, active)?;
-    src.residual_sigma_into(&solution, weights, sigma, dof)?;
+    // Results matched by reference (a `?` would copy them out).
+    let solved = solve_weighted(src, weights, active);
+    let solution = match &solved {
+        Ok(s) => s,
+        Err(e) => return Err(*e),
+    };
+    src.residual_sigma_into(solution, weights, sigma, dof)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let covariance = solution.cov_sandwich(&middle(src, weights, noise)?);
+    let middle = middle(src, weights, noise);
+    let covariance = match &middle {
+        Ok(m) => solution.cov_sandwich(m),
+        Err(e) => return Err(*e),
+    };
     Ok(Fit {
-        solution,
+        solution: solution.clone(),
         covariance,
         iterations: 0,
         converged: false,
