@@ -22,7 +22,7 @@
 //! `robcal::model::effect`.
 
 use nalgebra::{Const, RealField, SMatrix, Vector3};
-use robcal::estimate::screen::{rank_tests, Augmented, LackOfFit, PureError, Rule};
+use robcal::estimate::screen::{Augmented, LackOfFit, PureError, Rule};
 use robcal::estimate::{group_dof, group_sigma, leverage, NestedTest, Noise, Solution};
 use robcal::model::effect::{inadmissible, joint_bins, stream_candidates, Effect, JointBins};
 use robcal::model::{Layout, Marker, Param, Sample};
@@ -446,15 +446,66 @@ fn indices(mask: u64, out: &mut [usize; 64]) -> usize {
     n
 }
 
+/// One candidate's test, compactly: what ranks and selects it (the
+/// round's [`Round`] holds what all tests share: the model's weighted RSS
+/// and the equations).
+#[derive(Clone, Copy)]
+struct Tested {
+    /// Index into [`Round::cands`].
+    cand: u8,
+    /// Its columns tested (`NestedTest::dof_num`).
+    q: u8,
+    delta_rss: f64,
+    f: f64,
+    p_value: f64,
+}
+
 /// What one round's screening leaves to the loop: the augmented layout,
-/// the candidates, their tests (most significant first, by index into
-/// `cands`) and the lack of fit. Owned by the loop and filled in place
-/// (no returned copies); the sums themselves live only in [`screen`].
+/// the candidates, their tests (most significant first) and the lack of
+/// fit. Owned by the loop and filled in place (no returned copies); the
+/// sums themselves live only in [`screen`].
 struct Round {
     aug: Layout<P>,
     cands: heapless::Vec<robcal::model::effect::StreamCandidate, K>,
-    tests: heapless::Vec<(u8, NestedTest), K>,
+    tests: heapless::Vec<Tested, K>,
+    /// Every test's `rss_before` (the model's weighted RSS).
+    rss_before: f64,
+    /// Every test's `dof_num + dof_den` (equations minus the model's columns).
+    dof: usize,
     lof: Option<LackOfFit>,
+}
+
+impl Round {
+    /// The full test of `t` (`Augmented::test_fitted`'s, field for field).
+    fn test(&self, t: &Tested) -> NestedTest {
+        let q = usize::from(t.q);
+        NestedTest {
+            delta_rss: t.delta_rss,
+            rss_before: self.rss_before,
+            f: t.f,
+            dof_num: q,
+            dof_den: self.dof - q,
+            p_value: t.p_value,
+        }
+    }
+
+    /// Orders the tests as `screen::rank_tests` (by p-value, then by F,
+    /// largest first; stable).
+    fn rank(&mut self) {
+        let before = |a: &Tested, b: &Tested| match a.p_value.total_cmp(&b.p_value) {
+            core::cmp::Ordering::Less => true,
+            core::cmp::Ordering::Equal => b.f.total_cmp(&a.f) == core::cmp::Ordering::Less,
+            core::cmp::Ordering::Greater => false,
+        };
+        let t = &mut self.tests;
+        for i in 1..t.len() {
+            let mut j = i;
+            while j > 0 && before(&t[j], &t[j - 1]) {
+                t.swap(j, j - 1);
+                j -= 1;
+            }
+        }
+    }
 }
 
 /// The sums of one screening pass (`Augmented`, `PureError`): built in
@@ -513,32 +564,57 @@ fn screen<T: RealField + Copy, D: Data<T>>(
         sums.aug.update(b, &r, &cur.weights[m.group])?;
         sums.pure.update(m.group as u16, u16::from(m.marker), &m.dp)
     })?;
+    test_all(&sums, cur, data.groups(), round)
+}
+
+/// Every candidate of `round` tested from the sums (the model factored
+/// once), ranked, and the lack of fit. Not inlined: its frame is not on
+/// the stack during the stream.
+#[inline(never)]
+fn test_all<T: RealField + Copy>(
+    sums: &Sums<T>,
+    cur: &Fitted<T>,
+    groups: usize,
+    round: &mut Round,
+) -> Result<(), Error> {
+    let n = cur.layout.len();
     let model_cols: [usize; NMAX] = core::array::from_fn(|i| i);
     // The model's fit at these weights, once for every candidate and for
     // the lack of fit (its weighted RSS).
-    let fit = sums.aug.solve_model(&model_cols[..n], Const::<S>)?;
+    let fit = sums.aug.solve_model(&model_cols[..n], Const::<S>);
+    let fit = match &fit {
+        Ok(f) => f,
+        Err(e) => return Err(*e),
+    };
+    let wrss = to_f64(fit.wrss);
+    round.rss_before = wrss;
+    round.dof = sums.aug.equations().saturating_sub(n);
     let mut cols = [0usize; 64];
     for (i, c) in round.cands.iter().enumerate() {
         let q = indices(c.test, &mut cols);
         let r = sums
             .aug
-            .test_fitted(&model_cols[..n], &fit, &cols[..q], Const::<S>)?;
+            .test_fitted(&model_cols[..n], fit, &cols[..q], Const::<S>)?;
         if let Some(t) = r {
-            // Within capacity: one test per candidate (K ≤ 255).
-            let _ = round.tests.push((i as u8, t));
+            // Within capacity: one test per candidate (K ≤ 255, q ≤ 64).
+            let _ = round.tests.push(Tested {
+                cand: i as u8,
+                q: t.dof_num as u8,
+                delta_rss: t.delta_rss,
+                f: t.f,
+                p_value: t.p_value,
+            });
         }
     }
-    rank_tests(&mut round.tests);
-    let wrss = to_f64(fit.wrss);
-    round.lof = sums
-        .pure
-        .lack_of_fit(wrss, &cur.weights[..data.groups()], n);
+    round.rank();
+    round.lof = sums.pure.lack_of_fit(wrss, &cur.weights[..groups], n);
     Ok(())
 }
 
 /// The model with a candidate added (the host's `extended`, without its
 /// identifiability pruning): its parameters where the ones it replaces
-/// were, else at the end.
+/// were, else at the end. Not inlined: its buffers are not under the fit.
+#[inline(never)]
 fn extended(
     model: &Layout<NMAX>,
     aug: &Layout<P>,
@@ -569,25 +645,14 @@ fn extended(
     Ok(out)
 }
 
-/// The model with candidate `c` added, refitted into `next`: whether the
-/// fit identifies it and its estimate is physical. Not inlined: the fit's
-/// frame is on the stack only while it runs.
+/// Whether the estimate of the parameters `c` adds to `next` is physical
+/// (`effect::inadmissible`).
 #[inline(never)]
-fn admissible<T: RealField + Copy, D: Data<T>>(
-    data: &D,
-    cur: &Fitted<T>,
+fn physical<T: RealField + Copy>(
+    next: &Fitted<T>,
     aug: &Layout<P>,
     c: &robcal::model::effect::StreamCandidate,
-    settings: &IrlsSettings<T>,
-    next: &mut Fitted<T>,
-) -> Result<bool, Error> {
-    let chain = data.chain();
-    let next_layout = extended(&cur.layout, aug, c, chain)?;
-    match fit(data, &next_layout, settings, next) {
-        Ok(()) => {}
-        Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(false),
-        Err(e) => return Err(e),
-    }
+) -> bool {
     let mut params = [Param::Compliance { joint: 0 }; NMAX];
     let mut x = [0.0; NMAX];
     for (i, col) in next.layout.columns().iter().enumerate() {
@@ -598,7 +663,82 @@ fn admissible<T: RealField + Copy, D: Data<T>>(
     let na = indices(c.add, &mut idx);
     let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
     let m = next.layout.len();
-    Ok(inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_none())
+    inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_none()
+}
+
+/// The model `cur` with candidate `c` added and refitted: when the fit
+/// identifies it and its estimate is physical, it replaces `cur` and the
+/// RMS before and after are returned. Not inlined: the new fit is on the
+/// stack only while it runs (not during the screening).
+#[inline(never)]
+fn admissible<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    cur: &mut Fitted<T>,
+    aug: &Layout<P>,
+    c: &robcal::model::effect::StreamCandidate,
+    settings: &IrlsSettings<T>,
+) -> Result<Option<(f64, f64)>, Error> {
+    let mut next = Fitted::empty();
+    let next_layout = extended(&cur.layout, aug, c, data.chain());
+    let next_layout = match &next_layout {
+        Ok(l) => l,
+        Err(e) => return Err(*e),
+    };
+    match fit(data, next_layout, settings, &mut next) {
+        Ok(()) => {}
+        Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(None),
+        Err(e) => return Err(e),
+    }
+    if !physical(&next, aug, c) {
+        return Ok(None);
+    }
+    let rms = (cur.rms_um, next.rms_um);
+    *cur = next;
+    Ok(Some(rms))
+}
+
+/// Each joint's angle bins from the configurations (`g ≤ GMAX`). Not
+/// inlined: its frame is not under the fit's.
+#[inline(never)]
+fn angle_bins<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    bins: &mut [JointBins<BINS>; J],
+) -> Result<(), Error> {
+    let g = data.groups().min(GMAX);
+    let mut angles = [T::zero(); GMAX];
+    for (j, b) in bins.iter_mut().enumerate() {
+        for (i, a) in angles[..g].iter_mut().enumerate() {
+            *a = data.q(i)[j];
+        }
+        *b = joint_bins(&angles[..g])?;
+    }
+    Ok(())
+}
+
+/// The declared model's fit into `out`, and each joint's angle bins from
+/// the configurations into `bins`. Not inlined: its buffers are not on
+/// the stack during the rounds.
+#[inline(never)]
+fn declared<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    model: &[Param],
+    settings: &IrlsSettings<T>,
+    bins: &mut [JointBins<BINS>; J],
+    out: &mut Fitted<T>,
+) -> Result<(), Error> {
+    let g = data.groups();
+    if g > GMAX {
+        return Err(Error::CapacityExceeded {
+            what: "configurations",
+            capacity: GMAX,
+        });
+    }
+    angle_bins(data, bins)?;
+    let mut layout = Layout::new();
+    for p in model {
+        layout.push(data.chain(), *p)?;
+    }
+    fit(data, &layout, settings, out)
 }
 
 /// The closed loop: the declared `model`, then rounds of screening until
@@ -614,25 +754,11 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
     rule: &Rule,
     mut log: impl FnMut(&Step),
 ) -> Result<Outcome<T>, Error> {
-    let chain = data.chain();
-    let g = data.groups();
-    // Each joint's angle bins from the configurations.
     let mut bins: [JointBins<BINS>; J] = core::array::from_fn(|_| JointBins {
         angles_urad: heapless::Vec::new(),
         compensator_ok: false,
     });
-    let mut angles = [T::zero(); GMAX];
-    for (j, b) in bins.iter_mut().enumerate() {
-        for (i, a) in angles[..g].iter_mut().enumerate() {
-            *a = data.q(i)[j];
-        }
-        *b = joint_bins(&angles[..g])?;
-    }
-    let mut layout = Layout::new();
-    for p in model {
-        layout.push(chain, *p)?;
-    }
-    // `out.last` is the current fit, `next` the buffer of a candidate's.
+    // `out.last` is the current fit.
     let mut out = Outcome {
         declared_rms_um: 0.0,
         steps: heapless::Vec::new(),
@@ -640,13 +766,14 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
         first_tried: 0,
         first_lof: None,
     };
-    fit(data, &layout, settings, &mut out.last)?;
+    declared(data, model, settings, &mut bins, &mut out.last)?;
     out.declared_rms_um = out.last.rms_um;
-    let mut next = Fitted::empty();
     let mut round = Round {
         aug: Layout::new(),
         cands: heapless::Vec::new(),
         tests: heapless::Vec::new(),
+        rss_before: 0.0,
+        dof: 0,
         lof: None,
     };
     for r in 0.. {
@@ -660,28 +787,27 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
         if out.steps.is_full() {
             break;
         }
-        let mut accepted = None;
-        for (i, t) in &round.tests {
-            if !rule.eligible(t, tried, lof.as_ref()) {
+        let mut step = None;
+        for t in &round.tests {
+            let test = round.test(t);
+            if !rule.eligible(&test, tried, lof.as_ref()) {
                 continue;
             }
-            let c = &round.cands[usize::from(*i)];
-            if admissible(data, &out.last, &round.aug, c, settings, &mut next)? {
-                accepted = Some((*c, *t));
+            let c = &round.cands[usize::from(t.cand)];
+            if let Some(rms_um) = admissible(data, &mut out.last, &round.aug, c, settings)? {
+                step = Some(Step {
+                    effect: c.effect,
+                    joint: c.joint,
+                    test,
+                    tried,
+                    rms_um,
+                });
                 break;
             }
         }
-        let Some((c, t)) = accepted else { break };
-        let step = Step {
-            effect: c.effect,
-            joint: c.joint,
-            test: t,
-            tried,
-            rms_um: (out.last.rms_um, next.rms_um),
-        };
+        let Some(step) = step else { break };
         log(&step);
         let _ = out.steps.push(step);
-        core::mem::swap(&mut out.last, &mut next);
     }
     Ok(out)
 }
