@@ -22,12 +22,12 @@
 //! `robcal::model::effect`.
 
 use nalgebra::{Const, RealField, SMatrix, Vector3};
-use robcal::estimate::screen::{rank_tests, Augmented, LackOfFit, PureError, Rule};
+use robcal::estimate::screen::{Augmented, LackOfFit, PureError, Rule};
 use robcal::estimate::{group_dof, group_sigma, leverage, NestedTest, Noise, Solution};
 use robcal::model::effect::{inadmissible, joint_bins, stream_candidates, Effect, JointBins};
 use robcal::model::{Layout, Marker, Param, Sample};
 use robcal::robot::{joint_torques, Frames, PointLoad};
-use robcal::{Accumulator, Block, Chain, Error, Fit, IrlsSettings, Reweightable};
+use robcal::{Accumulator, Block, Chain, Error, IrlsSettings, Reweightable};
 
 /// Joints of the arm.
 pub const J: usize = 6;
@@ -103,18 +103,33 @@ struct Config<T: RealField + Copy> {
     wrench: robcal::robot::Wrench<T>,
 }
 
-fn config<T: RealField + Copy, D: Data<T>>(data: &D, g: usize) -> Result<Config<T>, Error> {
+/// The rows of configuration `g` into `cached` (`None` on error). Not
+/// inlined: the kinematics' temporaries are on the stack only while it runs.
+#[inline(never)]
+fn config<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    g: usize,
+    cached: &mut Option<Config<T>>,
+) -> Result<(), Error> {
     let q = data.q(g);
-    let frames = data.chain().frames(&q)?;
-    let wrench = data.load(g).wrench(&frames);
-    let mut tau = [T::zero(); J];
-    joint_torques(&frames, &wrench, &mut tau)?;
-    Ok(Config {
+    // The frames computed into the cache itself (no copy of them here).
+    *cached = None;
+    let c = cached.insert(Config {
         g,
-        frames,
-        tau,
-        wrench,
-    })
+        frames: data.chain().frames(&q)?,
+        tau: [T::zero(); J],
+        wrench: robcal::robot::Wrench {
+            force_n: Vector3::zeros(),
+            point_m: Vector3::zeros(),
+            moment_nm: Vector3::zeros(),
+        },
+    });
+    c.wrench = data.load(g).wrench(&c.frames);
+    let done = joint_torques(&c.frames, &c.wrench, &mut c.tau);
+    if done.is_err() {
+        *cached = None;
+    }
+    done
 }
 
 /// What [`stream`] hands each deflection to: the measurement and its rows.
@@ -138,7 +153,7 @@ fn stream<T: RealField + Copy, D: Data<T>, const C: usize>(
     let mut b = SMatrix::<T, 3, C>::zeros();
     data.for_each(&mut |m| {
         if cached.as_ref().map(|c| c.g) != Some(m.group) {
-            cached = Some(config(data, m.group)?);
+            config(data, m.group, &mut cached)?;
         }
         let c = cached.as_ref().ok_or(Error::Mismatch { what: "no rows" })?;
         let marker = data.marker(m.marker).ok_or(Error::OutOfRange {
@@ -245,19 +260,79 @@ pub struct Fitted<T: RealField + Copy> {
     pub iterations: usize,
 }
 
+impl<T: RealField + Copy> Fitted<T> {
+    /// No model yet (a buffer for [`fit`]).
+    fn empty() -> Self {
+        Self {
+            layout: Layout::new(),
+            x: [T::zero(); NMAX],
+            weights: [Vector3::zeros(); GMAX],
+            rms_um: 0.0,
+            iterations: 0,
+        }
+    }
+}
+
 fn to_f64<T: RealField + Copy>(v: T) -> f64 {
     nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN)
 }
 
+/// The OLS start's estimate (`Reweightable::fit_ols`). Not inlined: its fit
+/// is not on the stack during the reweighted ones.
+#[inline(never)]
+fn ols<T: RealField + Copy, D: Data<T>>(
+    src: &ModelSource<'_, T, D>,
+    active: &[bool],
+    weights: &mut [Vector3<T>],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+) -> Result<SMatrix<T, NMAX, 1>, Error> {
+    match &src.fit_ols(active, weights, sigma, dof) {
+        Ok(f) => Ok(f.solution.x),
+        Err(e) => Err(*e),
+    }
+}
+
+/// One reweighted fit (`Reweightable::fit_reweighted`): its estimate into
+/// `x`, and the largest move of a parameter from the previous `x` in its
+/// standard deviations (`Reweightable::fit_irls`'s convergence test). Not
+/// inlined, as [`ols`].
+#[inline(never)]
+fn reweighted<T: RealField + Copy, D: Data<T>>(
+    src: &ModelSource<'_, T, D>,
+    settings: &IrlsSettings<T>,
+    active: &[bool],
+    weights: &mut [Vector3<T>],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+    x: &mut SMatrix<T, NMAX, 1>,
+) -> Result<T, Error> {
+    let next = src.fit_reweighted(&settings.weight, active, weights, sigma, dof);
+    let f = match &next {
+        Ok(f) => f,
+        Err(e) => return Err(*e),
+    };
+    let std = f.std();
+    let mut change = T::zero();
+    for i in 0..active.len() {
+        if active[i] && std[i] > T::zero() {
+            change = change.max((f.solution.x[i] - x[i]).abs() / std[i]);
+        }
+    }
+    *x = f.solution.x;
+    Ok(change)
+}
+
 /// Iterative WLS of `layout` over the stream, to convergence, and the RMS
-/// of its residuals (one more pass). Not inlined: its frame stays out of
-/// the loop's.
+/// of its residuals (one more pass), into `out` (unchanged on error). Not
+/// inlined: its frame stays out of the loop's.
 #[inline(never)]
 fn fit<T: RealField + Copy, D: Data<T>>(
     data: &D,
     layout: &Layout<NMAX>,
     settings: &IrlsSettings<T>,
-) -> Result<Fitted<T>, Error> {
+    out: &mut Fitted<T>,
+) -> Result<(), Error> {
     let g = data.groups();
     if g > GMAX {
         return Err(Error::CapacityExceeded {
@@ -275,34 +350,58 @@ fn fit<T: RealField + Copy, D: Data<T>>(
     let mut dof = [Vector3::zeros(); GMAX];
     let mut active = [false; NMAX];
     active[..layout.len()].fill(true);
-    let f: Fit<T, Dm> = src.fit_irls(
-        settings,
+    // `Reweightable::fit_irls` step for step (the same fits, the same
+    // convergence test), with one fit on the stack instead of two: the
+    // previous estimate is all the test needs of the previous fit, and
+    // each fit lives in the frame of the helper that made it ([`ols`],
+    // [`reweighted`]).
+    if settings.max_iterations == 0 {
+        return Err(Error::OutOfRange {
+            what: "max_iterations",
+            index: 0,
+            len: 0,
+        });
+    }
+    let mut x = ols(
+        &src,
         &active,
         &mut weights[..g],
         &mut sigma[..g],
         &mut dof[..g],
-        |_| {},
     )?;
+    let mut iterations = 0;
+    for k in 1..=settings.max_iterations {
+        let change = reweighted(
+            &src,
+            settings,
+            &active,
+            &mut weights[..g],
+            &mut sigma[..g],
+            &mut dof[..g],
+            &mut x,
+        )?;
+        iterations = k;
+        if change < settings.tolerance {
+            break;
+        }
+    }
     let (mut ss, mut rows) = (0.0f64, 0usize);
     stream(data, layout, &mut |m, b| {
-        let r = m.dp - b * f.solution.x;
+        let r = m.dp - b * x;
         ss += to_f64(r.norm_squared());
         rows += 1;
         Ok(())
     })?;
-    let mut x = [T::zero(); NMAX];
-    x.copy_from_slice(f.solution.x.as_slice());
-    Ok(Fitted {
-        layout: layout.clone(),
-        x,
-        weights,
-        rms_um: if rows == 0 {
-            0.0
-        } else {
-            libm::sqrt(ss / rows as f64) * 1e6
-        },
-        iterations: f.iterations,
-    })
+    out.layout = layout.clone();
+    out.x.copy_from_slice(x.as_slice());
+    out.weights = weights;
+    out.rms_um = if rows == 0 {
+        0.0
+    } else {
+        libm::sqrt(ss / rows as f64) * 1e6
+    };
+    out.iterations = iterations;
+    Ok(())
 }
 
 /// One effect added.
@@ -347,32 +446,112 @@ fn indices(mask: u64, out: &mut [usize; 64]) -> usize {
     n
 }
 
+/// One candidate's test, compactly: what ranks and selects it (the
+/// round's [`Round`] holds what all tests share: the model's weighted RSS
+/// and the equations).
+#[derive(Clone, Copy)]
+struct Tested {
+    /// Index into [`Round::cands`].
+    cand: u8,
+    /// Its columns tested (`NestedTest::dof_num`).
+    q: u8,
+    delta_rss: f64,
+    f: f64,
+    p_value: f64,
+}
+
+/// What one round's screening leaves to the loop: the augmented layout,
+/// the candidates, their tests (most significant first) and the lack of
+/// fit. Owned by the loop and filled in place (no returned copies); the
+/// sums themselves live only in [`screen`].
+struct Round {
+    aug: Layout<P>,
+    cands: heapless::Vec<robcal::model::effect::StreamCandidate, K>,
+    tests: heapless::Vec<Tested, K>,
+    /// Every test's `rss_before` (the model's weighted RSS).
+    rss_before: f64,
+    /// Every test's `dof_num + dof_den` (equations minus the model's columns).
+    dof: usize,
+    lof: Option<LackOfFit>,
+}
+
+impl Round {
+    /// The full test of `t` (`Augmented::test_fitted`'s, field for field).
+    fn test(&self, t: &Tested) -> NestedTest {
+        let q = usize::from(t.q);
+        NestedTest {
+            delta_rss: t.delta_rss,
+            rss_before: self.rss_before,
+            f: t.f,
+            dof_num: q,
+            dof_den: self.dof - q,
+            p_value: t.p_value,
+        }
+    }
+
+    /// Orders the tests as `screen::rank_tests` (by p-value, then by F,
+    /// largest first; stable).
+    fn rank(&mut self) {
+        let before = |a: &Tested, b: &Tested| match a.p_value.total_cmp(&b.p_value) {
+            core::cmp::Ordering::Less => true,
+            core::cmp::Ordering::Equal => b.f.total_cmp(&a.f) == core::cmp::Ordering::Less,
+            core::cmp::Ordering::Greater => false,
+        };
+        let t = &mut self.tests;
+        for i in 1..t.len() {
+            let mut j = i;
+            while j > 0 && before(&t[j], &t[j - 1]) {
+                t.swap(j, j - 1);
+                j -= 1;
+            }
+        }
+    }
+}
+
+/// The sums of one screening pass (`Augmented`, `PureError`): built in
+/// place by [`screen`], dropped when it returns.
+struct Sums<T: RealField + Copy> {
+    aug: Augmented<T, P, L>,
+    pure: PureError<T, CELLS>,
+}
+
+/// The candidates of the model `layout` into `round` (their layout after
+/// the model's columns). Not inlined: the returned copies stay in its frame.
+#[inline(never)]
+fn candidates<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    layout: &Layout<NMAX>,
+    bins: &[JointBins<BINS>; J],
+    round: &mut Round,
+) -> Result<(), Error> {
+    let n = layout.len();
+    let mut model = [Param::Compliance { joint: 0 }; NMAX];
+    for (m, c) in model.iter_mut().zip(layout.columns()) {
+        *m = c.param;
+    }
+    (round.aug, round.cands) =
+        stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
+    Ok(())
+}
+
 /// The screening of one round on `cur`: one pass over the stream, every
-/// candidate tested. Returns the candidates' tests (most significant first,
-/// with their candidate), the lack of fit, and the augmented layout.
-#[allow(clippy::type_complexity)]
+/// candidate tested (the model factored once), into `round`. Not inlined:
+/// its sums are on the stack only while it runs, not during the fits.
 #[inline(never)]
 fn screen<T: RealField + Copy, D: Data<T>>(
     data: &D,
     cur: &Fitted<T>,
     bins: &[JointBins<BINS>; J],
-) -> Result<
-    (
-        heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K>,
-        Option<LackOfFit>,
-        Layout<P>,
-    ),
-    Error,
-> {
+    round: &mut Round,
+) -> Result<(), Error> {
     let n = cur.layout.len();
-    let mut model = [Param::Compliance { joint: 0 }; NMAX];
-    for (m, c) in model.iter_mut().zip(cur.layout.columns()) {
-        *m = c.param;
-    }
-    let (aug, cands) =
-        stream_candidates::<T, J, P, K, BINS>(data.chain(), &model[..n], bins, data.time())?;
-    let mut sums = Augmented::<T, P, L>::new()?;
-    let mut pure = PureError::<T, CELLS>::new();
+    candidates(data, &cur.layout, bins, round)?;
+    round.tests.clear();
+    round.lof = None;
+    let mut sums = Sums {
+        aug: Augmented::<T, P, L>::new()?,
+        pure: PureError::<T, CELLS>::new(),
+    };
     // The model fit's residuals `r = Δp − B_A X̂_A` in place of `Δp`: every
     // test is the same (`r` differs from `Δp` by a combination of the
     // model's columns), and the scores `B_Cᵀ W² r` are summed directly
@@ -380,36 +559,62 @@ fn screen<T: RealField + Copy, D: Data<T>>(
     // 1 %). The model's columns are the layout's first `n`.
     let mut x = SMatrix::<T, P, 1>::zeros();
     x.as_mut_slice()[..n].copy_from_slice(&cur.x[..n]);
-    stream(data, &aug, &mut |m, b| {
+    stream(data, &round.aug, &mut |m, b| {
         let r = m.dp - b * x;
-        sums.update(b, &r, &cur.weights[m.group])?;
-        pure.update(m.group as u16, u16::from(m.marker), &m.dp)
+        sums.aug.update(b, &r, &cur.weights[m.group])?;
+        sums.pure.update(m.group as u16, u16::from(m.marker), &m.dp)
     })?;
+    test_all(&sums, cur, data.groups(), round)
+}
+
+/// Every candidate of `round` tested from the sums (the model factored
+/// once), ranked, and the lack of fit. Not inlined: its frame is not on
+/// the stack during the stream.
+#[inline(never)]
+fn test_all<T: RealField + Copy>(
+    sums: &Sums<T>,
+    cur: &Fitted<T>,
+    groups: usize,
+    round: &mut Round,
+) -> Result<(), Error> {
+    let n = cur.layout.len();
     let model_cols: [usize; NMAX] = core::array::from_fn(|i| i);
-    let mut tests: heapless::Vec<(robcal::model::effect::StreamCandidate, NestedTest), K> =
-        heapless::Vec::new();
+    // The model's fit at these weights, once for every candidate and for
+    // the lack of fit (its weighted RSS).
+    let fit = sums.aug.solve_model(&model_cols[..n], Const::<S>);
+    let fit = match &fit {
+        Ok(f) => f,
+        Err(e) => return Err(*e),
+    };
+    let wrss = to_f64(fit.wrss);
+    round.rss_before = wrss;
+    round.dof = sums.aug.equations().saturating_sub(n);
     let mut cols = [0usize; 64];
-    for c in &cands {
+    for (i, c) in round.cands.iter().enumerate() {
         let q = indices(c.test, &mut cols);
-        let r = sums.test(&model_cols[..n], &cols[..q], Const::<S>)?;
+        let r = sums
+            .aug
+            .test_fitted(&model_cols[..n], fit, &cols[..q], Const::<S>)?;
         if let Some(t) = r {
-            // Within capacity: one test per candidate.
-            let _ = tests.push((*c, t));
+            // Within capacity: one test per candidate (K ≤ 255, q ≤ 64).
+            let _ = round.tests.push(Tested {
+                cand: i as u8,
+                q: t.dof_num as u8,
+                delta_rss: t.delta_rss,
+                f: t.f,
+                p_value: t.p_value,
+            });
         }
     }
-    rank_tests(&mut tests);
-    // The model's weighted RSS at these weights, for the lack of fit.
-    let acc = sums.select(&model_cols[..n], Const::<S>, true)?;
-    let mut active = [false; S];
-    active[..n].fill(true);
-    let wrss = to_f64(acc.solve_active(&active)?.wrss);
-    let lof = pure.lack_of_fit(wrss, &cur.weights[..data.groups()], n);
-    Ok((tests, lof, aug))
+    round.rank();
+    round.lof = sums.pure.lack_of_fit(wrss, &cur.weights[..groups], n);
+    Ok(())
 }
 
 /// The model with a candidate added (the host's `extended`, without its
 /// identifiability pruning): its parameters where the ones it replaces
-/// were, else at the end.
+/// were, else at the end. Not inlined: its buffers are not under the fit.
+#[inline(never)]
 fn extended(
     model: &Layout<NMAX>,
     aug: &Layout<P>,
@@ -440,6 +645,102 @@ fn extended(
     Ok(out)
 }
 
+/// Whether the estimate of the parameters `c` adds to `next` is physical
+/// (`effect::inadmissible`).
+#[inline(never)]
+fn physical<T: RealField + Copy>(
+    next: &Fitted<T>,
+    aug: &Layout<P>,
+    c: &robcal::model::effect::StreamCandidate,
+) -> bool {
+    let mut params = [Param::Compliance { joint: 0 }; NMAX];
+    let mut x = [0.0; NMAX];
+    for (i, col) in next.layout.columns().iter().enumerate() {
+        params[i] = col.param;
+        x[i] = to_f64(next.x[i]);
+    }
+    let mut idx = [0usize; 64];
+    let na = indices(c.add, &mut idx);
+    let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
+    let m = next.layout.len();
+    inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_none()
+}
+
+/// The model `cur` with candidate `c` added and refitted: when the fit
+/// identifies it and its estimate is physical, it replaces `cur` and the
+/// RMS before and after are returned. Not inlined: the new fit is on the
+/// stack only while it runs (not during the screening).
+#[inline(never)]
+fn admissible<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    cur: &mut Fitted<T>,
+    aug: &Layout<P>,
+    c: &robcal::model::effect::StreamCandidate,
+    settings: &IrlsSettings<T>,
+) -> Result<Option<(f64, f64)>, Error> {
+    let mut next = Fitted::empty();
+    let next_layout = extended(&cur.layout, aug, c, data.chain());
+    let next_layout = match &next_layout {
+        Ok(l) => l,
+        Err(e) => return Err(*e),
+    };
+    match fit(data, next_layout, settings, &mut next) {
+        Ok(()) => {}
+        Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(None),
+        Err(e) => return Err(e),
+    }
+    if !physical(&next, aug, c) {
+        return Ok(None);
+    }
+    let rms = (cur.rms_um, next.rms_um);
+    *cur = next;
+    Ok(Some(rms))
+}
+
+/// Each joint's angle bins from the configurations (`g ≤ GMAX`). Not
+/// inlined: its frame is not under the fit's.
+#[inline(never)]
+fn angle_bins<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    bins: &mut [JointBins<BINS>; J],
+) -> Result<(), Error> {
+    let g = data.groups().min(GMAX);
+    let mut angles = [T::zero(); GMAX];
+    for (j, b) in bins.iter_mut().enumerate() {
+        for (i, a) in angles[..g].iter_mut().enumerate() {
+            *a = data.q(i)[j];
+        }
+        *b = joint_bins(&angles[..g])?;
+    }
+    Ok(())
+}
+
+/// The declared model's fit into `out`, and each joint's angle bins from
+/// the configurations into `bins`. Not inlined: its buffers are not on
+/// the stack during the rounds.
+#[inline(never)]
+fn declared<T: RealField + Copy, D: Data<T>>(
+    data: &D,
+    model: &[Param],
+    settings: &IrlsSettings<T>,
+    bins: &mut [JointBins<BINS>; J],
+    out: &mut Fitted<T>,
+) -> Result<(), Error> {
+    let g = data.groups();
+    if g > GMAX {
+        return Err(Error::CapacityExceeded {
+            what: "configurations",
+            capacity: GMAX,
+        });
+    }
+    angle_bins(data, bins)?;
+    let mut layout = Layout::new();
+    for p in model {
+        layout.push(data.chain(), *p)?;
+    }
+    fit(data, &layout, settings, out)
+}
+
 /// The closed loop: the declared `model`, then rounds of screening until
 /// no candidate passes the `rule` with a physical estimate (or
 /// [`MAX_EFFECTS`]). `log` gets each step as it is taken.
@@ -453,82 +754,60 @@ pub fn run<T: RealField + Copy, D: Data<T>>(
     rule: &Rule,
     mut log: impl FnMut(&Step),
 ) -> Result<Outcome<T>, Error> {
-    let chain = data.chain();
-    let g = data.groups();
-    // Each joint's angle bins from the configurations.
     let mut bins: [JointBins<BINS>; J] = core::array::from_fn(|_| JointBins {
         angles_urad: heapless::Vec::new(),
         compensator_ok: false,
     });
-    let mut angles = [T::zero(); GMAX];
-    for (j, b) in bins.iter_mut().enumerate() {
-        for (i, a) in angles[..g].iter_mut().enumerate() {
-            *a = data.q(i)[j];
-        }
-        *b = joint_bins(&angles[..g])?;
-    }
-    let mut layout = Layout::new();
-    for p in model {
-        layout.push(chain, *p)?;
-    }
-    let mut cur = fit(data, &layout, settings)?;
+    // `out.last` is the current fit.
     let mut out = Outcome {
-        declared_rms_um: cur.rms_um,
+        declared_rms_um: 0.0,
         steps: heapless::Vec::new(),
-        last: cur.clone(),
+        last: Fitted::empty(),
         first_tried: 0,
         first_lof: None,
     };
-    for round in 0.. {
-        let (tests, lof, aug) = screen(data, &cur, &bins)?;
-        if round == 0 {
+    declared(data, model, settings, &mut bins, &mut out.last)?;
+    out.declared_rms_um = out.last.rms_um;
+    let mut round = Round {
+        aug: Layout::new(),
+        cands: heapless::Vec::new(),
+        tests: heapless::Vec::new(),
+        rss_before: 0.0,
+        dof: 0,
+        lof: None,
+    };
+    for r in 0.. {
+        screen(data, &out.last, &bins, &mut round)?;
+        let lof = round.lof;
+        if r == 0 {
             out.first_lof = lof;
-            out.first_tried = tests.len();
+            out.first_tried = round.tests.len();
         }
-        let tried = tests.len();
-        let mut eligible = tests
-            .iter()
-            .filter(|(_, t)| rule.eligible(t, tried, lof.as_ref()))
-            .peekable();
-        if eligible.peek().is_none() || out.steps.is_full() {
+        let tried = round.tests.len();
+        if out.steps.is_full() {
             break;
         }
-        let mut accepted = None;
-        for (c, t) in eligible {
-            let next_layout = extended(&cur.layout, &aug, c, chain)?;
-            let next = match fit(data, &next_layout, settings) {
-                Ok(next) => next,
-                Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => continue,
-                Err(e) => return Err(e),
-            };
-            let mut params = [Param::Compliance { joint: 0 }; NMAX];
-            let mut x = [0.0; NMAX];
-            for (i, col) in next.layout.columns().iter().enumerate() {
-                params[i] = col.param;
-                x[i] = to_f64(next.x[i]);
-            }
-            let mut idx = [0usize; 64];
-            let na = indices(c.add, &mut idx);
-            let added = idx[..na].iter().map(|&i| &aug.columns()[i].param);
-            let m = next.layout.len();
-            if inadmissible(&params[..m], &x[..m], added, MAX_DRIFT_MM_PER_H).is_some() {
+        let mut step = None;
+        for t in &round.tests {
+            let test = round.test(t);
+            if !rule.eligible(&test, tried, lof.as_ref()) {
                 continue;
             }
-            accepted = Some((*c, *t, next));
-            break;
+            let c = &round.cands[usize::from(t.cand)];
+            if let Some(rms_um) = admissible(data, &mut out.last, &round.aug, c, settings)? {
+                step = Some(Step {
+                    effect: c.effect,
+                    joint: c.joint,
+                    test,
+                    tried,
+                    rms_um,
+                });
+                break;
+            }
         }
-        let Some((c, t, next)) = accepted else { break };
-        let step = Step {
-            effect: c.effect,
-            joint: c.joint,
-            test: t,
-            tried,
-            rms_um: (cur.rms_um, next.rms_um),
-        };
+        let Some(step) = step else { break };
         log(&step);
         let _ = out.steps.push(step);
-        cur = next;
     }
-    out.last = cur;
     Ok(out)
 }

@@ -56,23 +56,42 @@ impl<T: RealField + Copy> Table<T> {
     ///
     /// # Errors
     /// From the kinematics.
+    #[inline(never)]
     pub fn injected(&self, g: usize) -> Result<[Vector3<T>; 3], Error> {
         let q = self.q(g);
-        let frames = self.chain.frames(&q)?;
-        let mut tau = [T::zero(); J];
-        joint_torques(&frames, &self.load(g).wrench(&frames), &mut tau)?;
         let (j, b) = BACKLASH;
+        let (at, tau) = self.markers_at(&q, Some(g))?;
         let mut qb = q;
         qb[j] += c::<T>(b) * tau[j].signum();
-        let moved = self.chain.frames(&qb)?;
-        let mut out = [Vector3::zeros(); 3];
-        for (m, o) in out.iter_mut().enumerate() {
+        let (moved, _) = self.markers_at(&qb, None)?;
+        Ok(core::array::from_fn(|m| moved[m] - at[m]))
+    }
+
+    /// The markers' positions at the joint angles `q`, and with the
+    /// configuration `load` the load's joint torques there. Not inlined:
+    /// one set of frames on the stack at a time.
+    #[inline(never)]
+    fn markers_at(
+        &self,
+        q: &[T; J],
+        load: Option<usize>,
+    ) -> Result<([Vector3<T>; 3], [T; J]), Error> {
+        let frames = self.chain.frames(q);
+        let frames = match &frames {
+            Ok(f) => f,
+            Err(e) => return Err(*e),
+        };
+        let mut tau = [T::zero(); J];
+        if let Some(g) = load {
+            joint_torques(frames, &self.load(g).wrench(frames), &mut tau)?;
+        }
+        let at = core::array::from_fn(|m| {
             let xyz = self
                 .marker(m as u8)
                 .map_or_else(Vector3::zeros, |m| m.xyz_m);
-            *o = moved.point_m(&xyz) - frames.point_m(&xyz);
-        }
-        Ok(out)
+            frames.point_m(&xyz)
+        });
+        Ok((at, tau))
     }
 }
 

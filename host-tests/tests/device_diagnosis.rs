@@ -513,3 +513,52 @@ fn augmented_sums_are_the_accumulator_of_the_columns() {
     assert!(pe.update(0, 0, &Vector3::repeat(f64::NAN)).is_err());
     assert_eq!(pe, before, "state unchanged on error");
 }
+
+/// The device's lean test (`Augmented::solve_model` once, then
+/// `test_fitted` per candidate) is `Augmented::test` bit for bit: the same
+/// sums in the same order, at a fixed size (`Const`, the device's) and at
+/// the host's (`Dyn`), in f64 and f32, with candidate columns that are
+/// informative, absorbed by the model, or empty.
+#[test]
+fn lean_test_is_the_test_bit_for_bit() {
+    use nalgebra::{Const, Dim, Dyn, SMatrix};
+    use robcal::estimate::screen::Augmented;
+
+    fn check<T: RealField + Copy, D: Dim + Copy>(dim: D)
+    where
+        nalgebra::DefaultAllocator: robcal::estimate::Alloc<D>,
+    {
+        let mut aug = Augmented::<T, 8, 36>::new().unwrap();
+        let mut rng = Rng::new(11);
+        for i in 0..60 {
+            let mut b = SMatrix::<T, 3, 8>::from_fn(|_, _| c(rng.normal()));
+            // Column 6 is column 0 plus a little (nearly absorbed), 7 zero.
+            for a in 0..3 {
+                b[(a, 6)] = b[(a, 0)] + c::<T>(1e-3 * rng.normal());
+                b[(a, 7)] = T::zero();
+            }
+            let dp = Vector3::from_fn(|a, _| b[(a, 4)] * c(0.3) + c(0.1 * rng.normal()));
+            let w = Vector3::new(c(1.0), c(0.5 + 0.01 * i as f64), c(2.0));
+            aug.update(&b, &dp, &w).unwrap();
+        }
+        let model = [0usize, 1, 2];
+        let fit = aug.solve_model(&model, dim).unwrap();
+        let candidates: [&[usize]; 6] = [&[3], &[4], &[3, 4, 5], &[6], &[7], &[7, 4]];
+        for cand in candidates {
+            let old = aug.test(&model, cand, dim).unwrap();
+            let new = aug.test_fitted(&model, &fit, cand, dim).unwrap();
+            assert_eq!(
+                old.map(|t| (t.delta_rss.to_bits(), t.f.to_bits(), t.p_value.to_bits())),
+                new.map(|t| (t.delta_rss.to_bits(), t.f.to_bits(), t.p_value.to_bits())),
+                "candidate {cand:?}"
+            );
+            assert_eq!(old, new, "candidate {cand:?}");
+        }
+        let other = aug.solve_model(&[0, 1], dim).unwrap();
+        assert!(aug.test_fitted(&model, &other, &[3], dim).is_err());
+    }
+    check::<f64, _>(Const::<8>);
+    check::<f64, _>(Dyn(8));
+    check::<f32, _>(Const::<8>);
+    check::<f32, _>(Dyn(8));
+}

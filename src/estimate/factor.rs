@@ -189,6 +189,7 @@ where
     /// `Λ⁻¹` over the active parameters (rows and columns of inactive ones
     /// are zero), exactly symmetric.
     #[must_use]
+    #[inline(never)]
     pub fn inverse(&self) -> OMatrix<T, D, D> {
         let n = self.parameters();
         let dim = self.l.shape_generic().0;
@@ -337,7 +338,12 @@ where
                 what: "information",
             });
         }
-        let f = Factor::with_mask(lambda, active)?;
+        // By reference: a `?` would copy the factor out of its result.
+        let factored = Factor::with_mask(lambda, active);
+        let f = match &factored {
+            Ok(f) => f,
+            Err(e) => return Err(*e),
+        };
         let x = f.solve(eta);
         let inv = f.inverse();
         if !(x.as_slice().iter().all(|v| v.is_finite())
@@ -349,7 +355,7 @@ where
         Ok(Self {
             x,
             lambda_inv: inv,
-            active: f.active,
+            active: f.active.clone(),
             equations,
             wrss,
             rcond: f.pivots.0 / f.pivots.1,
@@ -386,6 +392,7 @@ where
     /// Eq. 8 / 11, the sandwich `Λ⁻¹ M Λ⁻¹` with
     /// `M = Bᵀ W² Σ² W² B` (e.g. [`super::Accumulator::middle`]).
     #[must_use]
+    #[inline(never)]
     pub fn cov_sandwich(&self, middle: &OMatrix<T, D, D>) -> OMatrix<T, D, D> {
         let c = mat_mul(&mat_mul(&self.lambda_inv, middle), &self.lambda_inv);
         // Symmetrise what rounding left asymmetric.

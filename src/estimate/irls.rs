@@ -301,22 +301,79 @@ fn fit_with<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let acc = src.weighted(weights, None)?;
-    let solution = acc.solve_active(active)?;
-    src.residual_sigma_into(&solution, weights, sigma, dof)?;
+    // Results matched by reference (a `?` would copy them out).
+    let solved = solve_weighted(src, weights, active);
+    let solution = match &solved {
+        Ok(s) => s,
+        Err(e) => return Err(*e),
+    };
+    src.residual_sigma_into(solution, weights, sigma, dof)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = src.weighted(weights, Some(noise))?.middle();
-    let covariance = solution.cov_sandwich(&middle);
+    let middle = middle(src, weights, noise);
+    let covariance = match &middle {
+        Ok(m) => solution.cov_sandwich(m),
+        Err(e) => return Err(*e),
+    };
     Ok(Fit {
-        solution,
+        solution: solution.clone(),
         covariance,
         iterations: 0,
         converged: false,
     })
+}
+
+/// The first half of [`fit_with`]: the weighted sums and their solve.
+/// Not inlined (nor [`middle`]): each one's temporaries are on the
+/// stack only while it runs, not under the other's stream (a device's
+/// stack is the sum of the frames of one call chain).
+#[inline(never)]
+fn solve_weighted<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+    src: &R,
+    weights: &[Vector3<T>],
+    active: &[bool],
+) -> Result<Solution<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    // By reference: the sums are not moved out of the result (a copy).
+    match &src.weighted(weights, None) {
+        Ok(acc) => solve(acc, active),
+        Err(e) => Err(*e),
+    }
+}
+
+/// [`Accumulator::solve_active`], not inlined: the solve's temporaries are
+/// not in the frame that waits for the stream.
+#[inline(never)]
+fn solve<T: RealField + Copy, D: Dim>(
+    acc: &Accumulator<T, D>,
+    active: &[bool],
+) -> Result<Solution<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    acc.solve_active(active)
+}
+
+/// The second half of [`fit_with`]: the sandwich's middle term with
+/// `noise`.
+#[inline(never)]
+fn middle<T: RealField + Copy, D: Dim, R: Reweightable<T, D> + ?Sized>(
+    src: &R,
+    weights: &[Vector3<T>],
+    noise: Noise<'_, T>,
+) -> Result<OMatrix<T, D, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    match &src.weighted(weights, Some(noise)) {
+        Ok(acc) => Ok(acc.middle()),
+        Err(e) => Err(*e),
+    }
 }
 
 /// The noise of the sandwich's middle term (eq. 8, 11): σ per group and

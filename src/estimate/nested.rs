@@ -122,12 +122,23 @@ where
     // S⁻¹ g on the candidate block; its pivot check tells when candidate
     // columns are combinations of each other (after the model).
     let z = Solution::new(&schur, &g, T::zero(), m, candidate)?;
+    Ok(from_delta(dot(&z.x, &g), fit.wrss, q, m - p - q))
+}
+
+/// The test from `gᵀ S⁻¹ g` (`delta`), the model's weighted RSS and the
+/// degrees of freedom `q`, `m − p − q` (shared with
+/// [`super::screen::Augmented::test_fitted`]).
+pub(crate) fn from_delta<T: RealField + Copy>(
+    delta: T,
+    rss_before: T,
+    q: usize,
+    dof_den: usize,
+) -> NestedTest {
     let to_f64 = |v: T| nalgebra::try_convert::<T, f64>(v).unwrap_or(f64::NAN);
-    let rss_before = to_f64(fit.wrss);
+    let rss_before = to_f64(rss_before);
     // Not `clamp`: it panics when a bound is NaN (and links the float
     // formatting of its message into a firmware).
-    let delta = to_f64(dot(&z.x, &g)).max(0.0).min(rss_before);
-    let dof_den = m - p - q;
+    let delta = to_f64(delta).max(0.0).min(rss_before);
     let rss_after = rss_before - delta;
     let f = if delta <= 0.0 {
         0.0
@@ -141,12 +152,12 @@ where
     } else {
         0.0
     };
-    Ok(NestedTest {
+    NestedTest {
         delta_rss: delta,
         rss_before,
         f,
         dof_num: q,
         dof_den,
         p_value,
-    })
+    }
 }

@@ -38,7 +38,9 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, SMatri
 
 use super::accumulator::Accumulator;
 use super::distributions;
-use super::nested::{nested_test, NestedTest};
+use super::factor::{pivot_tolerance, Factor, Solution};
+use super::linalg::dot;
+use super::nested::{from_delta, nested_test, NestedTest};
 use super::rank::independent;
 use super::Alloc;
 use crate::Error;
@@ -305,6 +307,241 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
             Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => Ok(None),
             Err(e) => Err(e),
         }
+    }
+}
+
+impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
+    /// The model's weighted fit on its columns `model` (the first
+    /// `model.len()` of `dim`): what [`Augmented::test`] solves once per
+    /// candidate, solved once per round for [`Augmented::test_fitted`] and
+    /// the lack of fit (its `wrss`).
+    ///
+    /// # Errors
+    /// As [`Augmented::select`] and [`Accumulator::solve_active`].
+    #[inline(never)]
+    pub fn solve_model<D: Dim>(&self, model: &[usize], dim: D) -> Result<Solution<T, D>, Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        // `select(model, dim, true)?.solve_active(..)` without the
+        // accumulator's copy: the same full `Λ`, `η` and checks.
+        let n = model.len();
+        if n > dim.value() {
+            return Err(Error::Mismatch {
+                what: "more columns than the sub-problem's size",
+            });
+        }
+        if let Some(&c) = model.iter().find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
+        }
+        if self.equations < n {
+            return Err(Error::TooFewEquations {
+                equations: self.equations,
+                parameters: n,
+            });
+        }
+        let lambda = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
+            if i < n && j < n {
+                self.info[packed(model[i], model[j])]
+            } else {
+                T::zero()
+            }
+        });
+        let eta = OVector::<T, D>::from_fn_generic(dim, Const::<1>, |i, _| {
+            if i < n {
+                self.eta[model[i]]
+            } else {
+                T::zero()
+            }
+        });
+        let m = OVector::<bool, D>::from_fn_generic(dim, Const::<1>, |i, _| i < n);
+        Solution::with_mask(&lambda, &eta, self.yy, self.equations, m)
+    }
+
+    /// [`Augmented::test`] with the model's fit `fit` given
+    /// ([`Augmented::solve_model`] of the same `model` and `dim`): the lean
+    /// path of a device. The sub-problem's sums are read from the packed
+    /// triangles in place (no accumulator copies), the model is factored
+    /// once per round instead of once per candidate, and of
+    /// `S = Λ_CC − Λ_CA Λ_AA⁻¹ Λ_AC` only `S⁻¹ g` is formed (not `S⁻¹`; a
+    /// non-finite `S⁻¹` with a finite `S⁻¹ g` is not refused here). Every
+    /// sum is that of [`Augmented::test`] in the same order, so the result
+    /// is the same bit for bit (tested).
+    ///
+    /// # Errors
+    /// As [`Augmented::test`]; [`Error::Mismatch`] when `fit` is not a fit
+    /// of `model.len()` leading columns of `dim`.
+    #[inline(never)]
+    pub fn test_fitted<D: Dim>(
+        &self,
+        model: &[usize],
+        fit: &Solution<T, D>,
+        candidate: &[usize],
+        dim: D,
+    ) -> Result<Option<NestedTest>, Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        let n = model.len();
+        if n + candidate.len() > MAX_SUB {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
+        }
+        if fit.active.len() != dim.value()
+            || n > dim.value()
+            || fit.active.iter().enumerate().any(|(k, &a)| a != (k < n))
+        {
+            return Err(Error::Mismatch {
+                what: "fit was not solved on this model",
+            });
+        }
+        // As `test`: the informative candidate columns, then those the
+        // unweighted columns tell apart from the model's.
+        let diag = |c: usize| self.plain[packed(c, c)];
+        let dmax = model
+            .iter()
+            .chain(candidate)
+            .fold(T::zero(), |m, &c| m.max(diag(c)));
+        let floor = T::default_epsilon() * T::default_epsilon() * dmax;
+        let mut cols = [0usize; MAX_SUB];
+        cols[..n].copy_from_slice(model);
+        let mut q = 0;
+        for &c in candidate {
+            if diag(c) > floor && diag(c) > T::zero() {
+                cols[n + q] = c;
+                q += 1;
+            }
+        }
+        if q == 0 {
+            return Ok(None);
+        }
+        if n + q > dim.value() {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        let Some(kept) = self.kept(&cols[..n + q], dim) else {
+            return Ok(None);
+        };
+        let mut len = 0;
+        for k in 0..q {
+            if kept[n + k] {
+                cols[n + len] = cols[n + k];
+                len += 1;
+            }
+        }
+        if len == 0 {
+            return Ok(None);
+        }
+        self.nested(&cols[..n + len], n, fit, dim)
+    }
+
+    /// `rank::independent` of the unweighted sub-problem of `cols` (`None`
+    /// when it refuses).
+    #[inline(never)]
+    fn kept<D: Dim>(&self, cols: &[usize], dim: D) -> Option<OVector<bool, D>>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        let k = cols.len();
+        let plain = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
+            if i < k && j < k {
+                self.plain[packed(cols[i], cols[j])]
+            } else {
+                T::zero()
+            }
+        });
+        let all = OVector::<bool, D>::from_element_generic(dim, Const::<1>, true);
+        independent(&plain, all.as_slice()).ok()
+    }
+
+    /// `nested_test` of the columns `cols[n..]` after the model `cols[..n]`
+    /// fitted by `fit`, on the packed sums: the rows of `Λ Λ_A⁻¹` one
+    /// candidate column at a time, in `mat_mul`'s and `mat_vec`'s order.
+    #[inline(never)]
+    fn nested<D: Dim>(
+        &self,
+        cols: &[usize],
+        n: usize,
+        fit: &Solution<T, D>,
+        dim: D,
+    ) -> Result<Option<NestedTest>, Error>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        let k = cols.len();
+        let (p, q, m) = (n, k - n, self.equations);
+        if m <= p + q {
+            return Ok(None);
+        }
+        let d = dim.value();
+        let lam = |i: usize, j: usize| {
+            if i < k && j < k {
+                self.info[packed(cols[i], cols[j])]
+            } else {
+                T::zero()
+            }
+        };
+        let mut schur = OMatrix::<T, D, D>::zeros_generic(dim, dim);
+        let mut g = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+        let mut row = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+        for i in n..k {
+            // (Λ X̂)ᵢ and the row i of Λ Λ_A⁻¹, each sum in index order.
+            let mut lx = T::zero();
+            for c in 0..d {
+                lx += lam(i, c) * fit.x[c];
+            }
+            g[i] = self.eta[cols[i]] - lx;
+            for c in 0..d {
+                let mut v = T::zero();
+                for r in 0..d {
+                    v += lam(i, r) * fit.lambda_inv[(r, c)];
+                }
+                row[c] = v;
+            }
+            for j in n..k {
+                let mut v = T::zero();
+                for c in 0..d {
+                    v += row[c] * lam(c, j);
+                }
+                schur[(i, j)] = lam(i, j) - v;
+            }
+        }
+        let tol = pivot_tolerance::<T>();
+        for j in n..k {
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
+            if !(schur[(j, j)] > tol * lam(j, j)) {
+                return Ok(None);
+            }
+        }
+        if !g.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "information",
+            });
+        }
+        let mask = OVector::<bool, D>::from_fn_generic(dim, Const::<1>, |i, _| i >= n && i < k);
+        let f = match Factor::with_mask(&schur, mask) {
+            Ok(f) => f,
+            Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let z = f.solve(&g);
+        if !z.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite { what: "estimate" });
+        }
+        Ok(Some(from_delta(dot(&z, &g), fit.wrss, q, m - p - q)))
     }
 }
 
