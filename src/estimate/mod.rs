@@ -35,6 +35,7 @@
 //! | [`rank`] | [`identifiability`]: the one column-independence test |
 //! | [`nested`] | [`nested_test`]: the F test of a candidate effect from cross-products |
 //! | [`screen`] | [`screen::Augmented`]: the in-stream diagnosis, `[B | C]` of every candidate in one pass, the host's rule |
+//! | [`decision`] | [`decision::PureError`], [`decision::LackOfFit`], [`decision::Rule`]: the host's decision rule, shared with the device |
 //! | [`distributions`] | χ² and F tail probabilities (no std) |
 //! | `fmt` | with `defmt`: matrices in defmt logs as plain nested lists |
 
@@ -55,6 +56,7 @@ impl<D: Dim> Alloc<D> for DefaultAllocator where
 
 pub mod accumulator;
 pub mod block;
+pub mod decision;
 pub mod distributions;
 pub mod factor;
 #[cfg(feature = "defmt")]

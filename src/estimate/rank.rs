@@ -313,16 +313,7 @@ where
     let dim = lambda.shape_generic().0;
     // Regression of each left-out column on all kept columns: plain
     // Cholesky of the kept block (every positive pivot accepted).
-    let mut l = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
-        if kept[i] && kept[j] {
-            a[(i, j)]
-        } else if i == j {
-            T::one()
-        } else {
-            T::zero()
-        }
-    });
-    let factored = cholesky_in_place(&mut l, T::zero()).is_ok();
+    let l = kept_factor(&a, &kept, T::zero());
     let mut beta = OMatrix::<T, D, D>::zeros_generic(dim, dim);
     let mut residual = OVector::<T, D>::zeros_generic(dim, Const::<1>);
     for d in (0..n).filter(|&d| left_out[d] && s[d] > T::zero()) {
@@ -334,9 +325,9 @@ where
             }
         });
         let mut b = rhs.clone();
-        if factored {
-            solve_lower_in_place(&l, &mut b);
-            solve_upper_t_in_place(&l, &mut b);
+        if let Ok(l) = &l {
+            solve_lower_in_place(l, &mut b);
+            solve_upper_t_in_place(l, &mut b);
         } else {
             b.fill(T::zero());
         }
@@ -344,12 +335,12 @@ where
         beta.set_column(d, &b);
     }
     // Variance inflation of each kept parameter: column d of Λs_KK⁻¹.
-    if factored {
+    if let Ok(l) = &l {
         for d in (0..n).filter(|&d| kept[d]) {
             let mut x = OVector::<T, D>::zeros_generic(dim, Const::<1>);
             x[d] = T::one();
-            solve_lower_in_place(&l, &mut x);
-            solve_upper_t_in_place(&l, &mut x);
+            solve_lower_in_place(l, &mut x);
+            solve_upper_t_in_place(l, &mut x);
             let vif = x[d];
             if vif > T::zero() {
                 residual[d] = T::one() / vif;
