@@ -140,7 +140,7 @@ impl Param {
                 }
             }
             Param::LinkCompliance { joint } => match (&s.load, s.absolute) {
-                (Some(w), false) => {
+                (Some(w), false) if s.frames.joint(usize::from(joint))?.carries => {
                     let jf = s.frames.joint(usize::from(joint))?;
                     let o = jf.origin_m();
                     let m = (w.point_m - o).cross(&w.force_n);
@@ -229,7 +229,8 @@ pub fn joint_offset_columns<T: RealField + Copy, const J: usize>(
 
 /// The six joint-frame error columns of joint `j` (see the
 /// [module docs](self)): `[δx, δy, δz]` in m/m, then `[δrx, δry, δrz]` in
-/// m/rad, all along the axes of `Z_j`.
+/// m/rad, all along the axes of `Z_j`; zero when joint `j` does not carry
+/// the tip ([`crate::robot::JointFrame::carries`]).
 ///
 /// # Errors
 /// [`Error::OutOfRange`] when `j ≥ dof`.
@@ -238,7 +239,11 @@ pub fn joint_frame_columns<T: RealField + Copy, const J: usize>(
     j: usize,
     p_m: &Vector3<T>,
 ) -> Result<[Vector3<T>; 6], Error> {
-    let z = frames.joint(j)?.zero;
+    let jf = frames.joint(j)?;
+    if !jf.carries {
+        return Ok([Vector3::zeros(); 6]);
+    }
+    let z = jf.zero;
     let r = z.rotation.to_rotation_matrix();
     let arm = p_m - z.translation.vector;
     let e = |k: usize| r.matrix().column(k).into_owned();

@@ -1,5 +1,6 @@
-//! Serial kinematic chain: fixed origin transforms and joint axes (URDF
-//! convention), revolute or prismatic joints, optional link inertia.
+//! Kinematic chain: fixed origin transforms and joint axes (URDF
+//! convention), revolute or prismatic joints, optional link inertia — a
+//! serial chain, or a tree (data contract 7.1: markers on several links).
 //!
 //! A chain has at most `J` movable joints (a fixed capacity, as in
 //! `heapless::Vec<_, J>`). Fixed joints of a URDF are folded into the origin
@@ -7,9 +8,20 @@
 //! joint form `tip` (the transform from the last joint frame to `tip_link`).
 //!
 //! Frames: joint `j`'s frame at joint value `q_j` is
-//! `T_j = T_{j-1} · origin_j · motion_j(q_j)`, with `motion_j` a rotation of
-//! `q_j` \[rad\] about `axis_j` (revolute) or a translation of `q_j` \[m\] along
-//! it (prismatic). `T_tip = T_last · tip`. All lengths in metres.
+//! `T_j = T_{p(j)} · origin_j · motion_j(q_j)`, with `p(j)` its parent joint
+//! (`j − 1` in a serial chain; the base frame, identity, for a root joint)
+//! and `motion_j` a rotation of `q_j` \[rad\] about `axis_j` (revolute) or a
+//! translation of `q_j` \[m\] along it (prismatic). `T_tip = T_t · tip` with
+//! `t` the joint the tip is fixed to (the last one pushed with
+//! [`Chain::push`]). All lengths in metres.
+//!
+//! **Trees.** [`Chain::push_child`] hangs a joint from any earlier joint, so
+//! joints are in topological order (a parent before its children). Only the
+//! joints on the path from the base to the tip move the tip: their
+//! [`crate::robot::JointFrame::carries`] is set, and every other joint's
+//! columns are zero for a point on the tip. A tree with markers on several
+//! links is one chain per marker link, all sharing the joints
+//! ([`Chain::with_tip`]): the parameters of a shared joint are one column.
 
 use nalgebra::{Isometry3, RealField, Translation3, Unit, UnitQuaternion, Vector3};
 
@@ -89,12 +101,27 @@ impl<T: RealField + Copy> Joint<T> {
     }
 }
 
-/// A serial chain of at most `J` movable joints from the base frame to the
-/// tip frame (`tip_link`).
+/// Where a tip is fixed: a movable joint's frame (or the base frame) and the
+/// fixed transform from it (see [`Chain::with_tip`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct End<T: RealField + Copy> {
+    /// The movable joint whose frame the tip is fixed to; `None`: the base.
+    pub joint: Option<usize>,
+    /// The transform from that frame to the tip frame (translation in m).
+    pub origin: Isometry3<T>,
+}
+
+/// A chain of at most `J` movable joints from the base frame to the tip
+/// frame (`tip_link`): serial, or a tree (see the [module docs](self)).
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Chain<T: RealField + Copy, const J: usize> {
     joints: heapless::Vec<Joint<T>, J>,
+    /// Each joint's parent joint plus one (0: the base frame).
+    parents: heapless::Vec<u8, J>,
+    /// The joint the tip is fixed to, plus one (0: the base frame).
+    tip_parent: u8,
     tip: Isometry3<T>,
 }
 
@@ -103,17 +130,55 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     pub fn new() -> Self {
         Self {
             joints: heapless::Vec::new(),
+            parents: heapless::Vec::new(),
+            tip_parent: 0,
             tip: Isometry3::identity(),
         }
     }
 
-    /// Appends a movable joint.
+    /// Appends a movable joint after the tip's joint (serial: after the last
+    /// one), and moves the tip onto it.
     ///
     /// # Errors
-    /// [`crate::Error::CapacityExceeded`] when the chain already holds `J` joints;
-    /// [`crate::Error::NonFinite`] when the joint holds a non-finite number. The
-    /// chain is unchanged on error.
+    /// [`crate::Error::CapacityExceeded`] when the chain already holds `J`
+    /// joints (or 255); [`crate::Error::NonFinite`] when the joint holds a
+    /// non-finite number. The chain is unchanged on error.
     pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::Error> {
+        let parent = self.tip_joint();
+        let index = self.push_child(joint, parent)?;
+        // `index + 1 ≤ 255`: `push_child` refuses more joints.
+        self.tip_parent = (index + 1) as u8;
+        Ok(())
+    }
+
+    /// Appends a movable joint whose frame hangs from joint `parent`'s frame
+    /// (`None`: from the base frame), leaving the tip where it is: a branch
+    /// of a tree. Returns the new joint's index.
+    ///
+    /// # Errors
+    /// As [`Chain::push`]; [`crate::Error::OutOfRange`] when `parent` is not
+    /// a joint of the chain. The chain is unchanged on error.
+    pub fn push_child(
+        &mut self,
+        joint: Joint<T>,
+        parent: Option<usize>,
+    ) -> Result<usize, crate::Error> {
+        let index = self.joints.len();
+        if let Some(p) = parent {
+            if p >= index {
+                return Err(crate::Error::OutOfRange {
+                    what: "parent joint",
+                    index: p,
+                    len: index,
+                });
+            }
+        }
+        if index >= J.min(255) {
+            return Err(crate::Error::CapacityExceeded {
+                what: "chain joints",
+                capacity: J.min(255),
+            });
+        }
         let finite = joint
             .origin
             .translation
@@ -128,17 +193,108 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         if !finite {
             return Err(crate::Error::NonFinite { what: "joint" });
         }
+        let full = |_| crate::Error::CapacityExceeded {
+            what: "chain joints",
+            capacity: J,
+        };
+        // Both have room: `index < J`.
+        self.parents
+            .push(parent.map_or(0, |p| (p + 1) as u8))
+            .map_err(full)?;
         self.joints
             .push(joint)
             .map_err(|_| crate::Error::CapacityExceeded {
                 what: "chain joints",
                 capacity: J,
-            })
+            })?;
+        Ok(index)
     }
 
-    /// Sets the fixed transform from the last joint frame to the tip frame.
+    /// Sets the fixed transform from the tip's joint frame to the tip frame.
     pub fn set_tip(&mut self, tip: Isometry3<T>) {
         self.tip = tip;
+    }
+
+    /// The same chain with its tip at `end`: the chain of one marker link of
+    /// a tree (see the [module docs](self)).
+    ///
+    /// # Errors
+    /// [`crate::Error::OutOfRange`] when `end.joint` is not a joint of the
+    /// chain; [`crate::Error::NonFinite`] for a non-finite transform.
+    pub fn with_tip(&self, end: &End<T>) -> Result<Self, crate::Error> {
+        if let Some(j) = end.joint {
+            if j >= self.dof() {
+                return Err(crate::Error::OutOfRange {
+                    what: "tip joint",
+                    index: j,
+                    len: self.dof(),
+                });
+            }
+        }
+        let o = &end.origin;
+        if !(o.translation.vector.iter().all(|v| v.is_finite())
+            && o.rotation.coords.iter().all(|v| v.is_finite()))
+        {
+            return Err(crate::Error::NonFinite { what: "tip" });
+        }
+        let mut c = self.clone();
+        // `j < dof ≤ 255`.
+        c.tip_parent = end.joint.map_or(0, |j| (j + 1) as u8);
+        c.tip = end.origin;
+        Ok(c)
+    }
+
+    /// Where the tip is fixed.
+    pub fn tip_end(&self) -> End<T> {
+        End {
+            joint: self.tip_joint(),
+            origin: self.tip,
+        }
+    }
+
+    /// The joint the tip is fixed to (`None`: the base frame).
+    pub fn tip_joint(&self) -> Option<usize> {
+        usize::from(self.tip_parent).checked_sub(1)
+    }
+
+    /// Joint `j`'s parent joint (`None`: the base frame, or no joint `j`).
+    pub fn parent(&self, j: usize) -> Option<usize> {
+        self.parents
+            .get(j)
+            .and_then(|&p| usize::from(p).checked_sub(1))
+    }
+
+    /// Whether every joint hangs from the one before it (a serial chain).
+    pub fn is_serial(&self) -> bool {
+        self.parents
+            .iter()
+            .enumerate()
+            .all(|(j, &p)| usize::from(p) == j)
+    }
+
+    /// Joint `j` and the joints it hangs from, up to the base (`j` first):
+    /// the joints that move a point fixed to joint `j`'s frame.
+    pub fn path(&self, j: Option<usize>) -> Path<'_> {
+        Path {
+            parents: &self.parents,
+            next: j.filter(|&j| j < self.parents.len()),
+        }
+    }
+
+    /// The chain with its base placed by `base`: every root joint's origin
+    /// (and a tip fixed to the base) premultiplied by it, so that frames of
+    /// the result are in the frame `base` is given in.
+    pub fn placed(&self, base: &Isometry3<T>) -> Self {
+        let mut c = self.clone();
+        for (j, &p) in c.joints.iter_mut().zip(&self.parents) {
+            if p == 0 {
+                j.origin = base * j.origin;
+            }
+        }
+        if c.tip_parent == 0 {
+            c.tip = base * c.tip;
+        }
+        c
     }
 
     /// The movable joints, base to tip.
@@ -159,6 +315,28 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// Number of movable joints.
     pub fn dof(&self) -> usize {
         self.joints.len()
+    }
+}
+
+/// The joints from one joint up to the base ([`Chain::path`]).
+#[derive(Debug, Clone)]
+pub struct Path<'a> {
+    parents: &'a [u8],
+    next: Option<usize>,
+}
+
+impl Iterator for Path<'_> {
+    type Item = usize;
+
+    fn next(&mut self) -> Option<usize> {
+        let j = self.next?;
+        // Parents come before their children, so this ends.
+        self.next = self
+            .parents
+            .get(j)
+            .and_then(|&p| usize::from(p).checked_sub(1))
+            .filter(|&p| p < j);
+        Some(j)
     }
 }
 

@@ -98,33 +98,38 @@ impl<T: RealField + Copy> Loading<T> {
                     g * link.mass_kg,
                     lf.frame.transform_point(&Point3::from(link.com_m)).coords,
                 );
-                add_wrench_jacobian(frames.joints(), &w, l, &mut t);
+                add_wrench_jacobian(chain, frames.joints(), &w, Some(l), &mut t);
             }
         }
         if let Some(load) = self.load {
             if dof > 0 {
-                add_wrench_jacobian(frames.joints(), &load.wrench(frames), dof - 1, &mut t);
+                let w = load.wrench(frames);
+                add_wrench_jacobian(chain, frames.joints(), &w, chain.tip_joint(), &mut t);
             }
         }
         Ok(t)
     }
 }
 
-/// Adds `∂τⱼ/∂θᵢ` of wrench `w`, carried by joints `0..=last` (it acts on
-/// link `last` or beyond), to `t`. A joint `i` moves the wrench's point
-/// (`dc = zᵢ × (c − oᵢ)` revolute, `zᵢ` prismatic) and, when it lies before
-/// joint `j`, joint `j`'s axis and origin with it.
+/// Adds `∂τⱼ/∂θᵢ` of wrench `w`, carried by joint `last` and the joints it
+/// hangs from (`0..=last` in a serial chain; it acts on link `last` or
+/// beyond; `None`: on the base, nothing), to `t`. A joint `i` moves the
+/// wrench's point (`dc = zᵢ × (c − oᵢ)` revolute, `zᵢ` prismatic) and, when
+/// it lies before joint `j` (on one path: `i < j`), joint `j`'s axis and
+/// origin with it.
 fn add_wrench_jacobian<T: RealField + Copy, const J: usize>(
+    chain: &Chain<T, J>,
     js: &[JointFrame<T>],
     w: &Wrench<T>,
-    last: usize,
+    last: Option<usize>,
     t: &mut SMatrix<T, J, J>,
 ) {
     let (f, c, m) = (w.force_n, w.point_m, w.moment_nm);
-    for (j, jj) in js.iter().enumerate().take(last + 1) {
+    let on = |j: usize| js.get(j).map(|jf| (j, jf));
+    for (j, jj) in chain.path(last).filter_map(on) {
         let zj = jj.axis.into_inner();
         let cj = c - jj.origin_m();
-        for (i, ji) in js.iter().enumerate().take(last + 1) {
+        for (i, ji) in chain.path(last).filter_map(on) {
             let zi = ji.axis.into_inner();
             let d = match (ji.kind, jj.kind, i < j) {
                 // Joint i turns joint j's axis and origin and the point.

@@ -1,9 +1,10 @@
 //! Forward kinematics of a [`Chain`]: joint frames, joint origins `oⱼ` and
 //! axes `zⱼ` in the base frame, the tip pose and marker positions.
 //!
-//! Convention (see [`super::chain`]): `T_j = T_{j-1} · origin_j · motion_j(q_j)`,
-//! `T_tip = T_last · tip`. For every joint [`Frames`] keeps both the frame at
-//! zero joint value, `Z_j = T_{j-1} · origin_j` (where the joint-frame errors
+//! Convention (see [`super::chain`]): `T_j = T_{p(j)} · origin_j · motion_j(q_j)`
+//! (`p(j) = j − 1` in a serial chain), `T_tip = T_t · tip` (`t` the tip's
+//! joint). For every joint [`Frames`] keeps both the frame at zero joint
+//! value, `Z_j = T_{p(j)} · origin_j` (where the joint-frame errors
 //! of [`crate::model::columns`] act), and the moved frame `T_j`. All lengths in m,
 //! revolute joint values in rad, prismatic ones in m.
 //!
@@ -40,6 +41,10 @@ pub struct JointFrame<T: RealField + Copy> {
     pub axis: Unit<Vector3<T>>,
     /// Revolute or prismatic.
     pub kind: JointKind,
+    /// Whether the joint moves the tip (it is on the path from the base to
+    /// the tip; every joint of a serial chain). A joint that does not — on
+    /// another branch of a tree — has zero columns for a point on the tip.
+    pub carries: bool,
 }
 
 impl<T: RealField + Copy> JointFrame<T> {
@@ -48,11 +53,15 @@ impl<T: RealField + Copy> JointFrame<T> {
         self.frame.translation.vector
     }
 
-    /// `∂p/∂qⱼ` \[m/rad or m/m\] of a point `p_m` \[m, base frame\] carried by
-    /// the joint: `zⱼ × (p − oⱼ)` for a revolute joint, `zⱼ` for a prismatic
-    /// one. This is the joint-offset column of eq. 2 and, times `τⱼ`, the
+    /// `∂p/∂qⱼ` \[m/rad or m/m\] of a point `p_m` \[m, base frame\] on the
+    /// tip: `zⱼ × (p − oⱼ)` for a revolute joint, `zⱼ` for a prismatic one,
+    /// zero for a joint that does not carry the tip ([`JointFrame::carries`]).
+    /// This is the joint-offset column of eq. 2 and, times `τⱼ`, the
     /// compliance column of eq. 3.
     pub fn twist_column(&self, p_m: &Vector3<T>) -> Vector3<T> {
+        if !self.carries {
+            return Vector3::zeros();
+        }
         match self.kind {
             JointKind::Revolute => self.axis.cross(&(p_m - self.origin_m())),
             JointKind::Prismatic => self.axis.into_inner(),
@@ -149,24 +158,44 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         if !q.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "q" });
         }
-        let mut joints = heapless::Vec::new();
+        let mut joints: heapless::Vec<JointFrame<T>, J> = heapless::Vec::new();
         let mut t = Isometry3::identity();
-        for (joint, &qj) in self.joints().iter().zip(q) {
-            let zero = t * joint.origin;
-            t = zero * joint.motion(qj);
+        let serial = self.is_serial();
+        for (j, (joint, &qj)) in self.joints().iter().zip(q).enumerate() {
+            let parent = match j.checked_sub(1) {
+                Some(p) if serial => joints.get(p).map(|f| f.frame),
+                _ => self.parent(j).and_then(|p| joints.get(p)).map(|f| f.frame),
+            };
+            let zero = parent.unwrap_or_else(Isometry3::identity) * joint.origin;
+            let moved = zero * joint.motion(qj);
             let axis = Unit::new_normalize(zero.rotation * joint.axis.into_inner());
             // Capacity equals the chain's, so this cannot fail; map it anyway.
             joints
                 .push(JointFrame {
                     zero,
-                    frame: t,
+                    frame: moved,
                     axis,
                     kind: joint.kind,
+                    carries: serial,
                 })
                 .map_err(|_| Error::CapacityExceeded {
                     what: "frames",
                     capacity: J,
                 })?;
+        }
+        let tip_joint = self.tip_joint();
+        if let Some(f) = tip_joint.and_then(|j| joints.get(j)) {
+            t = f.frame;
+        }
+        if !serial || tip_joint.map_or(true, |j| j + 1 != joints.len()) {
+            for jf in joints.iter_mut() {
+                jf.carries = false;
+            }
+            for j in self.path(tip_joint) {
+                if let Some(jf) = joints.get_mut(j) {
+                    jf.carries = true;
+                }
+            }
         }
         let mut qv = heapless::Vec::new();
         qv.extend_from_slice(q)

@@ -8,9 +8,10 @@
 //! - `τⱼ = zⱼᵀ((c − oⱼ) × F + M)` \[N·m\] (revolute),
 //! - `τⱼ = zⱼᵀ F` \[N\] (prismatic).
 //!
-//! A wrench acting at or beyond the tip loads every joint
-//! ([`joint_torques`]); the weight of link `l` (carried by joint `l`) loads
-//! joints `0..=l` only ([`gravity_torques`]). How a joint yields under its
+//! A wrench acting at or beyond the tip loads every joint that carries the
+//! tip ([`joint_torques`]; all of a serial chain's); the weight of link `l`
+//! (carried by joint `l`) loads joint `l` and the joints it hangs from only
+//! (`0..=l` in a serial chain; [`gravity_torques`]). How a joint yields under its
 //! torque is the model's business ([`crate::model`]: compliance, eq. 3).
 //!
 //! ```
@@ -92,7 +93,8 @@ impl<T: RealField + Copy> PointLoad<T> {
 }
 
 /// Joint torques `τⱼ` of a wrench acting at or beyond the tip (it loads every
-/// joint), written to `tau[..dof]`.
+/// joint that carries the tip, [`crate::robot::JointFrame::carries`]; the
+/// others get 0), written to `tau[..dof]`.
 ///
 /// # Errors
 /// [`Error::Mismatch`] when `tau` is shorter than the number of joints.
@@ -103,14 +105,19 @@ pub fn joint_torques<T: RealField + Copy, const J: usize>(
 ) -> Result<(), Error> {
     check_len(frames, tau.len())?;
     for (t, jf) in tau.iter_mut().zip(frames.joints()) {
-        *t = wrench.torque_on(jf);
+        *t = if jf.carries {
+            wrench.torque_on(jf)
+        } else {
+            T::zero()
+        };
     }
     Ok(())
 }
 
 /// Joint torques `τⱼ` from the chain's own link masses under gravity `g`
 /// \[m/s², base frame\], written to `tau[..dof]`: the weight `m_l g` of link
-/// `l` acts at its centre of mass `T_l · com_l` and loads joints `0..=l`.
+/// `l` acts at its centre of mass `T_l · com_l` and loads joint `l` and the
+/// joints it hangs from (`0..=l` in a serial chain).
 /// Links without [`crate::LinkInertia`] weigh nothing.
 ///
 /// # Errors
@@ -137,8 +144,10 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
             gravity_mps2 * link.mass_kg,
             lf.frame.transform_point(&Point3::from(link.com_m)).coords,
         );
-        for (t, jf) in tau.iter_mut().zip(frames.joints()).take(l + 1) {
-            *t += w.torque_on(jf);
+        for j in chain.path(Some(l)) {
+            if let (Some(t), Some(jf)) = (tau.get_mut(j), frames.joints().get(j)) {
+                *t += w.torque_on(jf);
+            }
         }
     }
     Ok(())

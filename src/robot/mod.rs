@@ -18,7 +18,7 @@ pub mod equilibrium;
 pub mod kinematics;
 pub mod load;
 
-pub use chain::{Chain, Joint, JointKind, LinkInertia};
+pub use chain::{Chain, End, Joint, JointKind, LinkInertia, Path};
 pub use compensate::{compensate, compensate_pose, CompensateSettings, Compensation, Compliances};
 pub use equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
 pub use kinematics::{Frames, JointFrame};
