@@ -209,7 +209,12 @@ fn core_rows(job: &Job, data: &Measurements) -> Res<Stats> {
             com_m: Vector3::from(load.com),
             gravity_mps2: Vector3::from(load.gravity),
         };
-        let b = layout.block::<f64, 16, Const<N>>(chain, &d.q, &marker, Some(&pl))?;
+        let b = layout.block::<f64, { robcal::io::MAX_JOINTS }, Const<N>>(
+            chain,
+            &d.q,
+            &marker,
+            Some(&pl),
+        )?;
         stats.update(i32::try_from(d.config)?, &b, &Vector3::from(d.dp_m))?;
     }
     Ok(stats)

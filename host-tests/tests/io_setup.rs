@@ -31,7 +31,8 @@ fn defaults() {
         s.markers,
         [Marker {
             id: 1,
-            xyz: [0.0; 3]
+            xyz: [0.0; 3],
+            link: None
         }]
     );
     assert_eq!(s.load, None);
@@ -55,7 +56,8 @@ fn defaults() {
         s.markers,
         [Marker {
             id: 4,
-            xyz: [0.0; 3]
+            xyz: [0.0; 3],
+            link: None
         }]
     );
     assert_eq!((s.noise.sigma0_um, s.noise.lambda), (10.0, 0.5));
@@ -102,7 +104,8 @@ markers = "identify"
         s.markers[1],
         Marker {
             id: 2,
-            xyz: [0.1, 0.30, 0.20]
+            xyz: [0.1, 0.30, 0.20],
+            link: None
         }
     );
     assert_eq!(s.load.unwrap().gravity, [0.0, 0.0, -9.81]);

@@ -142,7 +142,7 @@ fn simulate(spec: &Spec) -> (Job, robcal::io::Measurements) {
             job.setup.model.base_frame = true;
         }
     }
-    let mut chain: Chain<f64, 16> = job.robot.chain.clone();
+    let mut chain: Chain<f64, { robcal::io::MAX_JOINTS }> = job.robot.chain.clone();
     if let Some((j, e)) = t.frame {
         let o = chain.joints()[j].origin;
         chain.joints_mut()[j].origin = o * small_transform(&e);

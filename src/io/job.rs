@@ -30,10 +30,11 @@ impl Job {
     pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
         let setup_path = setup_path.as_ref();
         let setup = Setup::load(setup_path)?;
-        let robot = Robot::load(
+        let robot = Robot::load_tree(
             setup.robot_path(setup_path),
             setup.base_link.as_deref(),
             setup.tip_link.as_deref(),
+            &setup.marker_links(),
         )?;
         setup.check_robot(&robot, setup_path)?;
         Ok(Self {

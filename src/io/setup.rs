@@ -13,7 +13,8 @@
 //! | `[units] length` | `"m"` (`"mm"` \| `"m"`) |
 //! | `[[marker]]` | one marker, `id = 1`, at the origin of `tip_link` |
 //! | `[[marker]] id` | required in each table; ids unique |
-//! | `[[marker]] xyz` | `[0, 0, 0]` m, in `tip_link` |
+//! | `[[marker]] xyz` | `[0, 0, 0]` m, in its link |
+//! | `[[marker]] link` | `tip_link`; another link makes the chain end there too, a tree when it is off the path to `tip_link` (data contract 7.1; then no `[load]` and no `tool_frame`) |
 //! | `[load]` | absent: no load (a CSV row with `load_kg > 0` is then an error) |
 //! | `[load] com` | `[0, 0, 0]` m, in `tip_link` |
 //! | `[load] gravity` | `[0, 0, -9.80665]` m/s², base frame |
@@ -104,15 +105,20 @@ impl Units {
     };
 }
 
-/// `[[marker]]`: a point on the tip body that the measuring system sees.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// `[[marker]]`: a point on the robot that the measuring system sees.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Marker {
     /// Id used in the CSV's `marker` column.
     pub id: u32,
-    /// Nominal position \[m\] in `tip_link`.
+    /// Nominal position \[m\] in its link.
     #[serde(default)]
     pub xyz: [f64; 3],
+    /// The URDF link the marker is fixed to (data contract 7.1); `None`:
+    /// `tip_link`. Markers on links off the path to `tip_link` make the
+    /// chain a tree.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// `[load]`: where the external load hangs.
@@ -291,6 +297,7 @@ fn default_markers() -> Vec<Marker> {
     vec![Marker {
         id: 1,
         xyz: [0.0; 3],
+        link: None,
     }]
 }
 
@@ -499,7 +506,51 @@ impl Setup {
                 }
             }
         }
+        // On a tree (markers on links off the path to the tip) the load
+        // hangs from tip_link while a marker may sit on another branch, and
+        // the tool frame would move every end: neither is built.
+        let off_tip = self
+            .markers
+            .iter()
+            .find(|m| m.link.as_deref().is_some_and(|l| l != robot.tip_link));
+        if let Some(m) = off_tip {
+            let link = m.link.as_deref().unwrap_or_default();
+            if self.load.is_some() {
+                return Err(InputError::new(
+                    file,
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "load: marker {} is on '{link}', not on tip_link '{}': a load with \
+                         markers on other links is not supported",
+                        m.id, robot.tip_link
+                    ),
+                ));
+            }
+            if self.model.tool_frame {
+                return Err(InputError::new(
+                    file,
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "model.tool_frame: marker {} is on '{link}', not on tip_link '{}': \
+                         the tool frame is tip_link's, give markers there or leave it out",
+                        m.id, robot.tip_link
+                    ),
+                ));
+            }
+        }
         Ok(())
+    }
+
+    /// The links markers are fixed to other than `tip_link` (data contract
+    /// 7.1), in marker order, once each.
+    pub fn marker_links(&self) -> Vec<&str> {
+        let mut links: Vec<&str> = Vec::new();
+        for l in self.markers.iter().filter_map(|m| m.link.as_deref()) {
+            if !links.contains(&l) && Some(l) != self.tip_link.as_deref() {
+                links.push(l);
+            }
+        }
+        links
     }
 
     /// The URDF path: `robot` resolved against the directory of `setup_path`.

@@ -101,7 +101,7 @@ pub fn core_stats(job: &Job, data: &Measurements) -> Stats {
             gravity_mps2: Vector3::from(load.gravity),
         };
         let b = layout
-            .block::<f64, 16, Const<N>>(chain, &d.q, &marker, Some(&pl))
+            .block::<f64, { robcal::io::MAX_JOINTS }, Const<N>>(chain, &d.q, &marker, Some(&pl))
             .unwrap();
         stats
             .update(d.config as i32, &b, &Vector3::from(d.dp_m))

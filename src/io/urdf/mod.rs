@@ -1,5 +1,9 @@
 //! URDF → [`Chain`]: the serial chain from `base_link` to `tip_link`, with
 //! joint names, kinds and limits, and the mass properties of each moving body.
+//! With markers on other links ([`Robot::load_tree`], data contract 7.1) the
+//! chain holds every path from `base_link` to `tip_link` and to those links,
+//! a joint shared by several paths once: a tree when a link is off the path
+//! to the tip. [`Robot::ends`] says where each of those links is fixed.
 //!
 //! - Revolute, continuous and prismatic joints move. Fixed joints on the path
 //!   are folded into the origin of the next movable joint
@@ -34,10 +38,10 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::{ErrorKind, InputError};
-use crate::robot::{Chain, JointKind};
+use crate::robot::{Chain, End, JointKind};
 
 /// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
-pub const MAX_JOINTS: usize = 16;
+pub const MAX_JOINTS: usize = 32;
 
 /// XML elements nested deeper than this are refused before the URDF parser
 /// sees the text (it recurses once per level; a URDF needs 4 or 5).
@@ -228,6 +232,13 @@ pub struct Robot {
     pub limits: Vec<Option<JointLimits>>,
     /// Movable joints off the chain hanging from moving bodies, in document order.
     pub off_chain: Vec<OffChainBranch>,
+    /// The links the chain ends at: `tip_link` first, then every other
+    /// link a marker is fixed to (data contract 7.1), once each. More than
+    /// one makes the chain a tree.
+    pub end_links: Vec<String>,
+    /// Where each of [`Robot::end_links`] is fixed (`ends[0]` is the
+    /// chain's own tip).
+    pub ends: Vec<End<f64>>,
 }
 
 impl Robot {
@@ -244,9 +255,27 @@ impl Robot {
         base_link: Option<&str>,
         tip_link: Option<&str>,
     ) -> Result<Self, InputError> {
+        Self::load_tree(path, base_link, tip_link, &[])
+    }
+
+    /// As [`Robot::load`], the chain also ending at each of `marker_links`
+    /// (data contract 7.1): every path from `base_link` to `tip_link` and to
+    /// these links, a joint shared by several paths once. Links on the path
+    /// to the tip add nothing but an end; links on other branches make the
+    /// chain a tree ([`crate::robot::Chain::push_child`]).
+    ///
+    /// # Errors
+    /// See the module doc; also a marker link that is not a link of the
+    /// robot or not below `base_link`.
+    pub fn load_tree(
+        path: impl AsRef<Path>,
+        base_link: Option<&str>,
+        tip_link: Option<&str>,
+        marker_links: &[&str],
+    ) -> Result<Self, InputError> {
         let path = path.as_ref();
         let text = crate::io::input::read_text(path, "the URDF", crate::io::input::MAX_URDF_BYTES)?;
-        Self::parse(&text, path, base_link, tip_link)
+        Self::parse_tree(&text, path, base_link, tip_link, marker_links)
     }
 
     /// As [`Robot::load`], from the URDF text; `file` names it in errors.
@@ -259,6 +288,20 @@ impl Robot {
         base_link: Option<&str>,
         tip_link: Option<&str>,
     ) -> Result<Self, InputError> {
+        Self::parse_tree(text, file, base_link, tip_link, &[])
+    }
+
+    /// As [`Robot::load_tree`], from the URDF text; `file` names it in errors.
+    ///
+    /// # Errors
+    /// See [`Robot::load_tree`].
+    pub fn parse_tree(
+        text: &str,
+        file: impl Into<PathBuf>,
+        base_link: Option<&str>,
+        tip_link: Option<&str>,
+        marker_links: &[&str],
+    ) -> Result<Self, InputError> {
         let ctx = Ctx {
             file: file.into(),
             text,
@@ -267,7 +310,7 @@ impl Robot {
             return Err(ctx.err(ErrorKind::Syntax, what).at_line(line));
         }
         let urdf = read_urdf(text).map_err(|e| ctx.err(ErrorKind::Syntax, e))?;
-        Tree::new(&urdf, &ctx)?.robot(&urdf, &ctx, base_link, tip_link)
+        Tree::new(&urdf, &ctx)?.robot(&urdf, &ctx, base_link, tip_link, marker_links)
     }
 
     /// Number of movable joints.
@@ -278,6 +321,26 @@ impl Robot {
     /// Chain index of the movable joint named `name`.
     pub fn joint_index(&self, name: &str) -> Option<usize> {
         self.joint_names.iter().position(|n| n == name)
+    }
+
+    /// Index into [`Robot::end_links`] of `link` (`None`: `tip_link`).
+    pub fn end_index(&self, link: Option<&str>) -> Option<usize> {
+        match link {
+            None => Some(0),
+            Some(l) => self.end_links.iter().position(|e| e == l),
+        }
+    }
+
+    /// Whether the chain is a tree: some marker link is off the path to the
+    /// tip.
+    pub fn is_tree(&self) -> bool {
+        !self.chain.is_serial()
+    }
+
+    /// The chain ending at end `k` ([`Robot::ends`]): the chain of the
+    /// markers on that link. `None` when there is no end `k`.
+    pub fn chain_to(&self, k: usize) -> Option<Chain<f64, MAX_JOINTS>> {
+        self.chain.with_tip(self.ends.get(k)?).ok()
     }
 }
 

@@ -11,7 +11,7 @@ use super::{
     MAX_JOINTS,
 };
 use crate::io::{ErrorKind, InputError};
-use crate::robot::{Chain, Joint, LinkInertia};
+use crate::robot::{Chain, End, Joint, LinkInertia};
 
 /// The link tree: who is whose parent and child.
 pub(super) struct Tree<'u> {
@@ -197,6 +197,7 @@ impl<'u> Tree<'u> {
         ctx: &Ctx<'_>,
         base_link: Option<&str>,
         tip_link: Option<&str>,
+        extra_links: &[&str],
     ) -> Result<Robot, InputError> {
         let base = match base_link {
             Some(b) => b,
@@ -217,136 +218,168 @@ impl<'u> Tree<'u> {
             None => self.default_tip(base, ctx)?,
         };
 
-        // Path: walk up from the tip to the base.
-        let mut path = Vec::new();
-        let mut link = tip;
-        while link != base {
-            match self.parent_joint.get(link) {
-                Some(joint) if path.len() <= urdf.joints.len() => {
-                    path.push(*joint);
-                    link = joint.parent.link.as_str();
-                }
-                _ => {
-                    return Err(ctx.err(
-                        ErrorKind::Robot,
-                        format!(
-                            "no path from base_link '{base}' to tip_link '{tip}': \
-                             '{tip}' is not below '{base}'"
-                        ),
-                    ))
-                }
+        // The links the chain ends at: the tip first, then each other
+        // marker link (data contract 7.1), once.
+        let mut end_links: Vec<&str> = vec![tip];
+        for &l in extra_links {
+            if !self.links.contains_key(l) {
+                return Err(ctx.err(
+                    ErrorKind::Robot,
+                    format!("marker link '{l}' is not a link of robot '{}'", urdf.name),
+                ));
+            }
+            if !end_links.contains(&l) {
+                end_links.push(l);
             }
         }
-        path.reverse();
 
         let mut chain = Chain::<f64, MAX_JOINTS>::new();
         let mut joint_names = Vec::new();
         let mut joint_kinds = Vec::new();
         let mut limits = Vec::new();
         let mut children = Vec::new(); // child link of each movable joint
-        let mut pending = Isometry3::identity();
-        for joint in &path {
-            let name = joint.name.as_str();
-            let o = &joint.origin;
-            if !finite(&o.xyz.0) || !finite(&o.rpy.0) {
-                return Err(ctx.err_at(
-                    "joint",
-                    name,
-                    ErrorKind::NonFinite,
-                    format!("origin xyz {:?} rpy {:?}", o.xyz.0, o.rpy.0),
-                ));
-            }
-            let kind = match joint.joint_type {
-                urdf_rs::JointType::Fixed => {
-                    pending *= pose(o);
+        let mut on_chain: Vec<&str> = Vec::new(); // every joint on a path
+        let mut ends = Vec::new();
+        for &end_link in &end_links {
+            let path = self.path(base, end_link, urdf, ctx)?;
+            // The movable joint the path has reached, and the fixed
+            // transforms since.
+            let mut last: Option<usize> = None;
+            let mut pending = Isometry3::identity();
+            for joint in &path {
+                let name = joint.name.as_str();
+                if !on_chain.contains(&name) {
+                    on_chain.push(name);
+                }
+                if let Some(index) = joint_names.iter().position(|n| n == name) {
+                    // A joint an earlier path shares.
+                    last = Some(index);
+                    pending = Isometry3::identity();
                     continue;
                 }
-                urdf_rs::JointType::Revolute => UrdfJointKind::Revolute,
-                urdf_rs::JointType::Continuous => UrdfJointKind::Continuous,
-                urdf_rs::JointType::Prismatic => UrdfJointKind::Prismatic,
-                ref other => {
+                let o = &joint.origin;
+                if !finite(&o.xyz.0) || !finite(&o.rpy.0) {
+                    return Err(ctx.err_at(
+                        "joint",
+                        name,
+                        ErrorKind::NonFinite,
+                        format!("origin xyz {:?} rpy {:?}", o.xyz.0, o.rpy.0),
+                    ));
+                }
+                let kind = match joint.joint_type {
+                    urdf_rs::JointType::Fixed => {
+                        pending *= pose(o);
+                        continue;
+                    }
+                    urdf_rs::JointType::Revolute => UrdfJointKind::Revolute,
+                    urdf_rs::JointType::Continuous => UrdfJointKind::Continuous,
+                    urdf_rs::JointType::Prismatic => UrdfJointKind::Prismatic,
+                    ref other => {
+                        return Err(ctx.err_at(
+                            "joint",
+                            name,
+                            ErrorKind::Robot,
+                            format!("{other:?} joints are not supported on the chain")
+                                .to_lowercase(),
+                        ))
+                    }
+                };
+                if let Some(mimic) = &joint.mimic {
                     return Err(ctx.err_at(
                         "joint",
                         name,
                         ErrorKind::Robot,
-                        format!("{other:?} joints are not supported on the chain").to_lowercase(),
-                    ))
+                        format!(
+                            "mimic joint (of '{}') on the chain is not supported",
+                            mimic.joint
+                        ),
+                    ));
                 }
-            };
-            if let Some(mimic) = &joint.mimic {
-                return Err(ctx.err_at(
-                    "joint",
-                    name,
-                    ErrorKind::Robot,
-                    format!(
-                        "mimic joint (of '{}') on the chain is not supported",
-                        mimic.joint
-                    ),
-                ));
+                if joint_names.len() == MAX_JOINTS {
+                    return Err(ctx.err_at(
+                        "joint",
+                        name,
+                        ErrorKind::Robot,
+                        format!(
+                            "more than {MAX_JOINTS} movable joints from '{base}' to '{}'",
+                            end_links.join("', '")
+                        ),
+                    ));
+                }
+                let a = joint.axis.xyz.0;
+                if !finite(&a) {
+                    return Err(ctx.err_at(
+                        "joint",
+                        name,
+                        ErrorKind::NonFinite,
+                        format!("axis {a:?}"),
+                    ));
+                }
+                // Normalizing `1e300 1e300 0` overflows its norm (the unit axis
+                // came out 0): divide by the largest component first (exact in
+                // direction; only ever by a factor > 1, so a tiny axis is still
+                // a zero axis).
+                let big = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+                let a = if big > 1.0 { a.map(|v| v / big) } else { a };
+                let mut j = Joint::from_urdf(
+                    Vector3::from(o.xyz.0),
+                    Vector3::from(o.rpy.0),
+                    Vector3::from(a),
+                    kind.chain_kind(),
+                )
+                .ok_or_else(|| ctx.err_at("joint", name, ErrorKind::Robot, "zero axis".into()))?;
+                j.origin = pending * j.origin;
+                pending = Isometry3::identity();
+                // Each origin is finite, their composition need not be (two
+                // fixed joints of 1e308 m).
+                if !finite(j.origin.translation.vector.as_slice()) {
+                    return Err(ctx.err_at(
+                        "joint",
+                        name,
+                        ErrorKind::NonFinite,
+                        format!(
+                            "origin {:?} m with the fixed joints before it overflows",
+                            j.origin.translation.vector.as_slice()
+                        ),
+                    ));
+                }
+                let limit = match kind {
+                    UrdfJointKind::Continuous => None,
+                    _ => {
+                        let (lower, upper) = (joint.limit.lower, joint.limit.upper);
+                        if lower.is_nan() || upper.is_nan() {
+                            return Err(ctx.err_at(
+                                "joint",
+                                name,
+                                ErrorKind::NonFinite,
+                                format!("limit lower {lower} upper {upper}"),
+                            ));
+                        }
+                        (lower.is_finite() && upper.is_finite() && lower < upper)
+                            .then_some(JointLimits { lower, upper })
+                    }
+                };
+                let index = chain
+                    .push_child(j, last)
+                    .map_err(|e| ctx.err_at("joint", name, ErrorKind::Robot, e.to_string()))?;
+                last = Some(index);
+                joint_names.push(name.to_owned());
+                joint_kinds.push(kind);
+                limits.push(limit);
+                children.push(joint.child.link.as_str());
             }
-            if joint_names.len() == MAX_JOINTS {
-                return Err(ctx.err_at(
-                    "joint",
-                    name,
-                    ErrorKind::Robot,
-                    format!("more than {MAX_JOINTS} movable joints from '{base}' to '{tip}'"),
-                ));
-            }
-            let a = joint.axis.xyz.0;
-            if !finite(&a) {
-                return Err(ctx.err_at("joint", name, ErrorKind::NonFinite, format!("axis {a:?}")));
-            }
-            // Normalizing `1e300 1e300 0` overflows its norm (the unit axis
-            // came out 0): divide by the largest component first (exact in
-            // direction; only ever by a factor > 1, so a tiny axis is still
-            // a zero axis).
-            let big = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-            let a = if big > 1.0 { a.map(|v| v / big) } else { a };
-            let mut j = Joint::from_urdf(
-                Vector3::from(o.xyz.0),
-                Vector3::from(o.rpy.0),
-                Vector3::from(a),
-                kind.chain_kind(),
-            )
-            .ok_or_else(|| ctx.err_at("joint", name, ErrorKind::Robot, "zero axis".into()))?;
-            j.origin = pending * j.origin;
-            pending = Isometry3::identity();
-            // Each origin is finite, their composition need not be (two
-            // fixed joints of 1e308 m).
-            if !finite(j.origin.translation.vector.as_slice()) {
-                return Err(ctx.err_at(
-                    "joint",
-                    name,
+            if !finite(pending.translation.vector.as_slice()) {
+                return Err(ctx.err(
                     ErrorKind::NonFinite,
                     format!(
-                        "origin {:?} m with the fixed joints before it overflows",
-                        j.origin.translation.vector.as_slice()
+                        "the fixed joints from the last movable joint to '{end_link}' overflow"
                     ),
                 ));
             }
-            let limit = match kind {
-                UrdfJointKind::Continuous => None,
-                _ => {
-                    let (lower, upper) = (joint.limit.lower, joint.limit.upper);
-                    if lower.is_nan() || upper.is_nan() {
-                        return Err(ctx.err_at(
-                            "joint",
-                            name,
-                            ErrorKind::NonFinite,
-                            format!("limit lower {lower} upper {upper}"),
-                        ));
-                    }
-                    (lower.is_finite() && upper.is_finite() && lower < upper)
-                        .then_some(JointLimits { lower, upper })
-                }
-            };
-            chain
-                .push(j)
-                .map_err(|e| ctx.err_at("joint", name, ErrorKind::Robot, e.to_string()))?;
-            joint_names.push(name.to_owned());
-            joint_kinds.push(kind);
-            limits.push(limit);
-            children.push(joint.child.link.as_str());
+            ends.push(End {
+                joint: last,
+                origin: pending,
+            });
         }
         if joint_names.is_empty() {
             return Err(ctx.err(
@@ -354,18 +387,13 @@ impl<'u> Tree<'u> {
                 format!("no movable joint from base_link '{base}' to tip_link '{tip}'"),
             ));
         }
-        if !finite(pending.translation.vector.as_slice()) {
-            return Err(ctx.err(
-                ErrorKind::NonFinite,
-                format!(
-                    "the fixed joints from the last movable joint to tip_link '{tip}' overflow"
-                ),
-            ));
-        }
-        chain.set_tip(pending);
+        // The tip's end was the first, its joints were pushed first.
+        let chain = chain
+            .with_tip(&ends[0])
+            .map_err(|e| ctx.err(ErrorKind::Robot, e.to_string()))?;
+        let mut chain = chain;
 
         // Moving bodies: each chain joint's child and everything fixed to it.
-        let on_chain: Vec<&str> = path.iter().map(|j| j.name.as_str()).collect();
         let mut off_chain = Vec::new();
         for (index, child) in children.iter().enumerate() {
             let mut mass = 0.0;
@@ -455,6 +483,39 @@ impl<'u> Tree<'u> {
             joint_kinds,
             limits,
             off_chain,
+            end_links: end_links.iter().map(|l| (*l).to_owned()).collect(),
+            ends,
         })
+    }
+
+    /// The joints (movable and fixed) from `base` down to `link`.
+    fn path(
+        &self,
+        base: &str,
+        link: &str,
+        urdf: &urdf_rs::Robot,
+        ctx: &Ctx<'_>,
+    ) -> Result<Vec<&'u urdf_rs::Joint>, InputError> {
+        let mut path = Vec::new();
+        let mut at = link;
+        while at != base {
+            match self.parent_joint.get(at) {
+                Some(joint) if path.len() <= urdf.joints.len() => {
+                    path.push(*joint);
+                    at = joint.parent.link.as_str();
+                }
+                _ => {
+                    return Err(ctx.err(
+                        ErrorKind::Robot,
+                        format!(
+                            "no path from base_link '{base}' to '{link}': \
+                             '{link}' is not below '{base}'"
+                        ),
+                    ))
+                }
+            }
+        }
+        path.reverse();
+        Ok(path)
     }
 }
