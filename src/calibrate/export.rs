@@ -150,9 +150,16 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
     for (m, name) in marker_links.iter().enumerate() {
         urdf.links.push(link(name));
         let p = g.markers[m];
+        // The marker's own link (data contract 7.1), tip_link by default.
+        let on = job
+            .setup
+            .markers
+            .get(m)
+            .and_then(|s| s.link.as_deref())
+            .unwrap_or(&robot.tip_link);
         urdf.joints.push(fixed(
             format!("{name}_joint"),
-            &robot.tip_link,
+            on,
             name,
             urdf_rs::Pose {
                 xyz: urdf_rs::Vec3([p.x, p.y, p.z]),

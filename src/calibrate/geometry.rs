@@ -34,7 +34,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
 use crate::model::Param;
-use crate::robot::Chain;
+use crate::robot::{Chain, End};
 
 /// Joint capacity of the host chain ([`crate::io::MAX_JOINTS`]).
 pub(crate) const J: usize = crate::io::MAX_JOINTS;
@@ -47,8 +47,13 @@ pub struct Geometry {
     pub chain: Chain<f64, J>,
     /// The robot base in the measurement frame.
     pub base: Isometry3<f64>,
-    /// Marker positions \[m, tip frame\], by marker index.
+    /// Marker positions \[m, in the frame of their end\], by marker index.
     pub markers: Vec<Vector3<f64>>,
+    /// Where the chain ends (data contract 7.1; `ends[0]`: the chain's own
+    /// tip): one per link markers are fixed to.
+    pub ends: Vec<End<f64>>,
+    /// Each marker's end (index into `ends`), by marker index.
+    pub marker_ends: Vec<usize>,
     /// Nominal marker positions \[m, tip frame\].
     nominal_markers: Vec<Vector3<f64>>,
     /// Sum of the applied steps of each joint-offset and joint-frame
@@ -69,18 +74,53 @@ impl Geometry {
             base: Isometry3::identity(),
             markers: markers.to_vec(),
             nominal_markers: markers.to_vec(),
+            ends: vec![chain.tip_end()],
+            marker_ends: vec![0; markers.len()],
             applied: BTreeMap::new(),
         }
     }
 
-    /// The chain with the base folded into the first joint's origin: frames
+    /// The nominal model of a robot whose markers sit on several links
+    /// (a tree, data contract 7.1): `ends` where the chain ends,
+    /// `marker_ends` each marker's end.
+    pub fn nominal_tree(
+        chain: &Chain<f64, J>,
+        ends: &[End<f64>],
+        markers: &[Vector3<f64>],
+        marker_ends: &[usize],
+    ) -> Self {
+        Self {
+            ends: ends.to_vec(),
+            marker_ends: marker_ends.to_vec(),
+            ..Self::nominal(chain, markers)
+        }
+    }
+
+    /// The chain with the base folded into its root joints' origins: frames
     /// of this chain are in the measurement frame.
     pub fn placed_chain(&self) -> Chain<f64, J> {
-        let mut c = self.chain.clone();
-        if let Some(j0) = c.joints_mut().first_mut() {
-            j0.origin = self.base * j0.origin;
-        }
-        c
+        self.chain.placed(&self.base)
+    }
+
+    /// [`Geometry::placed_chain`] ending at each of [`Geometry::ends`]: the
+    /// chain of the markers of each end.
+    pub fn placed_chains(&self) -> Vec<Chain<f64, J>> {
+        self.ends
+            .iter()
+            .map(|e| {
+                // Ends come from the robot's own chain: they fit.
+                self.chain
+                    .with_tip(e)
+                    .unwrap_or_else(|_| self.chain.clone())
+                    .placed(&self.base)
+            })
+            .collect()
+    }
+
+    /// Marker `m`'s end (index into [`Geometry::ends`]; 0 for an unknown
+    /// marker).
+    pub fn end_of(&self, m: u8) -> usize {
+        self.marker_ends.get(usize::from(m)).copied().unwrap_or(0)
     }
 
     /// Places the base by the rigid transform (Kabsch) that best maps the

@@ -136,7 +136,12 @@ pub fn calibrate(
     let weighting = weighting(setup, &rows, &data.file)?;
     let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut e = engine::Engine {
-        geometry: Geometry::nominal(&job.robot.chain, &markers),
+        geometry: Geometry::nominal_tree(
+            &job.robot.chain,
+            &job.robot.ends,
+            &markers,
+            &marker_ends(job),
+        ),
         rows,
         names,
         lin: Linearisation::nominal(settings.deflection_model),
@@ -269,6 +274,16 @@ fn weighting(
         }
         Some(w) => Ok(w),
     }
+}
+
+/// Each setup marker's end in the robot ([`crate::io::Robot::ends`]), in
+/// setup order (the order of [`Names::markers`]).
+pub(crate) fn marker_ends(job: &crate::io::Job) -> Vec<usize> {
+    job.setup
+        .markers
+        .iter()
+        .map(|m| job.robot.end_index(m.link.as_deref()).unwrap_or(0))
+        .collect()
 }
 
 #[cfg(test)]

@@ -14,6 +14,9 @@
 //!               "axis": [..], "link_mass_kg": m, "link_com_m": [..]}, ..],
 //!   "tip_xyz_m": [..], "tip_quaternion_xyzw": [..],
 //!   "markers": [{"id": 1, "xyz_m": [..]}, ..],    // tip frame
+//!   // a tree (data contract 7.1): each joint's "parent" (joint name, ""
+//!   // for the measurement frame), "tip_joint", and a marker on another
+//!   // link: "link": {"joint": .., "xyz_m": [..], "quaternion_xyzw": [..]}
 //!   "load_com_shift_m": [..],                     // tip frame
 //!   "joint_law": [{"joint": "a2", "units": {..}, "compliance": k,
 //!                  "compliance_table": [{"angle_rad": a, "compliance": k}, ..],
@@ -40,7 +43,7 @@ use super::geometry::J;
 use super::linearisation::{DeflectionModel, Linearisation};
 use super::predict::Predictor;
 use crate::model::{angle_urad, Param};
-use crate::robot::{Chain, Joint, JointKind, LinkInertia};
+use crate::robot::{Chain, End, Joint, JointKind, LinkInertia};
 
 /// One movable joint of the calibrated chain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -62,15 +65,37 @@ pub struct JointRecord {
     /// The child link's centre of mass \[m, joint frame\].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_com_m: Option<[f64; 3]>,
+    /// A tree's joint (data contract 7.1): the joint whose frame this one
+    /// hangs from, `""` for the measurement frame. Absent: the joint before
+    /// it (a serial chain's, written for none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parent: Option<String>,
 }
 
-/// A marker (tool point) on the tip link.
+/// A marker (tool point) on the tip link, or on another link of a tree.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MarkerRecord {
     /// Its id in the measurement CSV.
     pub id: u32,
-    /// Calibrated position \[m, tip frame\].
+    /// Calibrated position \[m, tip frame, or the frame of `link`\].
     pub xyz_m: [f64; 3],
+    /// The marker's link when it is not the tip's (a tree, data contract
+    /// 7.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<LinkRecord>,
+}
+
+/// Where a marker's link is fixed: a joint's frame and the transform from
+/// it, as the tip is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinkRecord {
+    /// The joint whose frame the link is fixed to, `""` for the measurement
+    /// frame.
+    pub joint: String,
+    /// Translation \[m\] from that frame.
+    pub xyz_m: [f64; 3],
+    /// Rotation from that frame, unit quaternion `[x, y, z, w]`.
+    pub quaternion_xyzw: [f64; 4],
 }
 
 /// One angle of a compensator table.
@@ -137,6 +162,10 @@ pub struct ModelFile {
     pub tip_xyz_m: [f64; 3],
     /// The tip frame's rotation, `[x, y, z, w]`.
     pub tip_quaternion_xyzw: [f64; 4],
+    /// The joint the tip frame is fixed to when it is not the last one (a
+    /// tree, data contract 7.1; `""`: the measurement frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tip_joint: Option<String>,
     /// The markers.
     pub markers: Vec<MarkerRecord>,
     /// The fitted shift of the calibration load's centre of mass \[m, tip
@@ -175,11 +204,15 @@ impl ModelFile {
     pub fn of(p: &Predictor) -> Self {
         let chain = p.chain();
         let names = p.joint_names();
+        let serial = chain.is_serial();
+        let name_of = |j: Option<usize>| j.and_then(|j| names.get(j)).cloned().unwrap_or_default();
         let joints = chain
             .joints()
             .iter()
             .zip(names)
-            .map(|(j, name)| JointRecord {
+            .enumerate()
+            .map(|(index, (j, name))| JointRecord {
+                parent: (!serial).then(|| name_of(chain.parent(index))),
                 name: name.clone(),
                 kind: match j.kind {
                     JointKind::Revolute => "revolute",
@@ -232,13 +265,27 @@ impl ModelFile {
             joints,
             tip_xyz_m: chain.tip().translation.vector.into(),
             tip_quaternion_xyzw: quat(&chain.tip().rotation),
-            markers: p
-                .markers()
-                .map(|(id, m)| MarkerRecord {
-                    id,
-                    xyz_m: m.into(),
-                })
-                .collect(),
+            tip_joint: (chain.tip_joint().map_or(true, |t| t + 1 != chain.dof()))
+                .then(|| name_of(chain.tip_joint())),
+            markers: {
+                let (ends, marker_ends) = p.ends();
+                p.markers()
+                    .enumerate()
+                    .map(|(i, (id, m))| MarkerRecord {
+                        id,
+                        xyz_m: m.into(),
+                        link: marker_ends
+                            .get(i)
+                            .and_then(|&k| k.checked_sub(1))
+                            .and_then(|k| ends.get(k))
+                            .map(|e| LinkRecord {
+                                joint: name_of(e.joint),
+                                xyz_m: e.origin.translation.vector.into(),
+                                quaternion_xyzw: quat(&e.origin.rotation),
+                            }),
+                    })
+                    .collect()
+            },
             load_com_shift_m: p.load_com_shift_m().into(),
             joint_law: law.into_values().collect(),
             link_compliance: p
@@ -332,16 +379,26 @@ impl ModelFile {
                 }
                 (None, _) => None,
             };
+            let parent = match r.parent.as_deref() {
+                None => chain.dof().checked_sub(1),
+                Some("") => None,
+                Some(p) => Some(names.iter().position(|n| n == p).ok_or_else(|| {
+                    format!("{what}: parent '{p}' is not a joint listed before it")
+                })?),
+            };
             chain
-                .push(Joint {
-                    origin: Isometry3::from_parts(
-                        Translation3::from(Vector3::from(r.origin_xyz_m)),
-                        rotation(&what, &r.origin_quaternion_xyzw)?,
-                    ),
-                    axis,
-                    kind,
-                    link,
-                })
+                .push_child(
+                    Joint {
+                        origin: Isometry3::from_parts(
+                            Translation3::from(Vector3::from(r.origin_xyz_m)),
+                            rotation(&what, &r.origin_quaternion_xyzw)?,
+                        ),
+                        axis,
+                        kind,
+                        link,
+                    },
+                    parent,
+                )
                 .map_err(|e| format!("{what}: {e}"))?;
             if names.contains(&r.name) {
                 return Err(format!("{what}: named twice"));
@@ -349,17 +406,65 @@ impl ModelFile {
             names.push(r.name.clone());
         }
         finite("tip_xyz_m", &self.tip_xyz_m)?;
-        chain.set_tip(Isometry3::from_parts(
-            Translation3::from(Vector3::from(self.tip_xyz_m)),
-            rotation("tip_quaternion_xyzw", &self.tip_quaternion_xyzw)?,
-        ));
+        // The tip hangs from the last joint unless `tip_joint` names one.
+        let tip_joint = match self.tip_joint.as_deref() {
+            None => chain.dof().checked_sub(1),
+            Some("") => None,
+            Some(t) => Some(
+                names
+                    .iter()
+                    .position(|n| n == t)
+                    .ok_or_else(|| format!("tip_joint: '{t}' is not a joint"))?,
+            ),
+        };
+        let chain = chain
+            .with_tip(&End {
+                joint: tip_joint,
+                origin: Isometry3::from_parts(
+                    Translation3::from(Vector3::from(self.tip_xyz_m)),
+                    rotation("tip_quaternion_xyzw", &self.tip_quaternion_xyzw)?,
+                ),
+            })
+            .map_err(|e| format!("tip: {e}"))?;
         let mut markers = Vec::new();
+        let mut ends = Vec::new();
+        let mut marker_ends = Vec::new();
         for m in &self.markers {
             finite(&format!("marker {}", m.id), &m.xyz_m)?;
             if markers.iter().any(|(id, _)| *id == m.id) {
                 return Err(format!("marker {}: listed twice", m.id));
             }
             markers.push((m.id, Vector3::from(m.xyz_m)));
+            marker_ends.push(match &m.link {
+                None => 0,
+                Some(l) => {
+                    let what = format!("marker {} link", m.id);
+                    finite(&what, &l.xyz_m)?;
+                    let joint = match l.joint.as_str() {
+                        "" => None,
+                        j => Some(
+                            names
+                                .iter()
+                                .position(|n| n == j)
+                                .ok_or_else(|| format!("{what}: '{j}' is not a joint"))?,
+                        ),
+                    };
+                    let end = End {
+                        joint,
+                        origin: Isometry3::from_parts(
+                            Translation3::from(Vector3::from(l.xyz_m)),
+                            rotation(&what, &l.quaternion_xyzw)?,
+                        ),
+                    };
+                    match ends.iter().position(|e| *e == end) {
+                        Some(k) => k + 1,
+                        None => {
+                            ends.push(end);
+                            ends.len()
+                        }
+                    }
+                }
+            });
         }
         finite("load_com_shift_m", &self.load_com_shift_m)?;
         let joint = |name: &str| {
@@ -432,7 +537,7 @@ impl ModelFile {
                 b.value * 1e6,
             ));
         }
-        Ok(Predictor::from_parts(
+        Predictor::from_parts(
             chain,
             markers,
             Vector3::from(self.gravity_mps2),
@@ -440,6 +545,8 @@ impl ModelFile {
             bending,
             Vector3::from(self.load_com_shift_m),
             names,
-        ))
+        )
+        .with_ends(&ends, marker_ends)
+        .map_err(|e| format!("markers: {e}"))
     }
 }

@@ -95,6 +95,10 @@ fn pairs(
     convert: Option<(usize, f64)>,
 ) -> Vec<(Vector3<f64>, Vector3<f64>)> {
     let markers = &job.setup.markers;
+    // One chain per link markers are on (a tree: data contract 7.1).
+    let chains: Vec<_> = (0..job.robot.ends.len())
+        .filter_map(|k| job.robot.chain_to(k))
+        .collect();
     data.unloaded()
         .filter_map(|o| {
             let m = markers.iter().find(|m| m.id == o.marker)?;
@@ -102,7 +106,8 @@ fn pairs(
             if let Some((j, s)) = convert {
                 q[j] *= s;
             }
-            let f = job.robot.chain.frames(&q).ok()?;
+            let k = job.robot.end_index(m.link.as_deref())?;
+            let f = chains.get(k)?.frames(&q).ok()?;
             Some((f.point_m(&Vector3::from(m.xyz)), Vector3::from(o.p_m)))
         })
         .collect()

@@ -50,6 +50,11 @@ pub struct Payload {
 #[derive(Debug, Clone)]
 pub struct Predictor {
     chain: Chain<f64, J>,
+    /// The chain ending at each link markers are on (`[0]`: `chain`; more
+    /// for a tree, data contract 7.1), placed.
+    branches: Vec<Chain<f64, J>>,
+    /// Each marker's index into `branches`.
+    marker_ends: Vec<usize>,
     markers: Vec<Vector3<f64>>,
     marker_ids: Vec<u32>,
     gravity_mps2: Vector3<f64>,
@@ -90,6 +95,8 @@ impl Predictor {
         g.apply(&model.params, x);
         Self {
             chain: g.placed_chain(),
+            branches: g.placed_chains(),
+            marker_ends: g.marker_ends.clone(),
             markers: g.markers.clone(),
             marker_ids: (0..g.markers.len())
                 .map(|m| model.names.marker_id(m as u8))
@@ -135,6 +142,8 @@ impl Predictor {
         joint_names: Vec<String>,
     ) -> Self {
         Self {
+            branches: vec![chain.clone()],
+            marker_ends: vec![0; markers.len()],
             chain,
             marker_ids: markers.iter().map(|m| m.0).collect(),
             markers: markers.iter().map(|m| m.1).collect(),
@@ -150,6 +159,78 @@ impl Predictor {
     /// The chain, placed in the measurement frame.
     pub fn chain(&self) -> &Chain<f64, J> {
         &self.chain
+    }
+
+    /// Sets where each marker is (a tree, data contract 7.1): `ends` the
+    /// chain's ends besides its tip's (placed in the measurement frame, as
+    /// the chain is), `marker_ends[m]` marker `m`'s end (0: the tip, `k`:
+    /// `ends[k - 1]`).
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for an end the chain does not have or a marker
+    /// end past `ends`; [`Error::Mismatch`] for one end per marker missing.
+    pub fn with_ends(
+        mut self,
+        ends: &[crate::robot::End<f64>],
+        marker_ends: Vec<usize>,
+    ) -> Result<Self, Error> {
+        if marker_ends.len() != self.markers.len() {
+            return Err(Error::Mismatch {
+                what: "one end per marker",
+            });
+        }
+        if let Some(&k) = marker_ends.iter().find(|&&k| k > ends.len()) {
+            return Err(Error::OutOfRange {
+                what: "marker end",
+                index: k,
+                len: ends.len() + 1,
+            });
+        }
+        let mut branches = vec![self.chain.clone()];
+        for e in ends {
+            branches.push(self.chain.with_tip(e)?);
+        }
+        self.branches = branches;
+        self.marker_ends = marker_ends;
+        Ok(self)
+    }
+
+    /// This predictor with its tip at marker `id`'s link: [`Self::predict`],
+    /// [`Self::compensate`] and [`Self::compensate_pose`] of a point on that
+    /// link (a tree's other branch, data contract 7.1). The same predictor
+    /// for a marker on the tip link.
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when there is no marker `id`.
+    pub fn for_marker(&self, id: u32) -> Result<Self, CalibrationError> {
+        self.marker_m(id)?;
+        let m = self.marker_ids.iter().position(|&i| i == id).unwrap_or(0);
+        let k = self.marker_ends.get(m).copied().unwrap_or(0);
+        if k == 0 {
+            return Ok(self.clone());
+        }
+        let chain = self
+            .branches
+            .get(k)
+            .cloned()
+            .unwrap_or_else(|| self.chain.clone());
+        Ok(Self {
+            branches: vec![chain.clone()],
+            marker_ends: vec![0; self.markers.len()],
+            chain,
+            // The covariance's finite differences rebuild the tip's chain.
+            calibration: None,
+            ..self.clone()
+        })
+    }
+
+    /// The chain's ends besides the tip's (placed) and each marker's end, as
+    /// [`Predictor::with_ends`] takes them.
+    pub fn ends(&self) -> (Vec<crate::robot::End<f64>>, &[usize]) {
+        (
+            self.branches.iter().skip(1).map(Chain::tip_end).collect(),
+            &self.marker_ends,
+        )
     }
 
     /// Marker ids and calibrated positions \[m, tip frame\].
@@ -283,8 +364,65 @@ impl Predictor {
             - self.predict_with(tool_m, q, None, false)?)
     }
 
+    /// [`Self::predict`] of marker index `m` (at its calibrated position, on
+    /// its own link: a tree's markers are on several, data contract 7.1).
+    ///
+    /// # Errors
+    /// As [`Self::predict`]; [`Error::OutOfRange`] for no marker `m`.
+    pub fn predict_marker(
+        &self,
+        m: usize,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<Vector3<f64>, Error> {
+        let (chain, tool) = self.marker_chain(m)?;
+        self.predict_on(chain, &tool, q, payload, true)
+    }
+
+    /// [`Self::predict_deflection`] of marker index `m` (see
+    /// [`Self::predict_marker`]).
+    ///
+    /// # Errors
+    /// As [`Self::predict_marker`].
+    pub fn predict_marker_deflection(
+        &self,
+        m: usize,
+        q: &[f64],
+        payload: &Payload,
+    ) -> Result<Vector3<f64>, Error> {
+        let (chain, tool) = self.marker_chain(m)?;
+        Ok(self.predict_on(chain, &tool, q, Some(payload), false)?
+            - self.predict_on(chain, &tool, q, None, false)?)
+    }
+
+    fn marker_chain(&self, m: usize) -> Result<(&Chain<f64, J>, Vector3<f64>), Error> {
+        let out = Error::OutOfRange {
+            what: "marker",
+            index: m,
+            len: self.markers.len(),
+        };
+        let tool = *self.markers.get(m).ok_or(out)?;
+        let chain = self
+            .marker_ends
+            .get(m)
+            .and_then(|&k| self.branches.get(k))
+            .unwrap_or(&self.chain);
+        Ok((chain, tool))
+    }
+
     fn predict_with(
         &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+        own_weight: bool,
+    ) -> Result<Vector3<f64>, Error> {
+        self.predict_on(&self.chain, tool_m, q, payload, own_weight)
+    }
+
+    fn predict_on(
+        &self,
+        chain: &Chain<f64, J>,
         tool_m: &Vector3<f64>,
         q: &[f64],
         payload: Option<&Payload>,
@@ -296,7 +434,7 @@ impl Predictor {
             loading.own_weight_mps2 = None;
         }
         let law = self.lin.joint_law(q, true);
-        let eq = equilibrium(&self.chain, q, q, &loading, &law, &EQUILIBRIUM)?;
+        let eq = equilibrium(chain, q, q, &loading, &law, &EQUILIBRIUM)?;
         let p = eq.frames.point_m(tool_m);
         Ok(p + self.bending_m(&eq.frames, &p, &loading)?)
     }

@@ -200,7 +200,11 @@ impl Rows {
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
         let setup = &job.setup;
-        let chain = &job.robot.chain;
+        // One chain per link markers are on (a tree: data contract 7.1).
+        let chains: Vec<_> = (0..job.robot.ends.len())
+            .filter_map(|k| job.robot.chain_to(k))
+            .collect();
+        let ends = super::marker_ends(job);
         let dof = job.robot.dof();
         let use_absolute = absolute || data.deflections.is_empty();
         let gravity = setup.load.map_or(Vector3::new(0.0, 0.0, -9.80665), |l| {
@@ -281,11 +285,16 @@ impl Rows {
                        measured: [f64; 3],
                        line,
                        sigma: Option<[f64; 3]>| {
+            let m = index_of(marker);
+            let chain = ends
+                .get(usize::from(m))
+                .and_then(|&k| chains.get(k))
+                .unwrap_or(&job.robot.chain);
             rows.push(Row {
                 kind,
                 group: group_of(config),
                 config,
-                marker: index_of(marker),
+                marker: m,
                 load_kg,
                 q: q.to_vec(),
                 dt,
@@ -371,7 +380,7 @@ impl Rows {
         geometry: &Geometry,
         lin: &Linearisation,
     ) -> Result<(), CalibrationError> {
-        let chain = geometry.placed_chain();
+        let chains = geometry.placed_chains();
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
@@ -384,6 +393,8 @@ impl Rows {
                 .copied()
                 .unwrap_or_default();
             let absolute = row.kind == RowKind::Absolute;
+            // The chain of the row's marker's link (one end but for a tree).
+            let chain = &chains[geometry.end_of(row.marker).min(chains.len() - 1)];
             let loading = Loading {
                 load: (!absolute).then_some(PointLoad {
                     mass_kg: row.load_kg,
@@ -412,7 +423,7 @@ impl Rows {
             match lin.law(&row.q, absolute) {
                 None => {
                     loading
-                        .torques(&chain, &rigid, &mut row.tau)
+                        .torques(chain, &rigid, &mut row.tau)
                         .map_err(core("torques"))?;
                     row.load = loading.load.map(|l| l.wrench(&rigid));
                     row.frames.set(&rigid);
@@ -432,9 +443,9 @@ impl Rows {
                     } else {
                         row.q.clone()
                     };
-                    let eq = equilibrium(&chain, &row.q, &guess, &loading, &law, &EQUILIBRIUM)
+                    let eq = equilibrium(chain, &row.q, &guess, &loading, &law, &EQUILIBRIUM)
                         .or_else(|_| {
-                            equilibrium(&chain, &row.q, &row.q, &loading, &law, &EQUILIBRIUM)
+                            equilibrium(chain, &row.q, &row.q, &loading, &law, &EQUILIBRIUM)
                         })
                         .map_err(core("equilibrium"))?;
                     let dof = row.q.len();

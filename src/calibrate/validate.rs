@@ -67,15 +67,15 @@ pub fn validate(
                 row.line
             ))
         };
-        let m = robot.marker_at(usize::from(row.marker));
+        let m = usize::from(row.marker);
         let predicted = match row.kind {
-            RowKind::Absolute => robot.predict(&m, &row.q, None),
+            RowKind::Absolute => robot.predict_marker(m, &row.q, None),
             RowKind::Deflection => {
                 let payload = Payload {
                     mass_kg: row.load_kg,
                     com_m: payload_com,
                 };
-                robot.predict_deflection(&m, &row.q, &payload)
+                robot.predict_marker_deflection(m, &row.q, &payload)
             }
         }
         .map_err(at)?;

@@ -86,7 +86,7 @@ fn tool_and_payload(
     robot: &Predictor,
     row: &PointRow,
     file: &Path,
-) -> Result<(u32, Vector3<f64>, Option<Payload>), String> {
+) -> Result<(u32, Vector3<f64>, Option<Payload>, Predictor), String> {
     let ids: Vec<u32> = robot.markers().map(|m| m.0).collect();
     let id = match (row.marker, ids.as_slice()) {
         (Some(id), _) => id,
@@ -102,11 +102,15 @@ fn tool_and_payload(
     let tool = robot
         .marker_m(id)
         .map_err(|e| format!("{}:{}: {e}", file.display(), row.line))?;
+    // The marker's own link (a tree's other branch, data contract 7.1).
+    let robot = robot
+        .for_marker(id)
+        .map_err(|e| format!("{}:{}: {e}", file.display(), row.line))?;
     let payload = (row.load_kg > 0.0).then(|| Payload {
         mass_kg: row.load_kg,
         com_m: Vector3::from(row.com_m.unwrap_or_default()),
     });
-    Ok((id, tool, payload))
+    Ok((id, tool, payload, robot))
 }
 
 fn header(robot: &Predictor, row: &PointRow, target: bool) -> String {
@@ -186,7 +190,7 @@ pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
     let rows = read_points(&robot, &a.poses, false)?;
     let mut out = header(&robot, &rows[0], false) + "\n";
     for row in &rows {
-        let (id, tool, payload) = tool_and_payload(&robot, row, &a.poses)?;
+        let (id, tool, payload, robot) = tool_and_payload(&robot, row, &a.poses)?;
         let p = robot
             .predict(&tool, &row.q, payload.as_ref())
             .map_err(|e| format!("{}:{}: cannot predict: {e}", a.poses.display(), row.line))?;
@@ -222,7 +226,7 @@ pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
     let mut out = header(&robot, &rows[0], true) + "\n";
     let dof = robot.dof();
     for row in &rows {
-        let (id, tool, payload) = tool_and_payload(&robot, row, &a.targets)?;
+        let (id, tool, payload, robot) = tool_and_payload(&robot, row, &a.targets)?;
         let target = Vector3::from(row.target_m.unwrap_or_default());
         let c = match row.target_rotation_rad {
             None => robot.compensate(&tool, &target, &row.q, payload.as_ref(), &settings),

@@ -1,0 +1,407 @@
+//! A tree robot (data contract 7.1): markers on two links of a Y-shaped
+//! robot, the two branches sharing their first two joints. The data come
+//! from this file's own forward kinematics (rotation matrices written out
+//! here, sharing no code with robcal's), with known joint offsets and 20 µm
+//! noise; `robcal calibrate` must find the offsets of every joint, shared or
+//! not, within their reported σ, and a joint no marker moves must be left
+//! out rather than given a value.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+/// One joint of the reference model: name, parent link, child link, origin
+/// xyz \[m\], rpy \[rad\], axis (`None`: fixed).
+struct J {
+    name: &'static str,
+    parent: &'static str,
+    child: &'static str,
+    xyz: [f64; 3],
+    rpy: [f64; 3],
+    axis: Option<[f64; 3]>,
+}
+
+const JOINTS: [J; 8] = [
+    J {
+        name: "j0",
+        parent: "base_link",
+        child: "l0",
+        xyz: [0.0, 0.0, 0.3],
+        rpy: [0.0; 3],
+        axis: Some([0.0, 0.0, 1.0]),
+    },
+    J {
+        name: "j1",
+        parent: "l0",
+        child: "l1",
+        xyz: [0.0, 0.0, 0.2],
+        rpy: [0.0; 3],
+        axis: Some([0.0, 1.0, 0.0]),
+    },
+    J {
+        name: "a0",
+        parent: "l1",
+        child: "la0",
+        xyz: [0.0, 0.15, 0.4],
+        rpy: [0.1, 0.0, 0.0],
+        axis: Some([0.0, 1.0, 0.0]),
+    },
+    J {
+        name: "a1",
+        parent: "la0",
+        child: "la1",
+        xyz: [0.35, 0.0, 0.0],
+        rpy: [0.0; 3],
+        axis: Some([1.0, 0.0, 0.0]),
+    },
+    J {
+        name: "a_tip",
+        parent: "la1",
+        child: "tip_a",
+        xyz: [0.1, 0.0, 0.0],
+        rpy: [0.0, 0.2, 0.0],
+        axis: None,
+    },
+    J {
+        name: "b0",
+        parent: "l1",
+        child: "lb0",
+        xyz: [0.0, -0.15, 0.4],
+        rpy: [-0.1, 0.0, 0.0],
+        axis: Some([0.0, 1.0, 0.0]),
+    },
+    J {
+        name: "b1",
+        parent: "lb0",
+        child: "lb1",
+        xyz: [0.3, 0.0, 0.05],
+        rpy: [0.0; 3],
+        axis: Some([0.0, 0.0, 1.0]),
+    },
+    J {
+        name: "b_tip",
+        parent: "lb1",
+        child: "tip_b",
+        xyz: [0.1, 0.02, 0.0],
+        rpy: [0.0; 3],
+        axis: None,
+    },
+];
+
+/// The movable joints, CSV order, and their true offsets \[rad\].
+const MOVABLE: [(&str, f64); 6] = [
+    ("j0", 0.002),
+    ("j1", -0.003),
+    ("a0", 0.004),
+    ("a1", -0.002),
+    ("b0", 0.0015),
+    ("b1", 0.003),
+];
+
+/// Marker id, link, position \[m\] in the link.
+const MARKERS: [(u32, &str, [f64; 3]); 2] = [
+    (1, "tip_a", [0.05, 0.02, 0.03]),
+    (2, "tip_b", [0.04, -0.02, 0.01]),
+];
+
+type M3 = [[f64; 3]; 3];
+
+fn mul(a: &M3, b: &M3) -> M3 {
+    let mut c = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            c[i][j] = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    c
+}
+
+fn apply(a: &M3, v: &[f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
+}
+
+/// Rotation by `angle` about the unit `axis` (Rodrigues).
+fn rot(axis: &[f64; 3], angle: f64) -> M3 {
+    let (s, c) = angle.sin_cos();
+    let [x, y, z] = *axis;
+    let t = 1.0 - c;
+    [
+        [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+        [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+        [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+    ]
+}
+
+/// URDF rpy: `Rz(yaw) · Ry(pitch) · Rx(roll)`.
+fn rpy(r: &[f64; 3]) -> M3 {
+    let rz = rot(&[0.0, 0.0, 1.0], r[2]);
+    let ry = rot(&[0.0, 1.0, 0.0], r[1]);
+    let rx = rot(&[1.0, 0.0, 0.0], r[0]);
+    mul(&mul(&rz, &ry), &rx)
+}
+
+/// Position \[m, base frame\] of `point` on `link` at joint values `q`
+/// (CSV order) plus the true offsets: walk up from `link` to the base, then
+/// compose down.
+fn fk(link: &str, q: &[f64], point: &[f64; 3]) -> [f64; 3] {
+    let mut path = Vec::new();
+    let mut at = link;
+    while at != "base_link" {
+        let j = JOINTS.iter().find(|j| j.child == at).unwrap();
+        path.push(j);
+        at = j.parent;
+    }
+    path.reverse();
+    let (mut r, mut t) = (rot(&[1.0, 0.0, 0.0], 0.0), [0.0; 3]);
+    for j in path {
+        let o = apply(&r, &j.xyz);
+        t = [t[0] + o[0], t[1] + o[1], t[2] + o[2]];
+        r = mul(&r, &rpy(&j.rpy));
+        if let Some(axis) = j.axis {
+            let k = MOVABLE.iter().position(|m| m.0 == j.name).unwrap();
+            r = mul(&r, &rot(&axis, q[k] + MOVABLE[k].1));
+        }
+    }
+    let p = apply(&r, point);
+    [t[0] + p[0], t[1] + p[1], t[2] + p[2]]
+}
+
+fn urdf() -> String {
+    let mut links: Vec<&str> = vec!["base_link"];
+    links.extend(JOINTS.iter().map(|j| j.child));
+    let mut s = String::from("<robot name=\"y\">\n");
+    for l in links {
+        s += &format!("  <link name=\"{l}\"/>\n");
+    }
+    for j in &JOINTS {
+        let kind = if j.axis.is_some() {
+            "revolute"
+        } else {
+            "fixed"
+        };
+        s += &format!(
+            "  <joint name=\"{}\" type=\"{kind}\"><parent link=\"{}\"/><child link=\"{}\"/>\
+             <origin xyz=\"{} {} {}\" rpy=\"{} {} {}\"/>",
+            j.name, j.parent, j.child, j.xyz[0], j.xyz[1], j.xyz[2], j.rpy[0], j.rpy[1], j.rpy[2]
+        );
+        if let Some(a) = j.axis {
+            s += &format!(
+                "<axis xyz=\"{} {} {}\"/><limit lower=\"-3\" upper=\"3\" effort=\"1\" velocity=\"1\"/>",
+                a[0], a[1], a[2]
+            );
+        }
+        s += "</joint>\n";
+    }
+    s + "</robot>\n"
+}
+
+/// A small generator of its own: SplitMix64 and Box–Muller.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn normal(&mut self) -> f64 {
+        let (u, v) = (self.next().max(1e-300), self.next());
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+}
+
+const SIGMA_M: f64 = 20e-6;
+
+/// The job's files in a fresh directory: the URDF, the setup with the
+/// given markers, and 40 configurations of data (both markers in each).
+fn job(name: &str, markers: &[(u32, &str, [f64; 3])]) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("robcal-tree-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    std::fs::write(d.join("y.urdf"), urdf()).unwrap();
+    let mut setup = String::from(
+        "robot = \"y.urdf\"\nbase_link = \"base_link\"\ntip_link = \"tip_a\"\n\
+         [units]\nangle = \"rad\"\nlength = \"m\"\n",
+    );
+    for (id, link, xyz) in markers {
+        setup += &format!(
+            "[[marker]]\nid = {id}\nlink = \"{link}\"\nxyz = [{}, {}, {}]\n",
+            xyz[0], xyz[1], xyz[2]
+        );
+    }
+    setup += "[noise]\nsigma0_um = 20.0\n[model]\ngeometry = \"joint_offsets\"\n";
+    std::fs::write(d.join("setup.toml"), setup).unwrap();
+    let mut rng = Rng(20261125);
+    let names: Vec<&str> = MOVABLE.iter().map(|m| m.0).collect();
+    let mut csv = format!("config,rep,marker,load_kg,{},x,y,z\n", names.join(","));
+    for c in 0..40 {
+        let q: Vec<f64> = (0..MOVABLE.len()).map(|_| 2.4 * rng.next() - 1.2).collect();
+        let qs: Vec<String> = q.iter().map(|v| format!("{v:.17}")).collect();
+        for (id, link, xyz) in markers {
+            let p = fk(link, &q, xyz).map(|v| v + SIGMA_M * rng.normal());
+            csv += &format!(
+                "{c},1,{id},0,{},{:.17},{:.17},{:.17}\n",
+                qs.join(","),
+                p[0],
+                p[1],
+                p[2]
+            );
+        }
+    }
+    std::fs::write(d.join("data.csv"), csv).unwrap();
+    d
+}
+
+fn calibrate(d: &Path) -> (Output, Value) {
+    let out = Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(d)
+        .args([
+            "calibrate",
+            "--setup",
+            "setup.toml",
+            "--data",
+            "data.csv",
+            "--no-diagnose",
+            "--json",
+        ])
+        .output()
+        .expect("run robcal");
+    assert!(
+        out.status.success(),
+        "robcal failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    (out, json)
+}
+
+fn param<'a>(json: &'a Value, name: &str) -> Option<&'a Value> {
+    json["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+}
+
+#[test]
+fn both_branches_and_the_shared_joints_are_found_within_their_sigma() {
+    let d = job("both", &MARKERS);
+    let (_, json) = calibrate(&d);
+    // 20 µm of noise per axis: the residual is the noise, the model is
+    // exact. The RMS is of the point distance, √3 · 20 µm, less the six
+    // parameters' share of the 240 equations: 34.6 · √(234/240) = 34.2 µm.
+    let rms = json["rms_um"].as_f64().unwrap();
+    assert!((31.0..37.5).contains(&rms), "rms {rms} um");
+    for (name, truth) in MOVABLE {
+        let p = param(&json, &format!("{name}.offset"))
+            .unwrap_or_else(|| panic!("{name}.offset not identified: {json}"));
+        assert_eq!(p["unit"], "mrad");
+        let (v, sd) = (p["value"].as_f64().unwrap(), p["std"].as_f64().unwrap());
+        assert!(sd > 0.0 && sd < 0.2, "{name}: sd {sd} mrad");
+        let z = (v - truth * 1e3) / sd;
+        assert!(
+            z.abs() < 4.0,
+            "{name}: {v} ± {sd} mrad, truth {} (z {z})",
+            truth * 1e3
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn the_calibrated_tree_predicts_new_poses_and_its_model_file_agrees() {
+    let d = job("predict", &MARKERS);
+    // Poses never used in the calibration: the true model's points.
+    let mut rng = Rng(7);
+    let mut validate = String::from("config,rep,marker,load_kg,j0,j1,a0,a1,b0,b1,x,y,z\n");
+    let mut poses = String::from("marker,j0_rad,j1_rad,a0_rad,a1_rad,b0_rad,b1_rad\n");
+    let mut truth = Vec::new();
+    for c in 0..20 {
+        let q: Vec<f64> = (0..MOVABLE.len()).map(|_| 2.4 * rng.next() - 1.2).collect();
+        let qs: Vec<String> = q.iter().map(|v| format!("{v:.17}")).collect();
+        for (id, link, xyz) in MARKERS {
+            let p = fk(link, &q, &xyz);
+            validate += &format!(
+                "{c},1,{id},0,{},{:.17},{:.17},{:.17}\n",
+                qs.join(","),
+                p[0],
+                p[1],
+                p[2]
+            );
+            poses += &format!("{id},{}\n", qs.join(","));
+            truth.push(p);
+        }
+    }
+    std::fs::write(d.join("validate.csv"), validate).unwrap();
+    std::fs::write(d.join("poses.csv"), poses).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(&d)
+        .args([
+            "calibrate",
+            "--setup",
+            "setup.toml",
+            "--data",
+            "data.csv",
+            "--no-diagnose",
+        ])
+        .args(["--validate", "validate.csv", "--output", "out", "--json"])
+        .output()
+        .expect("run robcal");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+    // Noise-free points: what is left is the estimate's own error, a
+    // fraction of the 20 µm noise.
+    let v = &json["validation"];
+    let rms_mm = v["rms_mm"].as_f64().unwrap_or_else(|| panic!("{v}"));
+    assert!(rms_mm < 0.015, "validation RMS {rms_mm} mm");
+    assert_eq!(v["points"], 40);
+    // The model file holds the tree: b0 hangs from j1, marker 2 on b1's link.
+    let model: Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/model.json")).unwrap()).unwrap();
+    let pr = &model["predictor"];
+    let b0 = pr["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|j| j["name"] == "b0")
+        .unwrap();
+    assert_eq!(b0["parent"], "j1");
+    assert_eq!(pr["markers"][1]["link"]["joint"], "b1");
+    // `robcal predict` from the model file alone: each marker on its own
+    // branch, where the validation put it.
+    let out = Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(&d)
+        .args([
+            "predict",
+            "--model",
+            "out/model.json",
+            "--poses",
+            "poses.csv",
+        ])
+        .output()
+        .expect("run robcal");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut worst: f64 = 0.0;
+    for (line, t) in text.lines().skip(1).zip(&truth) {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        let p = &cells[cells.len() - 3..];
+        let e = ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2) + (p[2] - t[2]).powi(2)).sqrt();
+        worst = worst.max(e);
+    }
+    assert_eq!(text.lines().count(), 41);
+    assert!(worst < 0.05e-3, "model file prediction off by {worst} m");
+    let _ = std::fs::remove_dir_all(&d);
+}
