@@ -31,12 +31,15 @@
 //!
 //! | module | what | needs |
 //! |---|---|---|
-//! | [`robot`] | the serial chain, forward kinematics, loads and joint torques, the deflected equilibrium, compensation | — |
+//! | [`robot`] | the serial chain (or a tree, markers on several links), forward kinematics, loads and joint torques, the deflected equilibrium, compensation | — (trees: `tree`, on with `std`) |
 //! | [`model`] | [`model::Param`] (every parameter and effect, with units), [`model::Sample`], the columns, the device's [`model::Layout`] | — |
 //! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests | — |
 //! | [`Error`] | the core's one error type | — |
 //! | `io` | the data contract's files: URDF, setup TOML, measurement CSV, importers | `std` |
 //! | `calibrate` | the one calibration engine: `calibrate::calibrate` | `std` |
+//!
+//! The `tree` feature (no_std too; `std` turns it on) lets a chain branch:
+//! a controller of a serial arm leaves it off and saves ~600 bytes of flash.
 //!
 //! Everything without a feature is `no_std`, allocation-free and free of
 //! `unsafe`; it builds for `thumbv7em-none-eabihf` and `thumbv7m-none-eabi`

@@ -140,7 +140,10 @@ impl Param {
                 }
             }
             Param::LinkCompliance { joint } => match (&s.load, s.absolute) {
-                (Some(w), false) if s.frames.joint(usize::from(joint))?.carries => {
+                (Some(w), false)
+                    if cfg!(not(feature = "tree"))
+                        || s.frames.joint(usize::from(joint))?.carries =>
+                {
                     let jf = s.frames.joint(usize::from(joint))?;
                     let o = jf.origin_m();
                     let m = (w.point_m - o).cross(&w.force_n);
@@ -240,7 +243,7 @@ pub fn joint_frame_columns<T: RealField + Copy, const J: usize>(
     p_m: &Vector3<T>,
 ) -> Result<[Vector3<T>; 6], Error> {
     let jf = frames.joint(j)?;
-    if !jf.carries {
+    if cfg!(feature = "tree") && !jf.carries {
         return Ok([Vector3::zeros(); 6]);
     }
     let z = jf.zero;

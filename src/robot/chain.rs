@@ -119,8 +119,10 @@ pub struct End<T: RealField + Copy> {
 pub struct Chain<T: RealField + Copy, const J: usize> {
     joints: heapless::Vec<Joint<T>, J>,
     /// Each joint's parent joint plus one (0: the base frame).
+    #[cfg(feature = "tree")]
     parents: heapless::Vec<u8, J>,
     /// The joint the tip is fixed to, plus one (0: the base frame).
+    #[cfg(feature = "tree")]
     tip_parent: u8,
     tip: Isometry3<T>,
 }
@@ -130,7 +132,9 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     pub fn new() -> Self {
         Self {
             joints: heapless::Vec::new(),
+            #[cfg(feature = "tree")]
             parents: heapless::Vec::new(),
+            #[cfg(feature = "tree")]
             tip_parent: 0,
             tip: Isometry3::identity(),
         }
@@ -145,19 +149,25 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// non-finite number. The chain is unchanged on error.
     pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::Error> {
         let parent = self.tip_joint();
-        let index = self.push_child(joint, parent)?;
+        let _index = self.push_child(joint, parent)?;
         // `index + 1 ≤ 255`: `push_child` refuses more joints.
-        self.tip_parent = (index + 1) as u8;
+        #[cfg(feature = "tree")]
+        {
+            self.tip_parent = (_index + 1) as u8;
+        }
         Ok(())
     }
 
     /// Appends a movable joint whose frame hangs from joint `parent`'s frame
     /// (`None`: from the base frame), leaving the tip where it is: a branch
-    /// of a tree. Returns the new joint's index.
+    /// of a tree. Returns the new joint's index. Without the `tree` feature
+    /// (a controller's build), only the serial `parent` (the last joint) is
+    /// taken, and the tip follows it.
     ///
     /// # Errors
     /// As [`Chain::push`]; [`crate::Error::OutOfRange`] when `parent` is not
-    /// a joint of the chain. The chain is unchanged on error.
+    /// a joint of the chain (without `tree`: not the last one). The chain is
+    /// unchanged on error.
     pub fn push_child(
         &mut self,
         joint: Joint<T>,
@@ -165,7 +175,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     ) -> Result<usize, crate::Error> {
         let index = self.joints.len();
         if let Some(p) = parent {
-            if p >= index {
+            if p >= index || (cfg!(not(feature = "tree")) && p + 1 != index) {
                 return Err(crate::Error::OutOfRange {
                     what: "parent joint",
                     index: p,
@@ -193,14 +203,25 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         if !finite {
             return Err(crate::Error::NonFinite { what: "joint" });
         }
-        let full = |_| crate::Error::CapacityExceeded {
-            what: "chain joints",
-            capacity: J,
-        };
-        // Both have room: `index < J`.
-        self.parents
-            .push(parent.map_or(0, |p| (p + 1) as u8))
-            .map_err(full)?;
+        #[cfg(feature = "tree")]
+        {
+            let full = |_| crate::Error::CapacityExceeded {
+                what: "chain joints",
+                capacity: J,
+            };
+            // Both have room: `index < J`.
+            self.parents
+                .push(parent.map_or(0, |p| (p + 1) as u8))
+                .map_err(full)?;
+        }
+        #[cfg(not(feature = "tree"))]
+        if parent.is_none() && index > 0 {
+            return Err(crate::Error::OutOfRange {
+                what: "parent joint",
+                index: 0,
+                len: index,
+            });
+        }
         self.joints
             .push(joint)
             .map_err(|_| crate::Error::CapacityExceeded {
@@ -216,11 +237,12 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     }
 
     /// The same chain with its tip at `end`: the chain of one marker link of
-    /// a tree (see the [module docs](self)).
+    /// a tree (see the [module docs](self); the `tree` feature).
     ///
     /// # Errors
     /// [`crate::Error::OutOfRange`] when `end.joint` is not a joint of the
     /// chain; [`crate::Error::NonFinite`] for a non-finite transform.
+    #[cfg(feature = "tree")]
     pub fn with_tip(&self, end: &End<T>) -> Result<Self, crate::Error> {
         if let Some(j) = end.joint {
             if j >= self.dof() {
@@ -254,30 +276,44 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
 
     /// The joint the tip is fixed to (`None`: the base frame).
     pub fn tip_joint(&self) -> Option<usize> {
-        usize::from(self.tip_parent).checked_sub(1)
+        #[cfg(feature = "tree")]
+        return usize::from(self.tip_parent).checked_sub(1);
+        #[cfg(not(feature = "tree"))]
+        return self.joints.len().checked_sub(1);
     }
 
     /// Joint `j`'s parent joint (`None`: the base frame, or no joint `j`).
     pub fn parent(&self, j: usize) -> Option<usize> {
-        self.parents
+        #[cfg(feature = "tree")]
+        return self
+            .parents
             .get(j)
-            .and_then(|&p| usize::from(p).checked_sub(1))
+            .and_then(|&p| usize::from(p).checked_sub(1));
+        #[cfg(not(feature = "tree"))]
+        return j.checked_sub(1).filter(|_| j < self.joints.len());
     }
 
     /// Whether every joint hangs from the one before it (a serial chain).
     pub fn is_serial(&self) -> bool {
-        self.parents
+        #[cfg(feature = "tree")]
+        return self
+            .parents
             .iter()
             .enumerate()
-            .all(|(j, &p)| usize::from(p) == j)
+            .all(|(j, &p)| usize::from(p) == j);
+        #[cfg(not(feature = "tree"))]
+        return true;
     }
 
     /// Joint `j` and the joints it hangs from, up to the base (`j` first):
     /// the joints that move a point fixed to joint `j`'s frame.
     pub fn path(&self, j: Option<usize>) -> Path<'_> {
         Path {
+            #[cfg(feature = "tree")]
             parents: &self.parents,
-            next: j.filter(|&j| j < self.parents.len()),
+            next: j.filter(|&j| j < self.joints.len()),
+            #[cfg(not(feature = "tree"))]
+            _chain: core::marker::PhantomData,
         }
     }
 
@@ -286,12 +322,12 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// the result are in the frame `base` is given in.
     pub fn placed(&self, base: &Isometry3<T>) -> Self {
         let mut c = self.clone();
-        for (j, &p) in c.joints.iter_mut().zip(&self.parents) {
-            if p == 0 {
-                j.origin = base * j.origin;
+        for (j, joint) in c.joints.iter_mut().enumerate() {
+            if self.parent(j).is_none() {
+                joint.origin = base * joint.origin;
             }
         }
-        if c.tip_parent == 0 {
+        if self.tip_joint().is_none() {
             c.tip = base * c.tip;
         }
         c
@@ -321,8 +357,11 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
 /// The joints from one joint up to the base ([`Chain::path`]).
 #[derive(Debug, Clone)]
 pub struct Path<'a> {
+    #[cfg(feature = "tree")]
     parents: &'a [u8],
     next: Option<usize>,
+    #[cfg(not(feature = "tree"))]
+    _chain: core::marker::PhantomData<&'a ()>,
 }
 
 impl Iterator for Path<'_> {
@@ -330,12 +369,16 @@ impl Iterator for Path<'_> {
 
     fn next(&mut self) -> Option<usize> {
         let j = self.next?;
-        // Parents come before their children, so this ends.
-        self.next = self
-            .parents
-            .get(j)
-            .and_then(|&p| usize::from(p).checked_sub(1))
-            .filter(|&p| p < j);
+        // Parents come before their children (`Chain::push_child` checks
+        // it), so this ends.
+        #[cfg(feature = "tree")]
+        {
+            self.next = usize::from(*self.parents.get(j)?).checked_sub(1);
+        }
+        #[cfg(not(feature = "tree"))]
+        {
+            self.next = j.checked_sub(1);
+        }
         Some(j)
     }
 }

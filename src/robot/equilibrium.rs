@@ -125,11 +125,32 @@ fn add_wrench_jacobian<T: RealField + Copy, const J: usize>(
     t: &mut SMatrix<T, J, J>,
 ) {
     let (f, c, m) = (w.force_n, w.point_m, w.moment_nm);
-    let on = |j: usize| js.get(j).map(|jf| (j, jf));
-    for (j, jj) in chain.path(last).filter_map(on) {
+    let Some(last) = last else { return };
+    // A tree's joints off the path to `last` do not carry the wrench.
+    #[cfg(feature = "tree")]
+    let on = {
+        let mut on = [false; J];
+        for j in chain.path(Some(last)) {
+            if let Some(o) = on.get_mut(j) {
+                *o = true;
+            }
+        }
+        on
+    };
+    #[cfg(not(feature = "tree"))]
+    let _ = chain;
+    for (j, jj) in js.iter().enumerate().take(last + 1) {
+        #[cfg(feature = "tree")]
+        if !on[j] {
+            continue;
+        }
         let zj = jj.axis.into_inner();
         let cj = c - jj.origin_m();
-        for (i, ji) in chain.path(last).filter_map(on) {
+        for (i, ji) in js.iter().enumerate().take(last + 1) {
+            #[cfg(feature = "tree")]
+            if !on[i] {
+                continue;
+            }
             let zi = ji.axis.into_inner();
             let d = match (ji.kind, jj.kind, i < j) {
                 // Joint i turns joint j's axis and origin and the point.

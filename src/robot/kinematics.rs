@@ -59,7 +59,7 @@ impl<T: RealField + Copy> JointFrame<T> {
     /// This is the joint-offset column of eq. 2 and, times `τⱼ`, the
     /// compliance column of eq. 3.
     pub fn twist_column(&self, p_m: &Vector3<T>) -> Vector3<T> {
-        if !self.carries {
+        if cfg!(feature = "tree") && !self.carries {
             return Vector3::zeros();
         }
         match self.kind {
@@ -159,14 +159,12 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
             return Err(Error::NonFinite { what: "q" });
         }
         let mut joints: heapless::Vec<JointFrame<T>, J> = heapless::Vec::new();
-        let mut t = Isometry3::identity();
-        let serial = self.is_serial();
         for (j, (joint, &qj)) in self.joints().iter().zip(q).enumerate() {
-            let parent = match j.checked_sub(1) {
-                Some(p) if serial => joints.get(p).map(|f| f.frame),
-                _ => self.parent(j).and_then(|p| joints.get(p)).map(|f| f.frame),
+            // Parents come before their children (`Chain::push_child`).
+            let zero = match self.parent(j).and_then(|p| joints.get(p)) {
+                Some(f) => f.frame * joint.origin,
+                None => joint.origin,
             };
-            let zero = parent.unwrap_or_else(Isometry3::identity) * joint.origin;
             let moved = zero * joint.motion(qj);
             let axis = Unit::new_normalize(zero.rotation * joint.axis.into_inner());
             // Capacity equals the chain's, so this cannot fail; map it anyway.
@@ -176,24 +174,27 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
                     frame: moved,
                     axis,
                     kind: joint.kind,
-                    carries: serial,
+                    // Serial: every joint carries the tip.
+                    carries: cfg!(not(feature = "tree")),
                 })
                 .map_err(|_| Error::CapacityExceeded {
                     what: "frames",
                     capacity: J,
                 })?;
         }
+        // The tip's path, walked up from its joint: one pass from the last
+        // joint down, since a parent has the lower index.
         let tip_joint = self.tip_joint();
-        if let Some(f) = tip_joint.and_then(|j| joints.get(j)) {
-            t = f.frame;
-        }
-        if !serial || tip_joint.map_or(true, |j| j + 1 != joints.len()) {
-            for jf in joints.iter_mut() {
-                jf.carries = false;
-            }
-            for j in self.path(tip_joint) {
-                if let Some(jf) = joints.get_mut(j) {
+        let t = tip_joint
+            .and_then(|j| joints.get(j))
+            .map_or_else(Isometry3::identity, |f| f.frame);
+        #[cfg(feature = "tree")]
+        {
+            let mut next = tip_joint;
+            for (j, jf) in joints.iter_mut().enumerate().rev() {
+                if next == Some(j) {
                     jf.carries = true;
+                    next = self.parent(j);
                 }
             }
         }

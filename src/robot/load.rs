@@ -105,7 +105,7 @@ pub fn joint_torques<T: RealField + Copy, const J: usize>(
 ) -> Result<(), Error> {
     check_len(frames, tau.len())?;
     for (t, jf) in tau.iter_mut().zip(frames.joints()) {
-        *t = if jf.carries {
+        *t = if cfg!(not(feature = "tree")) || jf.carries {
             wrench.torque_on(jf)
         } else {
             T::zero()
@@ -144,10 +144,15 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
             gravity_mps2 * link.mass_kg,
             lf.frame.transform_point(&Point3::from(link.com_m)).coords,
         );
+        #[cfg(feature = "tree")]
         for j in chain.path(Some(l)) {
             if let (Some(t), Some(jf)) = (tau.get_mut(j), frames.joints().get(j)) {
                 *t += w.torque_on(jf);
             }
+        }
+        #[cfg(not(feature = "tree"))]
+        for (t, jf) in tau.iter_mut().zip(frames.joints()).take(l + 1) {
+            *t += w.torque_on(jf);
         }
     }
     Ok(())
