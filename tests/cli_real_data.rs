@@ -501,3 +501,74 @@ fn motoman_protocol_on_the_test_poses() {
         }
     }
 }
+
+/// The protocol of docs/real-data.md for DLR's Justin, pinned: a tree (a
+/// marker on each hand, the torso shared, data contract 7.1) calibrated
+/// with the closed loop on the 300 training poses, validated on the 200
+/// test poses.
+#[test]
+fn justin_protocol_on_the_test_poses() {
+    let Some(data) = datasets("justin_protocol_on_the_test_poses") else {
+        return;
+    };
+    let d = dir("justin");
+    let (train, _) = import(&data, &d, "dlr_justin", "train");
+    let (test, _) = import(&data, &d, "dlr_justin", "test");
+    let urdf = data.join("dlr_justin/dlr_justin.urdf");
+    let text = std::fs::read_to_string(root().join("data/dlr_justin/setup.toml"))
+        .unwrap()
+        .replace(
+            "../../../shared/datasets/dlr_justin/dlr_justin.urdf",
+            &urdf.to_string_lossy(),
+        );
+    let setup = d.join("setup.toml");
+    std::fs::write(&setup, text).unwrap();
+    let o = robcal(&[
+        "calibrate",
+        "--setup",
+        setup.to_str().unwrap(),
+        "--data",
+        train.to_str().unwrap(),
+        "--validate",
+        test.to_str().unwrap(),
+        "--json",
+    ]);
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // The loop adds nothing: the gear-cyclic candidates on the loaded
+    // joints are refused as unphysical (docs/real-data.md).
+    assert_eq!(v["effects"].as_array().map(Vec::len), Some(0));
+    let val = &v["validation"];
+    assert_eq!(val["points"].as_u64(), Some(400));
+    // (what, got, want): docs/real-data.md, evaluation 3.
+    for (what, got, want) in [
+        (
+            "train rms um",
+            v["rms_um"].as_f64().unwrap() / 1e3,
+            10.858281,
+        ),
+        ("rms", val["rms_mm"].as_f64().unwrap(), 12.416706),
+        (
+            "mean 1",
+            val["per_marker_mean_mm"]["1"].as_f64().unwrap(),
+            11.609036,
+        ),
+        (
+            "mean 2",
+            val["per_marker_mean_mm"]["2"].as_f64().unwrap(),
+            10.383354,
+        ),
+        (
+            "max 1",
+            val["per_marker_max_mm"]["1"].as_f64().unwrap(),
+            33.952711,
+        ),
+        (
+            "max 2",
+            val["per_marker_max_mm"]["2"].as_f64().unwrap(),
+            32.379637,
+        ),
+    ] {
+        assert!((got - want).abs() < 1e-4, "{what}: {got}, want {want}");
+    }
+}
