@@ -213,15 +213,16 @@ where
         // enters them, also with w = 0: 0·∞ = NaN). Any failure takes the
         // slow path, `validate_rows`, for the precise error. Rows past
         // `rows` are never read: they count as zero rows of weight 0.
-        let added = match RowWeights::new(dp, w, sigma, rows) {
+        let what = match RowWeights::new(dp, w, sigma, rows) {
             Some(rw) if rows == 3 => self.add_rows3(b.as_slice(), &rw),
             Some(rw) => self.add_rows(b.as_slice(), &rw, rows),
-            None => Err(Error::NonFinite { what: "weight" }),
+            None => Err("weight"),
         };
-        if added.is_err() {
-            validate_rows(b, dp, w, sigma, rows)?;
-        }
-        added
+        let Err(what) = what else {
+            return Ok(());
+        };
+        validate_rows(b, dp, w, sigma, rows)?;
+        Err(Error::NonFinite { what })
     }
 
     /// The update of a block of three rows, on `B` (column-major, 3 × n)
@@ -240,18 +241,19 @@ where
     /// [`Self::fits_exactly`] computes the new checked values as the commit
     /// will: the check of the two-sweep update this replaced. Then one pass
     /// over the columns commits everything ([`add_upper3`]; `M`, with σ,
-    /// one column at a time: the smaller code, flash).
+    /// one column at a time: the smaller code, flash). `Err("overflow")`,
+    /// the state untouched, when a sum could overflow.
     #[inline]
-    fn add_rows3(&mut self, b: &[T], rw: &RowWeights<T>) -> Result<(), Error> {
+    fn add_rows3(&mut self, b: &[T], rw: &RowWeights<T>) -> Result<(), &'static str> {
         let (w2, y) = (&rw.w2, &rw.y);
         let bound = match self.next_bound(magnitude(b, y), rw) {
             None => self.fits_exactly(b, rw, 3),
             fast => fast,
         };
         if bound.is_none() {
-            return Err(Error::NonFinite { what: "overflow" });
+            return Err("overflow");
         }
-        add_upper3(&mut self.info, Some(self.eta.as_mut_slice()), w2, y, b);
+        add_upper3(&mut self.info, self.eta.as_mut_slice(), w2, y, b);
         if rw.sigma {
             add_upper3_columns(&mut self.middle, None, &rw.s2, y, b);
         }
@@ -263,10 +265,10 @@ where
     /// (the unused rows' terms, `+0` each, left out) in loops over the
     /// rows, out of line, always checked by [`Self::fits_exactly`].
     #[inline(never)]
-    fn add_rows(&mut self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Result<(), Error> {
+    fn add_rows(&mut self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Result<(), &'static str> {
         let bound = self.fits_exactly(b, rw, rows);
         if bound.is_none() {
-            return Err(Error::NonFinite { what: "overflow" });
+            return Err("overflow");
         }
         add_upper(
             &mut self.info,
@@ -283,8 +285,9 @@ where
         Ok(())
     }
 
-    /// The running bound after an update with `q = (Σ |b| + Σ |Δp|)²`, if
-    /// it stays below the limit (see [`Self::add_rows3`]).
+    /// The running bound after an update with `q` ≥ every `b²` and `Δp²`
+    /// ([`magnitude`]), if it stays below the limit (see
+    /// [`Self::add_rows3`]).
     #[inline(always)]
     fn next_bound(&self, q: T, rw: &RowWeights<T>) -> Option<T> {
         let (w2, s2) = (&rw.w2, &rw.s2);

@@ -97,17 +97,17 @@ fn madd3<T: RealField + Copy>(x: T, bi: &[T], a: &[T; 3]) -> T {
 
 /// The rank-3 update of an upper triangle, three columns at a time: for
 /// columns `j`, `j + 1`, `j + 2` of `B` (3 × n, column-major: three
-/// contiguous values), `a = k ∘ bⱼ` (`k` = `w²` or `w⁴σ²` per row), then
-/// `m[i][j] += bᵢ · a` for `i ≤ j` — the diagonal included — and, with
-/// `eta`, `ηⱼ += a · Δp`, in the same pass. Three multiply-adds per element,
-/// summed over the rows in order. The rows above the three columns' diagonal
-/// block run in one loop that loads each `bᵢ` once for the three columns,
-/// the `a` of the three in registers; the diagonal block (six elements) is
-/// straight code. The last `n mod 3` columns go one at a time.
+/// contiguous values), `a = k ∘ bⱼ` (`k` = `w²` per row), then
+/// `m[i][j] += bᵢ · a` for `i ≤ j` — the diagonal included — and
+/// `ηⱼ += a · Δp`, in the same pass. Three multiply-adds per element, summed
+/// over the rows in order. The rows above the three columns' diagonal block
+/// run in one loop that loads each `bᵢ` once for the three columns, the `a`
+/// of the three in registers; the diagonal block (six elements) and the
+/// three `η` are straight code. The last `n mod 3` columns go one at a time.
 #[inline(always)]
 fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
     m: &mut OMatrix<T, D, D>,
-    eta: Option<&mut [T]>,
+    eta: &mut [T],
     k: &[T; 3],
     y: &[T; 3],
     b: &[T],
@@ -116,13 +116,8 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
 {
     let n = m.nrows();
     let scaled = |c: &[T]| [k[0] * c[0], k[1] * c[1], k[2] * c[2]];
-    let (mut eta3, mut eta1) = match eta {
-        Some(e) => {
-            let (e3, e1) = e.split_at_mut(3 * (n / 3));
-            (Some(e3.chunks_exact_mut(3)), Some(e1.iter_mut()))
-        }
-        None => (None, None),
-    };
+    let (eta3, eta1) = eta.split_at_mut(3 * (n / 3));
+    let (mut eta3, mut eta1) = (eta3.chunks_exact_mut(3), eta1.iter_mut());
     let bcols = b.chunks_exact(3);
     let mut tiles = m.as_mut_slice().chunks_exact_mut(3 * n);
     let mut btiles = b.chunks_exact(9);
@@ -133,7 +128,7 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
         let (b0, b12) = bt.split_at(3);
         let (b1, b2) = b12.split_at(3);
         let (a0, a1, a2) = (scaled(b0), scaled(b1), scaled(b2));
-        if let Some([e0, e1, e2]) = eta3.as_mut().and_then(Iterator::next) {
+        if let Some([e0, e1, e2]) = eta3.next() {
             *e0 = fma3(*e0, &a0, y);
             *e1 = fma3(*e1, &a1, y);
             *e2 = fma3(*e2, &a2, y);
@@ -160,7 +155,7 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
     let rest = tiles.into_remainder().chunks_exact_mut(n);
     for ((j, column), bj) in rest.enumerate().zip(btiles.remainder().chunks_exact(3)) {
         let a = scaled(bj);
-        if let Some(e) = eta1.as_mut().and_then(Iterator::next) {
+        if let Some(e) = eta1.next() {
             *e = fma3(*e, &a, y);
         }
         for (x, bi) in column.iter_mut().zip(bcols.clone()).take(done + j + 1) {
@@ -212,12 +207,13 @@ fn hard_float<T>() -> bool {
     !cfg!(target_arch = "arm") || (cfg!(target_abi = "eabihf") && core::mem::size_of::<T>() <= 4)
 }
 
-/// The rank-3 update of an upper triangle (see [`add_upper3_tiled`] and
-/// [`add_upper3_columns`]; the same values, bit for bit).
+/// The rank-3 update of `Λ`'s upper triangle and `η` (see
+/// [`add_upper3_tiled`] and [`add_upper3_columns`]: the same values, bit for
+/// bit; tiles where `T` is hardware floating point).
 #[inline(always)]
 pub(super) fn add_upper3<T: RealField + Copy, D: Dim>(
     m: &mut OMatrix<T, D, D>,
-    eta: Option<&mut [T]>,
+    eta: &mut [T],
     k: &[T; 3],
     y: &[T; 3],
     b: &[T],
@@ -227,7 +223,7 @@ pub(super) fn add_upper3<T: RealField + Copy, D: Dim>(
     if hard_float::<T>() {
         add_upper3_tiled(m, eta, k, y, b);
     } else {
-        add_upper3_columns(m, eta, k, y, b);
+        add_upper3_columns(m, Some(eta), k, y, b);
     }
 }
 
