@@ -119,7 +119,7 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
     let (eta3, eta1) = eta.split_at_mut(3 * (n / 3));
     let (mut eta3, mut eta1) = (eta3.chunks_exact_mut(3), eta1.iter_mut());
     let bcols = b.chunks_exact(3);
-    let mut tiles = m.as_mut_slice().chunks_exact_mut(3 * n);
+    let mut tiles = m.as_mut_slice().chunks_exact_mut(3 * n.max(1));
     let mut btiles = b.chunks_exact(9);
     for ((t, tile), bt) in tiles.by_ref().enumerate().zip(btiles.by_ref()) {
         let j = 3 * t;
@@ -152,7 +152,7 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
         }
     }
     let done = 3 * (n / 3);
-    let rest = tiles.into_remainder().chunks_exact_mut(n);
+    let rest = tiles.into_remainder().chunks_exact_mut(n.max(1));
     for ((j, column), bj) in rest.enumerate().zip(btiles.remainder().chunks_exact(3)) {
         let a = scaled(bj);
         if let Some(e) = eta1.next() {
@@ -182,7 +182,7 @@ pub(super) fn add_upper3_columns<T: RealField + Copy, D: Dim>(
     let mut etas = eta.map(|e| e.iter_mut());
     for ((j, column), bj) in m
         .as_mut_slice()
-        .chunks_exact_mut(n)
+        .chunks_exact_mut(n.max(1))
         .enumerate()
         .zip(bcols.clone())
     {
@@ -271,7 +271,7 @@ pub(super) fn add_upper<T: RealField + Copy, D: Dim>(
     let mut etas = eta.map(|e| e.iter_mut());
     for ((j, column), bj) in m
         .as_mut_slice()
-        .chunks_exact_mut(n)
+        .chunks_exact_mut(n.max(1))
         .enumerate()
         .zip(bcols.clone())
     {
