@@ -100,10 +100,12 @@ fn madd3<T: RealField + Copy>(x: T, bi: &[T], a: &[T; 3]) -> T {
 /// contiguous values), `a = k ∘ bⱼ` (`k` = `w²` per row), then
 /// `m[i][j] += bᵢ · a` for `i ≤ j` — the diagonal included — and
 /// `ηⱼ += a · Δp`, in the same pass. Three multiply-adds per element, summed
-/// over the rows in order. The rows above the three columns' diagonal block
-/// run in one loop that loads each `bᵢ` once for the three columns, the `a`
-/// of the three in registers; the diagonal block (six elements) and the
-/// three `η` are straight code. The last `n mod 3` columns go one at a time.
+/// over the rows in order. First the three columns' diagonal block (six
+/// elements) and their three `η`, straight code; then the rows above the
+/// block in one loop that loads each `bᵢ` once for the three columns, the
+/// `a` of the three in registers (in this order the firmware's f32 update
+/// takes 28 instructions less than with the rows first). The last `n mod 3`
+/// columns go one at a time.
 #[inline(always)]
 fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
     m: &mut OMatrix<T, D, D>,
@@ -128,20 +130,9 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
         let (b0, b12) = bt.split_at(3);
         let (b1, b2) = b12.split_at(3);
         let (a0, a1, a2) = (scaled(b0), scaled(b1), scaled(b2));
-        if let Some([e0, e1, e2]) = eta3.next() {
-            *e0 = fma3(*e0, &a0, y);
-            *e1 = fma3(*e1, &a1, y);
-            *e2 = fma3(*e2, &a2, y);
-        }
         let (c0, d0) = c0.split_at_mut(j);
         let (c1, d1) = c1.split_at_mut(j);
         let (c2, d2) = c2.split_at_mut(j);
-        let rows = c0.iter_mut().zip(c1.iter_mut()).zip(c2.iter_mut());
-        for (((x0, x1), x2), bi) in rows.zip(bcols.clone()) {
-            *x0 = madd3(*x0, bi, &a0);
-            *x1 = madd3(*x1, bi, &a1);
-            *x2 = madd3(*x2, bi, &a2);
-        }
         if let ([x00, ..], [x01, x11, ..], [x02, x12, x22, ..]) = (d0, d1, d2) {
             *x00 = madd3(*x00, b0, &a0);
             *x01 = madd3(*x01, b0, &a1);
@@ -149,6 +140,17 @@ fn add_upper3_tiled<T: RealField + Copy, D: Dim>(
             *x02 = madd3(*x02, b0, &a2);
             *x12 = madd3(*x12, b1, &a2);
             *x22 = madd3(*x22, b2, &a2);
+        }
+        if let Some([e0, e1, e2]) = eta3.next() {
+            *e0 = fma3(*e0, &a0, y);
+            *e1 = fma3(*e1, &a1, y);
+            *e2 = fma3(*e2, &a2, y);
+        }
+        let rows = c0.iter_mut().zip(c1.iter_mut()).zip(c2.iter_mut());
+        for (((x0, x1), x2), bi) in rows.zip(bcols.clone()) {
+            *x0 = madd3(*x0, bi, &a0);
+            *x1 = madd3(*x1, bi, &a1);
+            *x2 = madd3(*x2, bi, &a2);
         }
     }
     let done = 3 * (n / 3);
