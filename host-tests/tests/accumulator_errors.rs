@@ -273,3 +273,28 @@ fn dyn_block_of_another_width_is_a_mismatch() {
     assert!(matches!(acc.merge(&other), Err(Error::Mismatch { .. })));
     assert_eq!(snapshot(&acc), before);
 }
+
+/// No parameters at all (`Dyn(0)`, `Const<0>`): an update only counts its
+/// rows and adds `Σ Δpᵀ W² Δp` — it does not panic (the kernels' chunk
+/// sizes are at least 1).
+#[test]
+fn zero_parameters_update_without_panic() {
+    use nalgebra::{Dyn, OMatrix, U3};
+    fn check<T: ToF64, D: nalgebra::Dim>(mut acc: Accumulator<T, D>, dim: D)
+    where
+        nalgebra::DefaultAllocator: robcal::estimate::Alloc<D>,
+    {
+        for rows in 1..=3 {
+            let b = OMatrix::<T, U3, D>::from_element_generic(U3, dim, T::one());
+            let mut blk = Block::new(b, Vector3::repeat(T::of_f64(2.0)));
+            blk.rows = rows;
+            acc.update(&blk).unwrap();
+        }
+        assert_eq!(acc.equations(), 6);
+        assert_eq!(acc.weighted_yy().f64(), 24.0);
+    }
+    check(Accumulator::<f64, Dyn>::zeros(Dyn(0)), Dyn(0));
+    check(Accumulator::<f32, Dyn>::zeros(Dyn(0)), Dyn(0));
+    check(Accumulator::<f64, Const<0>>::new(), Const::<0>);
+    check(Accumulator::<f32, Const<0>>::new(), Const::<0>);
+}

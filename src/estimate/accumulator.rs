@@ -42,7 +42,9 @@ use super::factor::Solution;
 use crate::Error;
 
 mod kernel;
-use kernel::{add_upper, add_upper3, bound_limit, bound_margin, RowWeights};
+use kernel::{
+    add_upper, add_upper3, add_upper3_columns, bound_limit, bound_margin, magnitude, RowWeights,
+};
 
 /// Sufficient statistics of a weighted least-squares problem with `D`
 /// parameters. See the [module docs](self).
@@ -211,50 +213,49 @@ where
         // enters them, also with w = 0: 0·∞ = NaN). Any failure takes the
         // slow path, `validate_rows`, for the precise error. Rows past
         // `rows` are never read: they count as zero rows of weight 0.
-        let added = match RowWeights::new(dp, w, sigma, rows) {
+        let what = match RowWeights::new(dp, w, sigma, rows) {
             Some(rw) if rows == 3 => self.add_rows3(b.as_slice(), &rw),
             Some(rw) => self.add_rows(b.as_slice(), &rw, rows),
-            None => Err(Error::NonFinite { what: "weight" }),
+            None => Err("weight"),
         };
-        if added.is_err() {
-            validate_rows(b, dp, w, sigma, rows)?;
-        }
-        added
+        let Err(what) = what else {
+            return Ok(());
+        };
+        validate_rows(b, dp, w, sigma, rows)?;
+        Err(Error::NonFinite { what })
     }
 
     /// The update of a block of three rows, on `B` (column-major, 3 × n)
     /// and the checked weights.
     ///
     /// Validation first, without touching the state: one sweep over `B`
-    /// gives `s = Σ |b| + Σ |Δp|`, and `(Σ w² + Σ w⁴σ²) s²` bounds the change
-    /// of every checked value (`Λⱼⱼ`, `ηⱼ`, `Mⱼⱼ`, `Σ Δpᵀ W² Δp`: each term is
-    /// a weight times `b²`, `b Δp` or `Δp²`). While the running bound stays
-    /// below `max/16`, no new value can overflow — which is the check — and
-    /// a non-finite input makes the bound NaN or ∞. (`s` is a sum of
-    /// absolute values rather than of squares: one addition per value,
-    /// where soft floating point — f64 on the Cortex-M4F, everything on the
-    /// M3 — pays dearly for each multiplication.) Otherwise (rare: huge values, or a
-    /// non-finite input) [`Self::fits_exactly`] computes the new checked
-    /// values as the commit will: the check of the two-sweep update this
-    /// replaced. Then one pass over the columns commits everything
-    /// ([`add_upper3`]).
+    /// gives `q` ≥ every `b²` and `Δp²` ([`magnitude`]: `Σ b² + Σ Δp²`
+    /// where `T` is hardware floating point, `(Σ |b| + Σ |Δp|)²` where a
+    /// multiplication costs dearly — soft floating point, f64 on the
+    /// Cortex-M4F, everything on the M3), and `(Σ w² + Σ w⁴σ²) q` bounds the
+    /// change of every checked value (`Λⱼⱼ`, `ηⱼ`, `Mⱼⱼ`, `Σ Δpᵀ W² Δp`: each
+    /// term is a weight times `b²`, `b Δp` or `Δp²`, and `|b Δp| ≤ q`). While
+    /// the running bound stays below `max/16`, no new value can overflow —
+    /// which is the check — and a non-finite input makes the bound NaN or ∞.
+    /// Otherwise (rare: huge values, or a non-finite input)
+    /// [`Self::fits_exactly`] computes the new checked values as the commit
+    /// will: the check of the two-sweep update this replaced. Then one pass
+    /// over the columns commits everything ([`add_upper3`]; `M`, with σ,
+    /// one column at a time: the smaller code, flash). `Err("overflow")`,
+    /// the state untouched, when a sum could overflow.
     #[inline]
-    fn add_rows3(&mut self, b: &[T], rw: &RowWeights<T>) -> Result<(), Error> {
+    fn add_rows3(&mut self, b: &[T], rw: &RowWeights<T>) -> Result<(), &'static str> {
         let (w2, y) = (&rw.w2, &rw.y);
-        let mut s = (y[0].abs() + y[1].abs()) + y[2].abs();
-        for c in b.chunks_exact(3) {
-            s = ((s + c[0].abs()) + c[1].abs()) + c[2].abs();
-        }
-        let bound = match self.next_bound(s * s, rw) {
+        let bound = match self.next_bound(magnitude(b, y), rw) {
             None => self.fits_exactly(b, rw, 3),
             fast => fast,
         };
         if bound.is_none() {
-            return Err(Error::NonFinite { what: "overflow" });
+            return Err("overflow");
         }
-        add_upper3(&mut self.info, Some(self.eta.as_mut_slice()), w2, y, b);
+        add_upper3(&mut self.info, self.eta.as_mut_slice(), w2, y, b);
         if rw.sigma {
-            add_upper3(&mut self.middle, None, &rw.s2, y, b);
+            add_upper3_columns(&mut self.middle, None, &rw.s2, y, b);
         }
         self.commit_rest(rw, bound);
         Ok(())
@@ -264,10 +265,10 @@ where
     /// (the unused rows' terms, `+0` each, left out) in loops over the
     /// rows, out of line, always checked by [`Self::fits_exactly`].
     #[inline(never)]
-    fn add_rows(&mut self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Result<(), Error> {
+    fn add_rows(&mut self, b: &[T], rw: &RowWeights<T>, rows: usize) -> Result<(), &'static str> {
         let bound = self.fits_exactly(b, rw, rows);
         if bound.is_none() {
-            return Err(Error::NonFinite { what: "overflow" });
+            return Err("overflow");
         }
         add_upper(
             &mut self.info,
@@ -284,8 +285,9 @@ where
         Ok(())
     }
 
-    /// The running bound after an update with `q = (Σ |b| + Σ |Δp|)²`, if
-    /// it stays below the limit (see [`Self::add_rows3`]).
+    /// The running bound after an update with `q` ≥ every `b²` and `Δp²`
+    /// ([`magnitude`]), if it stays below the limit (see
+    /// [`Self::add_rows3`]).
     #[inline(always)]
     fn next_bound(&self, q: T, rw: &RowWeights<T>) -> Option<T> {
         let (w2, s2) = (&rw.w2, &rw.s2);
