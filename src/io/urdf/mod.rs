@@ -41,7 +41,7 @@ use super::{ErrorKind, InputError};
 use crate::robot::{Chain, End, JointKind};
 
 /// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
-pub const MAX_JOINTS: usize = 32;
+pub const MAX_JOINTS: usize = 24;
 
 /// XML elements nested deeper than this are refused before the URDF parser
 /// sees the text (it recurses once per level; a URDF needs 4 or 5).
