@@ -277,3 +277,103 @@ fn irls_at_dyn_equals_const_bitwise() {
     assert_eq!(bits(&flat(&b.weights[0])), bits(&flat(&b.weights[1])));
     assert_eq!(bits(&flat(&b.sigma[0])), bits(&flat(&b.sigma[1])));
 }
+
+/// One axis's moments: `S` (column-major, upper triangle), `u`, `yy`, rows.
+type Moments = (Vec<f64>, Vec<f64>, f64, usize);
+/// A group's id and its three axes' moments.
+type Group = (i32, [Moments; 3]);
+
+/// The moments as the definition adds them, row after row, one element at
+/// a time (`S` upper triangle `+= bᵢ bⱼ`, `u += b y`, `yy += y²`).
+fn naive(p: usize, rows: &[(i32, Vec<f64>, [f64; 3])]) -> Vec<Group> {
+    let mut out: Vec<Group> = Vec::new();
+    for (g, b, y) in rows {
+        let i = match out.iter().position(|o| o.0 == *g) {
+            Some(i) => i,
+            None => {
+                let zero = || (vec![0.0; p * p], vec![0.0; p], 0.0, 0);
+                out.push((*g, [zero(), zero(), zero()]));
+                out.len() - 1
+            }
+        };
+        for a in 0..3 {
+            let m = &mut out[i].1[a];
+            for j in 0..p {
+                for r in 0..=j {
+                    m.0[j * p + r] += b[3 * r + a] * b[3 * j + a];
+                }
+                m.1[j] += b[3 * j + a] * y[a];
+            }
+            m.2 += y[a] * y[a];
+            m.3 += 1;
+        }
+    }
+    out
+}
+
+fn assert_bitwise<Dm: nalgebra::Dim, const GG: usize>(s: &GroupedStats<f64, Dm, GG>, want: &[Group])
+where
+    nalgebra::DefaultAllocator: robcal::estimate::Alloc<Dm>,
+{
+    assert_eq!(s.groups().len(), want.len());
+    for (g, w) in s.groups().iter().zip(want) {
+        assert_eq!(g.id, w.0);
+        for (ax, m) in g.axes.iter().zip(&w.1) {
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(ax.s_upper.as_slice()), bits(&m.0));
+            assert_eq!(bits(ax.u.as_slice()), bits(&m.1));
+            assert_eq!(ax.yy.to_bits(), m.2.to_bits());
+            assert_eq!(ax.n, m.3);
+        }
+    }
+}
+
+/// `update`'s moments are the definition's sums bit for bit, at sizes
+/// below and above its block of rows, groups revisited out of order; and
+/// values near the overflow threshold (where the bound of the guard gives
+/// up and every new value is checked) are taken or refused as the value
+/// by value check decides, the statistics unchanged on refusal.
+#[test]
+fn update_is_the_definitions_sums_bit_for_bit() {
+    let mut rng = StdRng::seed_from_u64(5);
+    for p in [1usize, 2, 5, 9, 12, 13, 30] {
+        let rows: Vec<(i32, Vec<f64>, [f64; 3])> = (0..90)
+            .map(|k| {
+                let g = [3, 3, 1, 7, 1, 3][k % 6];
+                let scale = 10f64.powi(rng.random_range(-3..4));
+                let b = (0..3 * p)
+                    .map(|_| rng.random_range(-1.0..1.0) * scale)
+                    .collect();
+                (g, b, [rng.random_range(-1.0..1.0); 3].map(|v| v * scale))
+            })
+            .collect();
+        let want = naive(p, &rows);
+        let mut s = GroupedStats::<f64, nalgebra::Dyn, 4>::with_dim(nalgebra::Dyn(p));
+        for (g, b, y) in &rows {
+            let b = nalgebra::OMatrix::<f64, nalgebra::U3, nalgebra::Dyn>::from_column_slice(b);
+            s.update(*g, &b, &Vector3::from(*y)).unwrap();
+        }
+        assert_bitwise(&s, &want);
+    }
+    // Near the threshold: 1e153² = 1e306, a few of them still fit.
+    let mut s = GroupedStats::<f64, U2, 2>::new();
+    let big = SMatrix::<f64, 3, 2>::from_element(1e153);
+    let mut rows = Vec::new();
+    let mut refused = 0;
+    for k in 0..400 {
+        let before = s.clone();
+        match s.update(k % 2, &big, &Vector3::repeat(1.0)) {
+            Ok(()) => rows.push((k % 2, big.as_slice().to_vec(), [1.0; 3])),
+            Err(e) => {
+                assert_eq!(e, robcal::Error::NonFinite { what: "overflow" });
+                assert_eq!(s, before);
+                refused += 1;
+            }
+        }
+    }
+    assert!(refused > 0 && !rows.is_empty());
+    assert_bitwise(&s, &naive(2, &rows));
+    // The statistics still take ordinary rows after a refusal.
+    s.update(0, &SMatrix::<f64, 3, 2>::identity(), &Vector3::zeros())
+        .unwrap();
+}

@@ -170,3 +170,39 @@ fn single_fits_and_errors_are_the_generic_paths() {
     assert_eq!(a, b);
     assert!(a.is_err());
 }
+
+#[test]
+fn an_overflow_and_a_bad_weight_give_the_generic_paths_first_error() {
+    let s = stats(7);
+    let active = [true; N];
+    let w: Vec<Vector3<f64>> = vec![Vector3::repeat(1.0); G];
+    // (group, axis, weight) pairs: the overflow (1e200) before or after a
+    // bad weight (NaN, negative), in both orders; and two overflows.
+    let cases: [[(usize, usize, f64); 2]; 5] = [
+        [(1, 0, 1e200), (4, 2, f64::NAN)],
+        [(1, 0, f64::NAN), (4, 2, 1e200)],
+        [(2, 1, 1e200), (2, 2, -1.0)],
+        [(2, 1, -1.0), (6, 0, 1e200)],
+        [(0, 0, 1e200), (7, 2, 1e200)],
+    ];
+    for case in cases {
+        let mut w2 = w.clone();
+        for (g, a, v) in case {
+            w2[g][a] = v;
+        }
+        let (mut s1, mut d1, mut s2, mut d2) = (
+            vec![Vector3::zeros(); G],
+            vec![Vector3::zeros(); G],
+            vec![Vector3::zeros(); G],
+            vec![Vector3::zeros(); G],
+        );
+        let a = s
+            .fit_weighted(&w2, &active, &mut s1, &mut d1)
+            .map(|f| f.solution.x);
+        let b = Generic(&s)
+            .fit_weighted(&w2, &active, &mut s2, &mut d2)
+            .map(|f| f.solution.x);
+        assert_eq!(a, b, "{case:?}");
+        assert!(a.is_err(), "{case:?} was accepted");
+    }
+}

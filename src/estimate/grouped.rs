@@ -126,7 +126,7 @@ where
 
 /// Grouped sufficient statistics of `D` parameters for at most `G` groups.
 /// See the [module docs](self).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GroupedStats<T: RealField + Copy, D: Dim, const G: usize>
 where
@@ -134,6 +134,20 @@ where
 {
     dim: D,
     groups: heapless::Vec<GroupMoments<T, D>, G>,
+    /// At least the magnitude of every diagonal of `S`, every `u` and
+    /// every `yy` (the overflow guard of [`GroupedStats::update`]); not
+    /// part of the statistics.
+    bound: T,
+}
+
+/// The statistics compared, not the overflow guard's bound.
+impl<T: RealField + Copy, D: Dim, const G: usize> PartialEq for GroupedStats<T, D, G>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn eq(&self, other: &Self) -> bool {
+        self.dim == other.dim && self.groups == other.groups
+    }
 }
 
 impl<T: RealField + Copy, D: DimName, const G: usize> Default for GroupedStats<T, D, G>
@@ -164,6 +178,7 @@ where
         Self {
             dim,
             groups: heapless::Vec::new(),
+            bound: T::zero(),
         }
     }
 
@@ -203,12 +218,16 @@ where
                 what: "block size differs from the statistics'",
             });
         }
-        // Over the slices: nalgebra's matrix iterator costs several times
-        // the check itself here.
-        if !b.as_slice().iter().all(|v| v.is_finite()) {
+        let (bs, ys) = (b.as_slice(), dp.as_slice());
+        // The inputs' largest magnitude and whether all are finite, in one
+        // pass each without a branch per value (over the slices: nalgebra's
+        // matrix iterator costs several times the check itself here).
+        let (mb, fb) = magnitude(bs);
+        let (my, fy) = magnitude(ys);
+        if !fb {
             return Err(Error::NonFinite { what: "row" });
         }
-        if !dp.as_slice().iter().all(|v| v.is_finite()) {
+        if !fy {
             return Err(Error::NonFinite { what: "dp" });
         }
         // Rows usually come configuration by configuration: try the last
@@ -230,37 +249,17 @@ where
                 self.groups.len()
             }
         };
-        // Overflow guard on the new diagonals (they bound the off-diagonals),
-        // `u` and `yy`. `t` collects v·0 over every new value: NaN iff one
-        // is not finite (the inputs are), one multiply-add per value
-        // instead of a compare and a branch.
-        let zero = T::zero();
-        let mut t = zero;
-        for a in 0..3 {
-            let y = dp[a];
-            let bcols = b.as_slice().chunks_exact(3);
-            match self.groups.get(index).map(|g| &g.axes[a]) {
-                Some(ax) => {
-                    t += (ax.yy + y * y) * zero;
-                    let diag = ax.s_upper.as_slice().iter().step_by(p + 1);
-                    for ((bi, &s), &u) in bcols.zip(diag).zip(ax.u.as_slice()) {
-                        let bi = bi[a];
-                        t += (s + bi * bi) * zero;
-                        t += (u + bi * y) * zero;
-                    }
-                }
-                None => {
-                    t += (zero + y * y) * zero;
-                    for bi in bcols {
-                        let bi = bi[a];
-                        t += (zero + bi * bi) * zero;
-                        t += (zero + bi * y) * zero;
-                    }
-                }
-            }
-        }
-        if !t.is_finite() {
-            return Err(Error::NonFinite { what: "overflow" });
+        // Overflow guard. Every new diagonal of `S` (they bound the
+        // off-diagonals), `u` and `yy` is an old one plus a product of two
+        // inputs, so its magnitude is at most `bound + m²` (`m` the inputs'
+        // largest), rounding included (`grow`). While that is at most half
+        // the largest finite value no sum can overflow, and the value by
+        // value check is skipped; it decides otherwise, with the same
+        // verdict as always.
+        let m = if mb > my { mb } else { my };
+        let bound = grow(self.bound, m);
+        if !(bound + bound).is_finite() {
+            self.check_overflow(index, b, dp)?;
         }
         if index == self.groups.len() {
             let dim = self.dim;
@@ -276,34 +275,52 @@ where
                     capacity: G,
                 })?;
         }
-        // `S += b bᵀ` (upper triangle), `u += b y` per axis, each element
-        // summed over the rows in the order they came. Column by column over
-        // the three axes at once: `B` is 3 × n column-major, so column `i`
-        // of `B` is the three axes' `bᵢ`, contiguous, and each column of `S`
-        // is a contiguous slice.
-        let [x, y, z] = &mut self.groups[index].axes;
-        let bcols = b.as_slice().chunks_exact(3);
-        let (sx, sy, sz) = (
-            x.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
-            y.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
-            z.s_upper.as_mut_slice().chunks_exact_mut(p.max(1)),
-        );
-        for (j, (((cx, cy), cz), bj)) in sx.zip(sy).zip(sz).zip(bcols.clone()).enumerate() {
-            let rows = cx[..=j].iter_mut().zip(&mut cy[..=j]).zip(&mut cz[..=j]);
-            for (((sx, sy), sz), bi) in rows.zip(bcols.clone()) {
-                *sx += bi[0] * bj[0];
-                *sy += bi[1] * bj[1];
-                *sz += bi[2] * bj[2];
-            }
-        }
-        for (a, ax) in [x, y, z].into_iter().enumerate() {
-            for (u, bj) in ax.u.iter_mut().zip(bcols.clone()) {
-                *u += bj[a] * dp[a];
-            }
-            ax.yy += dp[a] * dp[a];
-            ax.n += 1;
-        }
+        self.bound = bound;
+        add_rows(&mut self.groups[index].axes, p, bs, ys);
         Ok(())
+    }
+
+    /// The overflow guard of [`GroupedStats::update`] value by value: every
+    /// new diagonal of `S`, `u` and `yy` of the group at `index` (a new
+    /// one when `index` is the number of groups) finite. (Rarely needed:
+    /// kept out of `update`'s code.)
+    #[cold]
+    #[inline(never)]
+    fn check_overflow(
+        &self,
+        index: usize,
+        b: &OMatrix<T, U3, D>,
+        dp: &Vector3<T>,
+    ) -> Result<(), Error> {
+        let p = self.dim.value();
+        let zero = T::zero();
+        let mut ok = true;
+        for a in 0..3 {
+            let y = dp[a];
+            let bcols = b.as_slice().chunks_exact(3);
+            match self.groups.get(index).map(|g| &g.axes[a]) {
+                Some(ax) => {
+                    ok &= (ax.yy + y * y).is_finite();
+                    let diag = ax.s_upper.as_slice().iter().step_by(p + 1);
+                    for ((bi, &s), &u) in bcols.zip(diag).zip(ax.u.as_slice()) {
+                        let bi = bi[a];
+                        ok &= (s + bi * bi).is_finite() && (u + bi * y).is_finite();
+                    }
+                }
+                None => {
+                    ok &= (zero + y * y).is_finite();
+                    for bi in bcols {
+                        let bi = bi[a];
+                        ok &= (zero + bi * bi).is_finite() && (zero + bi * y).is_finite();
+                    }
+                }
+            }
+        }
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::NonFinite { what: "overflow" })
+        }
     }
 
     /// σ per group and axis of the residuals of `fit`, made with `weights`:
@@ -407,6 +424,102 @@ where
         }
         Ok(acc)
     }
+}
+
+/// Rows of `B` per block of [`add_rows`]: the block's rows, axis by axis,
+/// on the stack.
+const BLOCK: usize = 12;
+
+/// `S += b bᵀ` (upper triangle), `u += b y`, `yy += y²` and one more row,
+/// for each axis `a` its row `b = B[a, ·]` and `y = Δp[a]` (`bs`: `B`,
+/// 3 × `p` column-major). Every element is its old value plus one
+/// product, `bᵢ bⱼ` or `bᵢ y`, so the order of the elements does not
+/// matter to the result: `B`'s rows are copied to contiguous stack arrays
+/// (blocks of [`BLOCK`] parameters) and each column of `S` is updated
+/// from them two elements at a time, which the compiler turns into
+/// vector instructions.
+fn add_rows<T: RealField + Copy, D: Dim>(
+    axes: &mut [AxisMoments<T, D>; 3],
+    p: usize,
+    bs: &[T],
+    ys: &[T],
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    let zero = T::zero();
+    let mut i0 = 0;
+    while i0 < p {
+        let len = BLOCK.min(p - i0);
+        let blk = &bs[3 * i0..3 * (i0 + len)];
+        let bt: [[T; BLOCK]; 3] = core::array::from_fn(|a| {
+            core::array::from_fn(|k| blk.get(3 * k + a).copied().unwrap_or(zero))
+        });
+        for (j, bj) in bs.chunks_exact(3).enumerate().skip(i0) {
+            // Rows i0 ..= j of column j, at most the block.
+            let rows = (j + 1 - i0).min(len);
+            for (a, ax) in axes.iter_mut().enumerate() {
+                let col = &mut ax.s_upper.as_mut_slice()[j * p + i0..j * p + i0 + rows];
+                add_scaled(col, &bt[a][..rows], bj[a]);
+            }
+        }
+        for (a, ax) in axes.iter_mut().enumerate() {
+            let y = ys[a];
+            add_scaled(&mut ax.u.as_mut_slice()[i0..i0 + len], &bt[a][..len], y);
+        }
+        i0 += len;
+    }
+    for (ax, &y) in axes.iter_mut().zip(ys) {
+        ax.yy += y * y;
+        ax.n += 1;
+    }
+}
+
+/// `dst[i] += src[i] * f`, two at a time.
+#[inline(always)]
+fn add_scaled<T: RealField + Copy>(dst: &mut [T], src: &[T], f: T) {
+    let mut d = dst.chunks_exact_mut(2);
+    let mut s = src.chunks_exact(2);
+    for (d, s) in (&mut d).zip(&mut s) {
+        d[0] += s[0] * f;
+        d[1] += s[1] * f;
+    }
+    for (d, &s) in d.into_remainder().iter_mut().zip(s.remainder()) {
+        *d += s * f;
+    }
+}
+
+/// The largest magnitude in `v` and whether every value is finite (four
+/// independent maxima, not one chain of dependent compares; finite as
+/// `x · 0 = 0`, a floating-point compare, where `is_finite` compares the
+/// bits as a 64-bit integer, which SSE2 does not have).
+fn magnitude<T: RealField + Copy>(v: &[T]) -> (T, bool) {
+    let zero = T::zero();
+    let mut m = [zero; 4];
+    let mut finite = true;
+    let mut lanes = v.chunks_exact(4);
+    for c in &mut lanes {
+        for (m, &x) in m.iter_mut().zip(c) {
+            let a = x.abs();
+            finite &= a * zero == zero;
+            *m = if a > *m { a } else { *m };
+        }
+    }
+    for (m, &x) in m.iter_mut().zip(lanes.remainder()) {
+        let a = x.abs();
+        finite &= a * zero == zero;
+        *m = if a > *m { a } else { *m };
+    }
+    let max = |a: T, b: T| if a > b { a } else { b };
+    (max(max(m[0], m[1]), max(m[2], m[3])), finite)
+}
+
+/// A bound of `|v + x y|` for `|v| ≤ bound` and `|x|, |y| ≤ m`, rounding
+/// included: `(bound + m²)(1 + 8ε)`, `ε` the machine epsilon (the two
+/// roundings of the sum and the three of the bound are each at most `ε/2`
+/// relative).
+fn grow<T: RealField + Copy>(bound: T, m: T) -> T {
+    let eight: T = nalgebra::convert(8.0);
+    (bound + m * m) * (T::one() + eight * T::default_epsilon())
 }
 
 /// `tr(Λ⁻¹ S)` of three `n × n` matrices `S` from their upper triangles

@@ -131,31 +131,30 @@ where
                 what: "one weight (and sigma) per group",
             });
         }
-        let (dim, p) = (self.dim(), self.dim().value());
+        let dim = self.dim();
         let mut info = OMatrix::<T, D, D>::zeros_generic(dim, dim);
         let mut eta = OVector::<T, D>::zeros_generic(dim, Const::<1>);
         let (mut yy, mut equations) = (T::zero(), 0);
+        // `Accumulator::add_moments` checks every new diagonal and η before
+        // it adds anything and stops at the first that is not finite; here
+        // everything is added and the sums are checked once, at the end or
+        // at a bad weight: the same verdict, because a sum that is not
+        // finite stays so whatever is added to it.
         for (g, w) in self.groups().iter().zip(weights) {
             for (ax, &w) in g.axes.iter().zip(w.iter()) {
-                let Some(w2) = moment_weight(w, None, ax.n)? else {
-                    continue;
+                let w2 = match moment_weight(w, None, ax.n) {
+                    Ok(Some(w2)) => w2,
+                    Ok(None) => continue,
+                    Err(e) => return Err(overflow_first(&info, Some(&eta), yy, e)),
                 };
-                // As `Accumulator::add_moments`: every new diagonal and η
-                // checked before anything is added.
-                let new_yy = yy + w2 * ax.yy;
-                let ok = new_yy.is_finite()
-                    && (0..p).all(|i| {
-                        (info[(i, i)] + w2 * ax.s_upper[(i, i)]).is_finite()
-                            && (eta[i] + w2 * ax.u[i]).is_finite()
-                    });
-                if !ok {
-                    return Err(Error::NonFinite { what: "overflow" });
-                }
                 add_upper(&mut info, &ax.s_upper, w2);
                 eta.zip_apply(&ax.u, |a, v| *a += v * w2);
-                yy = new_yy;
+                yy += w2 * ax.yy;
                 equations += ax.n;
             }
+        }
+        if !finite_sums(&info, Some(&eta), yy) {
+            return Err(Error::NonFinite { what: "overflow" });
         }
         Ok(Information {
             upper: info,
@@ -181,20 +180,22 @@ where
                 what: "one weight (and sigma) per group",
             });
         }
-        let (dim, p) = (self.dim(), self.dim().value());
+        let dim = self.dim();
         let mut middle = OMatrix::<T, D, D>::zeros_generic(dim, dim);
+        // The overflow check once, as in `information_upper`.
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
             let s = noise.sigma(gi, w);
             for ((ax, &w), &s) in g.axes.iter().zip(w.iter()).zip(s.iter()) {
-                let Some(w2) = moment_weight(w, Some(s), ax.n)? else {
-                    continue;
+                let w2 = match moment_weight(w, Some(s), ax.n) {
+                    Ok(Some(w2)) => w2,
+                    Ok(None) => continue,
+                    Err(e) => return Err(overflow_first(&middle, None, T::zero(), e)),
                 };
-                let m2 = w2 * w2 * s * s;
-                if !(0..p).all(|i| (middle[(i, i)] + m2 * ax.s_upper[(i, i)]).is_finite()) {
-                    return Err(Error::NonFinite { what: "overflow" });
-                }
-                add_upper(&mut middle, &ax.s_upper, m2);
+                add_upper(&mut middle, &ax.s_upper, w2 * w2 * s * s);
             }
+        }
+        if !finite_sums(&middle, None, T::zero()) {
+            return Err(Error::NonFinite { what: "overflow" });
         }
         Ok(middle)
     }
@@ -245,5 +246,41 @@ where
         for (a, &v) in mc[..=j].iter_mut().zip(&sc[..=j]) {
             *a += v * k;
         }
+    }
+}
+
+/// Whether the diagonal of `m`, `eta` and `yy` are finite: the overflow
+/// check of `Accumulator::add_moments` on sums of moments (the diagonals
+/// bound the rest). A float compare (`v · 0 = 0`) per value.
+fn finite_sums<T: RealField + Copy, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    eta: Option<&OVector<T, D>>,
+    yy: T,
+) -> bool
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let zero = T::zero();
+    let finite = |v: &T| *v * zero == zero;
+    let n = m.nrows();
+    let diag = m.as_slice().iter().step_by(n + 1).all(finite);
+    diag && finite(&yy) && eta.map_or(true, |e| e.as_slice().iter().all(finite))
+}
+
+/// The error of a bad weight met after the sums so far, or the overflow
+/// that `Accumulator::add_moments` would have reported before it.
+fn overflow_first<T: RealField + Copy, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    eta: Option<&OVector<T, D>>,
+    yy: T,
+    e: Error,
+) -> Error
+where
+    DefaultAllocator: Alloc<D>,
+{
+    if finite_sums(m, eta, yy) {
+        e
+    } else {
+        Error::NonFinite { what: "overflow" }
     }
 }
