@@ -223,8 +223,10 @@ fn job(name: &str, markers: &[(u32, &str, [f64; 3])]) -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     std::fs::write(d.join("y.urdf"), urdf()).unwrap();
+    // No tip_link: every marker names its link, so the first one's is the
+    // tip (the setup's default for a tree).
     let mut setup = String::from(
-        "robot = \"y.urdf\"\nbase_link = \"base_link\"\ntip_link = \"tip_a\"\n\
+        "robot = \"y.urdf\"\nbase_link = \"base_link\"\n\
          [units]\nangle = \"rad\"\nlength = \"m\"\n",
     );
     for (id, link, xyz) in markers {

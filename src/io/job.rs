@@ -33,7 +33,7 @@ impl Job {
         let robot = Robot::load_tree(
             setup.robot_path(setup_path),
             setup.base_link.as_deref(),
-            setup.tip_link.as_deref(),
+            setup.tip(),
             &setup.marker_links(),
         )?;
         setup.check_robot(&robot, setup_path)?;

@@ -7,7 +7,7 @@
 //! |---|---|
 //! | `robot` | required: URDF path, relative to the setup file's directory |
 //! | `base_link` | the URDF's root link (error if there are several) |
-//! | `tip_link` | the one leaf link below `base_link` (error if the tree branches) |
+//! | `tip_link` | the first marker's `link` when every marker names one; else the one leaf link below `base_link` (error if the tree branches) |
 //! | `ignore_columns` | `[]`: measurement CSV columns to skip (data contract 7.2) |
 //! | `[units] angle` | `"rad"` (`"deg"` \| `"rad"`) |
 //! | `[units] length` | `"m"` (`"mm"` \| `"m"`) |
@@ -541,12 +541,23 @@ impl Setup {
         Ok(())
     }
 
-    /// The links markers are fixed to other than `tip_link` (data contract
-    /// 7.1), in marker order, once each.
+    /// The tip link the robot is read with: `tip_link`, or when it is not
+    /// given and every marker names its link, the first marker's link (a
+    /// tree's default: its other markers' links are ends too); `None`: the
+    /// URDF's one leaf.
+    pub fn tip(&self) -> Option<&str> {
+        self.tip_link.as_deref().or_else(|| {
+            let links: Option<Vec<&str>> = self.markers.iter().map(|m| m.link.as_deref()).collect();
+            links.and_then(|l| l.first().copied())
+        })
+    }
+
+    /// The links markers are fixed to other than the tip ([`Setup::tip`];
+    /// data contract 7.1), in marker order, once each.
     pub fn marker_links(&self) -> Vec<&str> {
         let mut links: Vec<&str> = Vec::new();
         for l in self.markers.iter().filter_map(|m| m.link.as_deref()) {
-            if !links.contains(&l) && Some(l) != self.tip_link.as_deref() {
+            if !links.contains(&l) && Some(l) != self.tip() {
                 links.push(l);
             }
         }
