@@ -1,7 +1,7 @@
 //! The robot's geometry at the current linearisation: Gauss–Newton for the
 //! geometric parameters of absolute rows.
 //!
-//! The geometric columns (eq. 2, [`crate::geometric`]) are derivatives at a
+//! The geometric columns (eq. 2, [`crate::model::columns`]) are derivatives at a
 //! model, exact only for small errors. A laser tracker's or a mocap system's
 //! frame is anywhere, and real joint-frame errors reach tens of mrad, so a
 //! single linearisation about the nominal model leaves a second-order error

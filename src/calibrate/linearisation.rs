@@ -4,7 +4,7 @@
 //! model the rows use.
 //!
 //! **Exact** (the default): each row is the robot at its equilibrium
-//! ([`crate::robot::equilibrium`]) — a deflection is the marker at the
+//! ([`crate::robot::equilibrium()`]) — a deflection is the marker at the
 //! loaded equilibrium (the load acting on the deflected robot) minus the
 //! marker at the commanded pose; an absolute position is the marker at the
 //! equilibrium under the robot's own weight. The model is not linear in

@@ -37,7 +37,7 @@
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
-//! | [`report`], [`calibrated`], [`validate`] | what comes out |
+//! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
 //! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point) |

@@ -18,7 +18,7 @@
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
 //! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
-//! | validation with no point | `--validate` | error ([`super::validate`]) |
+//! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
 //! Candidates of the diagnosis with an implausible estimate are rejected
 //! there ([`super::effects::inadmissible`]) and named in `notes`; input

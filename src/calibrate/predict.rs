@@ -1,11 +1,11 @@
 //! The calibrated model applied: where a marker (or any tool point) is for
 //! given joint values and payload, and the joint command that puts it at a
-//! desired point ([`crate::robot::compensate`]).
+//! desired point ([`crate::robot::compensate()`]).
 //!
 //! A [`Predictor`] holds the final geometry of a calibration (its last
 //! Gauss–Newton step applied, as in the calibrated URDF), the base placed
 //! in the measurement frame, and the calibrated joint law. A prediction is
-//! the exact static equilibrium ([`crate::robot::equilibrium`]) of the
+//! the exact static equilibrium ([`crate::robot::equilibrium()`]) of the
 //! robot commanded to `q` under its own weight (the URDF's link masses) and
 //! the payload, whichever deflection model fitted the compliances, with
 //! every joint-law term the calibration found (compliances, compensator
@@ -336,7 +336,7 @@ impl Predictor {
     ///
     /// # Errors
     /// [`Error::Mismatch`] / [`Error::NonFinite`] for bad joint values or
-    /// payload; the errors of [`equilibrium`].
+    /// payload; the errors of [`equilibrium()`].
     pub fn predict(
         &self,
         tool_m: &Vector3<f64>,
@@ -499,11 +499,11 @@ impl Predictor {
 
     /// The joint command that puts `tool_m` \[m, tip frame\] at `target_m`
     /// \[m, measurement frame\] with `payload`, by Newton's method from
-    /// `q_start` ([`compensate`]; the compensator tables at each step's
+    /// `q_start` ([`compensate()`]; the compensator tables at each step's
     /// command).
     ///
     /// # Errors
-    /// As [`Self::predict`] and [`compensate`] (`NotConverged` for a target
+    /// As [`Self::predict`] and [`compensate()`] (`NotConverged` for a target
     /// the robot cannot reach near `q_start`).
     pub fn compensate(
         &self,

@@ -95,7 +95,7 @@ pub struct Row {
 }
 
 /// A row's [`Frames`] in the memory of the robot's joints (a `Frames` holds
-/// room for [`J`] of them, ~2.5 KB: most of a row, and most of the memory
+/// room for `J` of them, ~2.5 KB: most of a row, and most of the memory
 /// of a calibration with many rows). [`RowFrames::frames`] rebuilds them
 /// as they were.
 #[derive(Debug, Clone)]

@@ -164,8 +164,8 @@ where
     /// σ per group and axis of the residuals of `fit`, made with `weights`
     /// (one entry per group), written to `sigma`, and its degrees of
     /// freedom to `dof`: each group and axis on its own, `ν = n − h` and
-    /// `σ̂ = √(RSS / ν)` ([`group_sigma`]; `h` is the group and axis's share
-    /// of the fit's leverage, [`leverage`]).
+    /// `σ̂ = √(RSS / ν)` ([`crate::estimate::grouped::group_sigma`]; `h` is the group and axis's share
+    /// of the fit's leverage, [`crate::estimate::grouped::leverage`]).
     ///
     /// # Errors
     /// [`Error::Mismatch`] when `sigma`, `dof` or `weights` does not have

@@ -13,7 +13,7 @@
 //! when it has no `[load]` (every row unloaded); a column named in the
 //! setup's `ignore_columns` is skipped, empty cells included.
 //!
-//! Conversion to SI, exact to the decimal: [`super::cells`]; the writer:
+//! Conversion to SI, exact to the decimal: `io::cells`; the writer:
 //! [`super::writer`].
 //!
 //! Rejected, with file, line and column: an unreadable file, a missing,

@@ -11,7 +11,7 @@ use super::{ErrorKind, InputError};
 /// Writes `rows` (SI) as a measurement file for `robot` in `units`:
 /// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t][,sx,sy,sz]`
 /// (`t` when the rows have times, `sx, sy, sz` when they have the
-/// instrument's σ). [`read_measurements`] reads it back to
+/// instrument's σ). [`super::read_measurements`] reads it back to
 /// the same values (see the module doc for deg).
 ///
 /// The file is written to a temporary file next to `path` and renamed over

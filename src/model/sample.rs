@@ -21,7 +21,7 @@ use crate::Error;
 pub struct Sample<'a, T: RealField + Copy, const J: usize> {
     /// The chain's frames at the pose the point is at — the measured joint
     /// values, or the deflected pose of the exact model
-    /// ([`crate::robot::equilibrium`]) — in the frame the point is given in.
+    /// ([`crate::robot::equilibrium()`]) — in the frame the point is given in.
     pub frames: &'a Frames<T, J>,
     /// The measured (commanded) joint values \[rad or m\]: what angle bins
     /// and the gear's cyclic error are functions of.

@@ -7,7 +7,7 @@
 //! by the deflection of the joints under the payload and the robot's own
 //! weight. With the calibrated chain (its joint origins already corrected)
 //! and its joint law, the commanded `q` settles at the equilibrium
-//! `θ(q) = q + δ(τ(θ))` ([`super::equilibrium`]) and the tool point is at
+//! `θ(q) = q + δ(τ(θ))` ([`super::equilibrium()`]) and the tool point is at
 //! `p(θ(q))`. [`compensate`] solves
 //!
 //! ```text

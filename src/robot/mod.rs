@@ -6,8 +6,8 @@
 //! | [`chain`] | [`Chain`], [`Joint`] (with the one [`Joint::motion`]), [`LinkInertia`] |
 //! | [`kinematics`] | [`Frames`]: joint frames, axes and origins, marker positions |
 //! | [`load`] | [`Wrench`], [`PointLoad`], the joint torques of a load and of the robot's own weight |
-//! | [`equilibrium`] | the deflected pose of a loaded chain whose joints yield (eq. 3 solved exactly) and its sensitivity |
-//! | [`compensate`] | the joint command whose loaded, deflected robot reaches a desired point (Newton on the exact model) |
+//! | [`equilibrium`](mod@equilibrium) | the deflected pose of a loaded chain whose joints yield (eq. 3 solved exactly) and its sensitivity |
+//! | [`compensate`](mod@compensate) | the joint command whose loaded, deflected robot reaches a desired point (Newton on the exact model) |
 //!
 //! All lengths in metres, revolute joint values in radians, prismatic ones
 //! in metres, torques in N·m (N for a prismatic joint).

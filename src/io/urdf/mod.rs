@@ -196,7 +196,7 @@ pub struct JointLimits {
 }
 
 /// A movable joint off the chain whose subtree hangs from a moving body but
-/// is left out of its [`LinkInertia`] (see the module doc).
+/// is left out of its [`crate::LinkInertia`] (see the module doc).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OffChainBranch {
     /// The off-chain joint.
