@@ -205,6 +205,24 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
         Ok(Accumulator::from_sums(info, eta, yy, self.equations))
     }
 
+    /// Whether `model` and `candidate` make a sub-problem: at most
+    /// `MAX_SUB` columns, each one of the `P`.
+    fn check_sub(model: &[usize], candidate: &[usize]) -> Result<(), Error> {
+        if model.len() + candidate.len() > MAX_SUB {
+            return Err(Error::Mismatch {
+                what: "candidate does not fit in the sub-problem",
+            });
+        }
+        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
+            return Err(Error::OutOfRange {
+                what: "column",
+                index: c,
+                len: P,
+            });
+        }
+        Ok(())
+    }
+
     /// The host's test of one candidate: of its columns `candidate`, those
     /// the unweighted columns tell apart from the model's `model` and from
     /// the candidate's before them ([`super::rank`]); the nested F test of
@@ -230,18 +248,7 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
         DefaultAllocator: Alloc<D>,
     {
         let n = model.len();
-        if n + candidate.len() > MAX_SUB {
-            return Err(Error::Mismatch {
-                what: "candidate does not fit in the sub-problem",
-            });
-        }
-        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
-            return Err(Error::OutOfRange {
-                what: "column",
-                index: c,
-                len: P,
-            });
-        }
+        Self::check_sub(model, candidate)?;
         // The columns in one list: model, then candidate. A candidate column
         // without information (`Λ⁰ᵢᵢ ≤ ε² max Λ⁰ₖₖ`, e.g. the torque of a
         // vertical load about a vertical axis) is left out here, as the
@@ -368,18 +375,7 @@ impl<T: RealField + Copy, const P: usize, const L: usize> Augmented<T, P, L> {
         DefaultAllocator: Alloc<D>,
     {
         let n = model.len();
-        if n + candidate.len() > MAX_SUB {
-            return Err(Error::Mismatch {
-                what: "candidate does not fit in the sub-problem",
-            });
-        }
-        if let Some(&c) = model.iter().chain(candidate).find(|&&c| c >= P) {
-            return Err(Error::OutOfRange {
-                what: "column",
-                index: c,
-                len: P,
-            });
-        }
+        Self::check_sub(model, candidate)?;
         if fit.active.len() != dim.value()
             || n > dim.value()
             || fit.active.iter().enumerate().any(|(k, &a)| a != (k < n))
