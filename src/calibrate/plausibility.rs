@@ -96,9 +96,7 @@ fn pairs(
 ) -> Vec<(Vector3<f64>, Vector3<f64>)> {
     let markers = &job.setup.markers;
     // One chain per link markers are on (a tree: data contract 7.1).
-    let chains: Vec<_> = (0..job.robot.ends.len())
-        .filter_map(|k| job.robot.chain_to(k))
-        .collect();
+    let chains = job.robot.chains();
     data.unloaded()
         .filter_map(|o| {
             let m = markers.iter().find(|m| m.id == o.marker)?;

@@ -50,10 +50,10 @@ pub struct Payload {
 #[derive(Debug, Clone)]
 pub struct Predictor {
     chain: Chain<f64, J>,
-    /// The chain ending at each link markers are on (`[0]`: `chain`; more
-    /// for a tree, data contract 7.1), placed.
+    /// A tree's other chains (data contract 7.1): the chain ending at each
+    /// other link markers are on, placed. Empty for a serial robot.
     branches: Vec<Chain<f64, J>>,
-    /// Each marker's index into `branches`.
+    /// Each marker's end: 0 for `chain`'s tip, `k` for `branches[k - 1]`.
     marker_ends: Vec<usize>,
     markers: Vec<Vector3<f64>>,
     marker_ids: Vec<u32>,
@@ -95,7 +95,7 @@ impl Predictor {
         g.apply(&model.params, x);
         Self {
             chain: g.placed_chain(),
-            branches: g.placed_chains(),
+            branches: g.placed_chains().into_iter().skip(1).collect(),
             marker_ends: g.marker_ends.clone(),
             markers: g.markers.clone(),
             marker_ids: (0..g.markers.len())
@@ -142,7 +142,7 @@ impl Predictor {
         joint_names: Vec<String>,
     ) -> Self {
         Self {
-            branches: vec![chain.clone()],
+            branches: Vec::new(),
             marker_ends: vec![0; markers.len()],
             chain,
             marker_ids: markers.iter().map(|m| m.0).collect(),
@@ -186,11 +186,10 @@ impl Predictor {
                 len: ends.len() + 1,
             });
         }
-        let mut branches = vec![self.chain.clone()];
-        for e in ends {
-            branches.push(self.chain.with_tip(e)?);
-        }
-        self.branches = branches;
+        self.branches = ends
+            .iter()
+            .map(|e| self.chain.with_tip(e))
+            .collect::<Result<_, _>>()?;
         self.marker_ends = marker_ends;
         Ok(self)
     }
@@ -211,11 +210,11 @@ impl Predictor {
         }
         let chain = self
             .branches
-            .get(k)
+            .get(k - 1)
             .cloned()
             .unwrap_or_else(|| self.chain.clone());
         Ok(Self {
-            branches: vec![chain.clone()],
+            branches: Vec::new(),
             marker_ends: vec![0; self.markers.len()],
             chain,
             // The covariance's finite differences rebuild the tip's chain.
@@ -228,7 +227,7 @@ impl Predictor {
     /// [`Predictor::with_ends`] takes them.
     pub fn ends(&self) -> (Vec<crate::robot::End<f64>>, &[usize]) {
         (
-            self.branches.iter().skip(1).map(Chain::tip_end).collect(),
+            self.branches.iter().map(Chain::tip_end).collect(),
             &self.marker_ends,
         )
     }
@@ -281,12 +280,6 @@ impl Predictor {
                     self.marker_ids
                 ))
             })
-    }
-
-    /// Marker index `m`'s calibrated position \[m, tip frame\] (the origin
-    /// for an index past the setup's markers).
-    pub fn marker_at(&self, m: usize) -> Vector3<f64> {
-        self.markers.get(m).copied().unwrap_or_default()
     }
 
     /// The fitted shift of the calibration load's centre of mass \[m, tip
@@ -405,7 +398,8 @@ impl Predictor {
         let chain = self
             .marker_ends
             .get(m)
-            .and_then(|&k| self.branches.get(k))
+            .and_then(|&k| k.checked_sub(1))
+            .and_then(|k| self.branches.get(k))
             .unwrap_or(&self.chain);
         Ok((chain, tool))
     }

@@ -201,9 +201,7 @@ impl Rows {
     ) -> Result<Self, CalibrationError> {
         let setup = &job.setup;
         // One chain per link markers are on (a tree: data contract 7.1).
-        let chains: Vec<_> = (0..job.robot.ends.len())
-            .filter_map(|k| job.robot.chain_to(k))
-            .collect();
+        let chains = job.robot.chains();
         let ends = super::marker_ends(job);
         let dof = job.robot.dof();
         let use_absolute = absolute || data.deflections.is_empty();

@@ -331,16 +331,18 @@ impl Robot {
         }
     }
 
-    /// Whether the chain is a tree: some marker link is off the path to the
-    /// tip.
-    pub fn is_tree(&self) -> bool {
-        !self.chain.is_serial()
-    }
-
-    /// The chain ending at end `k` ([`Robot::ends`]): the chain of the
-    /// markers on that link. `None` when there is no end `k`.
-    pub fn chain_to(&self, k: usize) -> Option<Chain<f64, MAX_JOINTS>> {
-        self.chain.with_tip(self.ends.get(k)?).ok()
+    /// The chain ending at each of [`Robot::ends`], in that order: the chain
+    /// of the markers on each link (`[0]`: [`Robot::chain`] itself).
+    pub fn chains(&self) -> Vec<Chain<f64, MAX_JOINTS>> {
+        // The ends were built from this chain: they fit.
+        self.ends
+            .iter()
+            .map(|e| {
+                self.chain
+                    .with_tip(e)
+                    .unwrap_or_else(|_| self.chain.clone())
+            })
+            .collect()
     }
 }
 
