@@ -35,13 +35,15 @@
 //! position within ±10 with `length = "mm"`, paired rows whose joint values
 //! differ by more than [`PAIR_Q_TOLERANCE`].
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::cells::{parse_int, parse_real, raw, Scale};
 use super::setup::{AngleUnit, LengthUnit, Setup};
 use super::urdf::{Robot, UrdfJointKind};
-use super::{ErrorKind, InputError, InputWarning, WarningKind};
+use super::{ErrorKind, InputError, InputWarning};
+
+mod pairing;
+use pairing::{pair, warnings, Stats};
 
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
@@ -516,127 +518,8 @@ pub fn parse_measurements<R: std::io::Read>(
         ));
     }
 
-    // Pairing.
-    let mut unloaded: HashMap<(i64, i64, u32), usize> = HashMap::new();
-    let mut loaded: HashMap<(i64, i64, u32, u64), usize> = HashMap::new();
-    for (i, o) in observations.iter().enumerate() {
-        let previous = if o.load_kg > 0.0 {
-            loaded.insert((o.config, o.rep, o.marker, o.load_kg.to_bits()), i)
-        } else {
-            unloaded.insert((o.config, o.rep, o.marker), i)
-        };
-        if let Some(p) = previous {
-            return Err(err(
-                ErrorKind::Duplicate,
-                o.line,
-                format!(
-                    "config {}, rep {}, marker {}, load {} kg already at line {}",
-                    o.config, o.rep, o.marker, o.load_kg, observations[p].line
-                ),
-            ));
-        }
-    }
-    let mut deflections = Vec::new();
-    let mut moved: Option<(usize, [usize; 2])> = None;
-    for (i, o) in observations.iter().enumerate() {
-        if o.load_kg <= 0.0 {
-            continue;
-        }
-        let Some(&u) = unloaded.get(&(o.config, o.rep, o.marker)) else {
-            return Err(cell_err(
-                ErrorKind::Unpaired,
-                o.line,
-                "load_kg",
-                format!(
-                    "loaded row (config {}, rep {}, marker {}) has no unloaded row \
-                     with the same config, rep and marker",
-                    o.config, o.rep, o.marker
-                ),
-            ));
-        };
-        let b = &observations[u];
-        if o.q
-            .iter()
-            .zip(&b.q)
-            .any(|(x, y)| (x - y).abs() > PAIR_Q_TOLERANCE)
-        {
-            let (count, _) = moved.get_or_insert((0, [o.line, b.line]));
-            *count += 1;
-        }
-        deflections.push(Deflection {
-            config: o.config,
-            rep: o.rep,
-            marker: o.marker,
-            load_kg: o.load_kg,
-            q: b.q.clone(),
-            dp_m: [0, 1, 2].map(|k| o.p_m[k] - b.p_m[k]),
-            lines: [o.line, b.line],
-            rows: [i, u],
-        });
-    }
-
-    // Warnings.
-    let mut warnings = Vec::new();
-    let mut warn = |kind, line: Option<usize>, column: Option<&str>, message: String| {
-        warnings.push(InputWarning {
-            file: file.clone(),
-            line,
-            column: column.map(str::to_owned),
-            kind,
-            message,
-        });
-    };
-    for (j, outside) in stats.outside.iter().enumerate() {
-        if let (Some((count, first)), Some(l)) = (outside, robot.limits[j]) {
-            warn(
-                WarningKind::Limits,
-                Some(*first),
-                Some(&robot.joint_names[j]),
-                format!(
-                    "{count} value(s) outside the URDF limits [{}, {}] by more than 10 % \
-                     of the range (first here)",
-                    l.lower, l.upper
-                ),
-            );
-        }
-    }
-    let angular = robot.joint_kinds.iter().any(|k| k.is_angular());
-    if units.angle == AngleUnit::Deg
-        && angular
-        && stats.max_angle_written > 0.0
-        && stats.max_angle_written <= std::f64::consts::PI
-    {
-        warn(
-            WarningKind::Units,
-            None,
-            None,
-            "every revolute joint value is within ±π although [units] angle = \"deg\": \
-             are the joint columns in radians?"
-                .into(),
-        );
-    }
-    if units.length == LengthUnit::Mm && stats.max_pos_written > 0.0 && stats.max_pos_written < 10.0
-    {
-        warn(
-            WarningKind::Units,
-            None,
-            None,
-            "every x, y, z is within ±10 although [units] length = \"mm\": \
-             are the positions in metres?"
-                .into(),
-        );
-    }
-    if let Some((count, [a, b])) = moved {
-        warn(
-            WarningKind::Moved,
-            Some(a),
-            None,
-            format!(
-                "{count} loaded row(s) whose joint values differ from their unloaded row's by \
-                 more than {PAIR_Q_TOLERANCE} (first: lines {a} and {b})"
-            ),
-        );
-    }
+    let (deflections, moved) = pair(&observations, &file)?;
+    let warnings = warnings(&file, robot, units, &stats, moved);
 
     Ok(Measurements {
         file,
@@ -645,21 +528,4 @@ pub fn parse_measurements<R: std::io::Read>(
         has_time,
         warnings,
     })
-}
-
-struct Stats {
-    /// Per joint: (values outside limits, first line).
-    outside: Vec<Option<(usize, usize)>>,
-    max_angle_written: f64,
-    max_pos_written: f64,
-}
-
-impl Stats {
-    fn new(dof: usize) -> Self {
-        Self {
-            outside: vec![None; dof],
-            max_angle_written: 0.0,
-            max_pos_written: 0.0,
-        }
-    }
 }

@@ -1,0 +1,178 @@
+//! The second pass over a measurement file's rows: loaded rows paired
+//! with their unloaded rows into deflections, and the file's warnings
+//! (limits, units, moved joints; see [`super`]).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use super::{Deflection, Observation, PAIR_Q_TOLERANCE};
+use crate::io::setup::{AngleUnit, LengthUnit, Units};
+use crate::io::urdf::Robot;
+use crate::io::{ErrorKind, InputError, InputWarning, WarningKind};
+
+/// Each loaded row paired with the unloaded row of the same config, rep and
+/// marker: the deflections, and how many pairs moved between their two rows
+/// (with the first pair's lines).
+///
+/// # Errors
+/// A row twice (same config, rep, marker and load), or a loaded row without
+/// its unloaded row, naming its line.
+#[allow(clippy::type_complexity)]
+pub(super) fn pair(
+    observations: &[Observation],
+    file: &Path,
+) -> Result<(Vec<Deflection>, Option<(usize, [usize; 2])>), InputError> {
+    let err =
+        |kind, line: usize, message: String| InputError::new(file, kind, message).at_line(line);
+    let cell_err = |kind, line: usize, column: &str, message: String| {
+        err(kind, line, message).in_column(column)
+    };
+    let mut unloaded: HashMap<(i64, i64, u32), usize> = HashMap::new();
+    let mut loaded: HashMap<(i64, i64, u32, u64), usize> = HashMap::new();
+    for (i, o) in observations.iter().enumerate() {
+        let previous = if o.load_kg > 0.0 {
+            loaded.insert((o.config, o.rep, o.marker, o.load_kg.to_bits()), i)
+        } else {
+            unloaded.insert((o.config, o.rep, o.marker), i)
+        };
+        if let Some(p) = previous {
+            return Err(err(
+                ErrorKind::Duplicate,
+                o.line,
+                format!(
+                    "config {}, rep {}, marker {}, load {} kg already at line {}",
+                    o.config, o.rep, o.marker, o.load_kg, observations[p].line
+                ),
+            ));
+        }
+    }
+    let mut deflections = Vec::new();
+    let mut moved: Option<(usize, [usize; 2])> = None;
+    for (i, o) in observations.iter().enumerate() {
+        if o.load_kg <= 0.0 {
+            continue;
+        }
+        let Some(&u) = unloaded.get(&(o.config, o.rep, o.marker)) else {
+            return Err(cell_err(
+                ErrorKind::Unpaired,
+                o.line,
+                "load_kg",
+                format!(
+                    "loaded row (config {}, rep {}, marker {}) has no unloaded row \
+                     with the same config, rep and marker",
+                    o.config, o.rep, o.marker
+                ),
+            ));
+        };
+        let b = &observations[u];
+        if o.q
+            .iter()
+            .zip(&b.q)
+            .any(|(x, y)| (x - y).abs() > PAIR_Q_TOLERANCE)
+        {
+            let (count, _) = moved.get_or_insert((0, [o.line, b.line]));
+            *count += 1;
+        }
+        deflections.push(Deflection {
+            config: o.config,
+            rep: o.rep,
+            marker: o.marker,
+            load_kg: o.load_kg,
+            q: b.q.clone(),
+            dp_m: [0, 1, 2].map(|k| o.p_m[k] - b.p_m[k]),
+            lines: [o.line, b.line],
+            rows: [i, u],
+        });
+    }
+    Ok((deflections, moved))
+}
+
+/// The file's warnings: values outside the URDF limits, numbers that look
+/// like the other unit, loaded rows whose joints moved.
+pub(super) fn warnings(
+    file: &Path,
+    robot: &Robot,
+    units: Units,
+    stats: &Stats,
+    moved: Option<(usize, [usize; 2])>,
+) -> Vec<InputWarning> {
+    let mut warnings = Vec::new();
+    let mut warn = |kind, line: Option<usize>, column: Option<&str>, message: String| {
+        warnings.push(InputWarning {
+            file: file.to_path_buf(),
+            line,
+            column: column.map(str::to_owned),
+            kind,
+            message,
+        });
+    };
+    for (j, outside) in stats.outside.iter().enumerate() {
+        if let (Some((count, first)), Some(l)) = (outside, robot.limits[j]) {
+            warn(
+                WarningKind::Limits,
+                Some(*first),
+                Some(&robot.joint_names[j]),
+                format!(
+                    "{count} value(s) outside the URDF limits [{}, {}] by more than 10 % \
+                     of the range (first here)",
+                    l.lower, l.upper
+                ),
+            );
+        }
+    }
+    let angular = robot.joint_kinds.iter().any(|k| k.is_angular());
+    if units.angle == AngleUnit::Deg
+        && angular
+        && stats.max_angle_written > 0.0
+        && stats.max_angle_written <= std::f64::consts::PI
+    {
+        warn(
+            WarningKind::Units,
+            None,
+            None,
+            "every revolute joint value is within ±π although [units] angle = \"deg\": \
+             are the joint columns in radians?"
+                .into(),
+        );
+    }
+    if units.length == LengthUnit::Mm && stats.max_pos_written > 0.0 && stats.max_pos_written < 10.0
+    {
+        warn(
+            WarningKind::Units,
+            None,
+            None,
+            "every x, y, z is within ±10 although [units] length = \"mm\": \
+             are the positions in metres?"
+                .into(),
+        );
+    }
+    if let Some((count, [a, b])) = moved {
+        warn(
+            WarningKind::Moved,
+            Some(a),
+            None,
+            format!(
+                "{count} loaded row(s) whose joint values differ from their unloaded row's by \
+                 more than {PAIR_Q_TOLERANCE} (first: lines {a} and {b})"
+            ),
+        );
+    }
+    warnings
+}
+
+pub(super) struct Stats {
+    /// Per joint: (values outside limits, first line).
+    pub(super) outside: Vec<Option<(usize, usize)>>,
+    pub(super) max_angle_written: f64,
+    pub(super) max_pos_written: f64,
+}
+
+impl Stats {
+    pub(super) fn new(dof: usize) -> Self {
+        Self {
+            outside: vec![None; dof],
+            max_angle_written: 0.0,
+            max_pos_written: 0.0,
+        }
+    }
+}
