@@ -20,6 +20,9 @@
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
+//! The scale and unit checks read at most [`Policy::unit_check_points`]
+//! unloaded points, evenly spaced in file order.
+//!
 //! Candidates of the diagnosis with an implausible estimate are rejected
 //! there ([`super::effects::inadmissible`]) and named in `notes`; input
 //! files are checked by their readers ([`crate::io`]).
@@ -87,17 +90,20 @@ pub fn check_torques(
     )))
 }
 
-/// Nominal predictions \[m\] of the unloaded observations, paired with the
-/// measured points; joint `convert` (if any) with its values scaled by `s`.
+/// Nominal predictions \[m\] of the unloaded observations (every
+/// `stride`-th of them), paired with the measured points; joint `convert`
+/// (if any) with its values scaled by `s`.
 fn pairs(
     job: &Job,
     data: &Measurements,
+    stride: usize,
     convert: Option<(usize, f64)>,
 ) -> Vec<(Vector3<f64>, Vector3<f64>)> {
     let markers = &job.setup.markers;
     // One chain per link markers are on (a tree: data contract 7.1).
     let chains = job.robot.chains();
     data.unloaded()
+        .step_by(stride.max(1))
         .filter_map(|o| {
             let m = markers.iter().find(|m| m.id == o.marker)?;
             let mut q = o.q.clone();
@@ -136,8 +142,8 @@ fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
 }
 
 /// The scale of the positions and the unit of each angle column against
-/// the nominal robot (unloaded rows; needs 4 points spread over
-/// [`Policy::min_spread_m`]).
+/// the nominal robot (unloaded rows, at most [`Policy::unit_check_points`]
+/// of them; needs 4 points spread over [`Policy::min_spread_m`]).
 ///
 /// # Errors
 /// [`CalibrationError::Data`] for a scale beyond
@@ -149,7 +155,9 @@ pub fn check_units(
     policy: &Policy,
 ) -> Result<Vec<String>, CalibrationError> {
     let mut warnings = Vec::new();
-    let base = pairs(job, data, None);
+    let cap = policy.unit_check_points.max(1);
+    let stride = data.unloaded().count().div_ceil(cap);
+    let base = pairs(job, data, stride, None);
     let predicted = spread(base.iter().map(|p| p.0));
     if base.len() < 4 {
         return Ok(warnings);
@@ -202,7 +210,7 @@ pub fn check_units(
         if kind != crate::robot::JointKind::Revolute {
             continue;
         }
-        let alt = registered_rms(job, &pairs(job, data, Some((j, factor))));
+        let alt = registered_rms(job, &pairs(job, data, stride, Some((j, factor))));
         if alt * policy.unit_fit_ratio < declared {
             return Err(CalibrationError::Data(format!(
                 "{file}: column '{}': its values fit {other} far better than the declared \

@@ -142,6 +142,12 @@ pub struct Policy {
     /// nominal model register onto the measured points this many times
     /// better is in the other unit. 3.
     pub unit_fit_ratio: f64,
+    /// The scale and unit checks read at most this many unloaded points,
+    /// evenly spaced in file order (every `⌈n / this⌉`-th): they are ratios
+    /// of spreads and RMS, settled long before a million points, and each
+    /// angle column's check is a forward kinematics of every point read.
+    /// 4096.
+    pub unit_check_points: usize,
     /// The nominal model moves the markers over less than this \[m\] (RMS
     /// about their centroid) across the configurations: the data excite
     /// the geometry only by its errors, so parameters that are left out at
@@ -176,6 +182,7 @@ impl Default for Policy {
             max_scale_ratio: 2.0,
             warn_scale_ratio: 1.2,
             unit_fit_ratio: 3.0,
+            unit_check_points: 4096,
             min_spread_m: 0.01,
             negative_sigmas: 3.0,
         }
