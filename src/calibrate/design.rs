@@ -4,7 +4,7 @@
 use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::linearisation::Linearisation;
-use super::rows::Row;
+use super::rows::Rows;
 use crate::estimate::{Accumulator, Block, Identifiability};
 use crate::model::Param;
 use crate::Error;
@@ -30,19 +30,20 @@ pub struct Design {
 }
 
 impl Design {
-    /// Columns of `params` at `rows`; `load_com` about the compliances of
+    /// Columns of `params` at `rows` (at their last relinearisation, each
+    /// row's frames recomputed there); `load_com` about the compliances of
     /// `lin`.
     ///
     /// # Errors
     /// [`Error`] when a column cannot be computed (a parameter naming a
     /// joint the chain does not have).
     pub fn new(
-        rows: &[Row],
+        all: &Rows,
         params: &[Param],
         lin: &Linearisation,
         names: &super::names::Names,
-        groups: usize,
     ) -> Result<Self, Error> {
+        let (rows, groups) = (&all.rows[..], all.configs.len());
         let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
         let mut b = DMatrix::zeros(3 * rows.len(), params.len());
         let mut y = Vec::with_capacity(3 * rows.len());
@@ -52,7 +53,7 @@ impl Design {
             } else {
                 Vec::new()
             };
-            let frames = row.frames.frames();
+            let frames = all.frames(row)?;
             let sample = row.sample(&frames, &k);
             for (c, p) in params.iter().enumerate() {
                 let col = p.column_si(&sample)? * names.unit(p).si;

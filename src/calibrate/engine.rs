@@ -72,14 +72,8 @@ impl Engine<'_> {
     /// # Errors
     /// [`CalibrationError::Core`] when a column cannot be computed.
     pub fn design(&self, params: &[Param]) -> Result<Design, CalibrationError> {
-        Design::new(
-            &self.rows.rows,
-            params,
-            &self.lin,
-            &self.names,
-            self.rows.configs.len(),
-        )
-        .map_err(|e| CalibrationError::Core("columns", e))
+        Design::new(&self.rows, params, &self.lin, &self.names)
+            .map_err(|e| CalibrationError::Core("columns", e))
     }
 
     /// Recomputes the rows at the current geometry.
@@ -208,11 +202,17 @@ impl Engine<'_> {
     }
 
     /// Puts the problem back at `f`'s linearisation: its joint law and its
-    /// geometry.
+    /// geometry (nothing to do when the rows are there: a relinearisation
+    /// at the same law and geometry recomputes the same rows).
     ///
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
+        if self.rows.at.as_ref() == Some(&(f.geometry.clone(), f.linearisation.clone())) {
+            self.lin = f.linearisation.clone();
+            self.geometry = f.geometry.clone();
+            return Ok(());
+        }
         self.lin = f.linearisation.clone();
         self.geometry = f.geometry.clone();
         self.relinearise()

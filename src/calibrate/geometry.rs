@@ -40,7 +40,7 @@ use crate::robot::{Chain, End};
 pub(crate) const J: usize = crate::io::MAX_JOINTS;
 
 /// The current model: chain, base pose, markers, and what has been applied.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Geometry {
     /// The chain with the applied joint offsets and joint-frame errors (the
     /// base pose is kept apart, in `base`).

@@ -10,7 +10,7 @@
 //! load. The configurations are the groups of the per-axis noise estimate
 //! (eq. 14).
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Vector3;
 
 use super::geometry::{Geometry, J};
 use super::linearisation::Linearisation;
@@ -20,7 +20,7 @@ use crate::io::{Job, Measurements};
 use crate::model::bins::{by_first_appearance, clusters};
 use crate::model::{angle_urad, Sample, BIN_TOLERANCE_RAD};
 use crate::robot::{
-    equilibrium, EquilibriumSettings, Frames, JointFrame, JointKind, JointLaw, Loading, PointLoad,
+    equilibrium, Chain, EquilibriumSettings, Frames, JointKind, JointLaw, Loading, PointLoad,
     Wrench,
 };
 use crate::Error;
@@ -71,9 +71,10 @@ pub struct Row {
     /// contract 7.2): the point's, or for a deflection the root sum of
     /// squares of its two points'.
     pub sigma: Option<Vector3<f64>>,
-    /// Frames of the current model in the measurement frame, at the pose
-    /// the row's point is at: `q`, or with the exact deflection model the
-    /// equilibrium (the loaded one for a deflection).
+    /// Where the frames of the current model in the measurement frame are,
+    /// at the pose the row's point is at: `q`, or with the exact deflection
+    /// model the equilibrium (the loaded one for a deflection); see
+    /// [`Rows::frames`].
     pub frames: RowFrames,
     /// Predicted marker position \[m, measurement frame\] at `frames`.
     pub p: Vector3<f64>,
@@ -94,52 +95,32 @@ pub struct Row {
     pub y: Vector3<f64>,
 }
 
-/// A row's [`Frames`] in the memory of the robot's joints (a `Frames` holds
-/// room for `J` of them, ~2.5 KB: most of a row, and most of the memory
-/// of a calibration with many rows). [`RowFrames::frames`] rebuilds them
-/// as they were.
-#[derive(Debug, Clone)]
+/// Where a row's [`Frames`] are: the joint values they are at (the
+/// commanded `q`, or with the exact deflection model the equilibrium) and
+/// the chain of the row's marker, placed at the geometry of the last
+/// relinearisation ([`Rows::chains`]). A `Frames` holds room for `J`
+/// joints (~2.5 KB) and its joints alone are ~150 B each: kept per row they
+/// were most of the memory of a calibration with many rows, and copying
+/// them a good part of its time. [`Rows::frames`] recomputes them, bit for
+/// bit (the equilibrium's frames are the forward kinematics at its `θ`).
+#[derive(Debug, Clone, Default)]
 pub struct RowFrames {
-    joints: Vec<JointFrame<f64>>,
-    q: Vec<f64>,
-    tip: Isometry3<f64>,
+    /// Index into [`Rows::chains`].
+    chain: usize,
+    /// `θ` \[rad or m\]; empty for the row's own `q`.
+    theta: Vec<f64>,
 }
 
 impl RowFrames {
-    /// The parts of `f`.
-    pub fn of(f: &Frames<f64, J>) -> Self {
-        Self {
-            joints: f.joints().to_vec(),
-            q: f.q().to_vec(),
-            tip: *f.tip(),
-        }
-    }
-
-    /// Sets these to the parts of `f`, in the memory they have.
-    pub fn set(&mut self, f: &Frames<f64, J>) {
-        self.joints.clear();
-        self.joints.extend_from_slice(f.joints());
-        self.q.clear();
-        self.q.extend_from_slice(f.q());
-        self.tip = *f.tip();
-    }
-
-    /// The frames, as they were given to [`RowFrames::of`].
-    pub fn frames(&self) -> Frames<f64, J> {
-        // Parts of a `Frames<f64, J>`: they fit.
-        Frames::from_parts(&self.joints, &self.q, self.tip)
-            .unwrap_or_else(|_| unreachable!("the parts of a Frames<f64, J>"))
-    }
-
-    /// The joint values the frames are at.
-    pub fn q(&self) -> &[f64] {
-        &self.q
+    /// The joint values the frames are at (the row's `q` when empty).
+    pub fn theta(&self) -> &[f64] {
+        &self.theta
     }
 }
 
 impl Row {
     /// The row as a [`Sample`] for the columns at `frames` (the row's own,
-    /// [`RowFrames::frames`]), with the effective compliance of each joint
+    /// [`Rows::frames`]), with the effective compliance of each joint
     /// (may be empty).
     pub fn sample<'a>(
         &'a self,
@@ -182,6 +163,12 @@ pub struct Rows {
     pub com: Vector3<f64>,
     /// The measurement file (for errors).
     pub file: String,
+    /// The chains of the markers' links placed at the geometry of the last
+    /// [`Rows::relinearise`] ([`Geometry::placed_chains`]); empty before.
+    pub chains: Vec<Chain<f64, J>>,
+    /// The geometry and joint law of the last [`Rows::relinearise`], when
+    /// it completed (`None` before, and after one that failed part way).
+    pub at: Option<(Geometry, Linearisation)>,
 }
 
 impl Rows {
@@ -200,9 +187,6 @@ impl Rows {
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
         let setup = &job.setup;
-        // One chain per link markers are on (a tree: data contract 7.1).
-        let chains = job.robot.chains();
-        let ends = super::marker_ends(job);
         let dof = job.robot.dof();
         let use_absolute = absolute || data.deflections.is_empty();
         let gravity = setup.load.map_or(Vector3::new(0.0, 0.0, -9.80665), |l| {
@@ -272,8 +256,14 @@ impl Rows {
         }
 
         let index_of = |id: u32| names.marker_index(id).unwrap_or(0);
-        let core = |what: &'static str| move |e: Error| CalibrationError::Core(what, e);
-        let mut rows = Vec::new();
+        let mut rows = Vec::with_capacity(
+            data.deflections.len()
+                + if use_absolute {
+                    data.observations.len()
+                } else {
+                    0
+                },
+        );
         let mut row = |kind,
                        config,
                        marker,
@@ -284,10 +274,6 @@ impl Rows {
                        line,
                        sigma: Option<[f64; 3]>| {
             let m = index_of(marker);
-            let chain = ends
-                .get(usize::from(m))
-                .and_then(|&k| chains.get(k))
-                .unwrap_or(&job.robot.chain);
             rows.push(Row {
                 kind,
                 group: group_of(config),
@@ -299,14 +285,13 @@ impl Rows {
                 measured: Vector3::from(measured),
                 line,
                 sigma: sigma.map(Vector3::from),
-                frames: RowFrames::of(&chain.frames(q).map_err(core("forward kinematics"))?),
+                frames: RowFrames::default(),
                 p: Vector3::zeros(),
                 tau: vec![0.0; dof],
                 load: None,
                 twists: Vec::new(),
                 y: Vector3::from(measured),
             });
-            Ok::<(), CalibrationError>(())
         };
         for d in &data.deflections {
             let (loaded, unloaded) = (&data.observations[d.rows[0]], &data.observations[d.rows[1]]);
@@ -324,7 +309,7 @@ impl Rows {
                     .sigma_m
                     .zip(unloaded.sigma_m)
                     .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
-            )?;
+            );
         }
         if use_absolute {
             for o in data.unloaded() {
@@ -339,7 +324,7 @@ impl Rows {
                     o.p_m,
                     o.line,
                     o.sigma_m,
-                )?;
+                );
             }
         }
         if rows.is_empty() {
@@ -362,6 +347,8 @@ impl Rows {
             gravity,
             com,
             file: data.file.display().to_string(),
+            chains: Vec::new(),
+            at: None,
         })
     }
 
@@ -378,7 +365,9 @@ impl Rows {
         geometry: &Geometry,
         lin: &Linearisation,
     ) -> Result<(), CalibrationError> {
-        let chains = geometry.placed_chains();
+        self.at = None;
+        self.chains = geometry.placed_chains();
+        let chains = &self.chains;
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
@@ -392,7 +381,9 @@ impl Rows {
                 .unwrap_or_default();
             let absolute = row.kind == RowKind::Absolute;
             // The chain of the row's marker's link (one end but for a tree).
-            let chain = &chains[geometry.end_of(row.marker).min(chains.len() - 1)];
+            let end = geometry.end_of(row.marker).min(chains.len() - 1);
+            let chain = &chains[end];
+            row.frames.chain = end;
             let loading = Loading {
                 load: (!absolute).then_some(PointLoad {
                     mass_kg: row.load_kg,
@@ -424,7 +415,7 @@ impl Rows {
                         .torques(chain, &rigid, &mut row.tau)
                         .map_err(core("torques"))?;
                     row.load = loading.load.map(|l| l.wrench(&rigid));
-                    row.frames.set(&rigid);
+                    row.frames.theta.clear();
                     row.p = p_rigid;
                     row.twists.clear();
                     row.y = if absolute {
@@ -436,8 +427,8 @@ impl Rows {
                 Some(law) => {
                     // From the last equilibrium of this row when there is
                     // one (the law moves little between relinearisations).
-                    let guess: Vec<f64> = if row.frames.q().len() == row.q.len() {
-                        row.frames.q().to_vec()
+                    let guess: Vec<f64> = if row.frames.theta.len() == row.q.len() {
+                        row.frames.theta.clone()
                     } else {
                         row.q.clone()
                     };
@@ -479,12 +470,31 @@ impl Rows {
                     } else {
                         row.measured - (p - p_rigid) + linear
                     };
-                    row.frames.set(&eq.frames);
+                    row.frames.theta.clear();
+                    row.frames.theta.extend_from_slice(eq.frames.q());
                     row.p = p;
                 }
             }
         }
+        self.at = Some((geometry.clone(), lin.clone()));
         Ok(())
+    }
+
+    /// The frames of `row` (one of these rows) at the last
+    /// [`Rows::relinearise`]: the forward kinematics of its chain at its
+    /// pose, as they were computed there.
+    ///
+    /// # Errors
+    /// [`Error`] from the forward kinematics (a row not relinearised).
+    pub fn frames(&self, row: &Row) -> Result<Frames<f64, J>, Error> {
+        let chain = self.chains.get(row.frames.chain).ok_or(Error::Mismatch {
+            what: "rows not evaluated at a geometry",
+        })?;
+        if row.frames.theta.is_empty() {
+            chain.frames(&row.q)
+        } else {
+            chain.frames(&row.frames.theta)
+        }
     }
 
     /// Rows per configuration.
