@@ -2,6 +2,8 @@
 //! (`fit`), Gauss–Newton on the geometry and the linearised effects, and
 //! the leave-one-configuration-out prediction error.
 
+use std::sync::{Arc, Mutex};
+
 use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
@@ -64,16 +66,43 @@ pub struct Engine<'a> {
     pub heldout: bool,
     /// Progress messages.
     pub progress: Progress<'a>,
+    /// The last design [`Engine::design`] built: its parameters, the rows'
+    /// linearisation it was built at ([`Rows::at`]), the design. A fit's
+    /// last design is asked for again by its held-out error and its
+    /// identifiability report; with many rows a design is seconds and
+    /// hundreds of MB.
+    pub last_design: Mutex<Option<LastDesign>>,
 }
 
+/// A design and what it was built from: [`Engine::last_design`].
+pub type LastDesign = (Vec<Param>, (Geometry, Linearisation), Arc<Design>);
+
 impl Engine<'_> {
-    /// The design of `params` at the current linearisation.
+    /// The design of `params` at the rows' current linearisation (the
+    /// last one built again when nothing changed since).
     ///
     /// # Errors
     /// [`CalibrationError::Core`] when a column cannot be computed.
-    pub fn design(&self, params: &[Param]) -> Result<Design, CalibrationError> {
-        Design::new(&self.rows, params, &self.lin, &self.names)
-            .map_err(|e| CalibrationError::Core("columns", e))
+    pub fn design(&self, params: &[Param]) -> Result<Arc<Design>, CalibrationError> {
+        let mut last = self
+            .last_design
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let (Some((p, at, d)), Some(now)) = (last.as_ref(), self.rows.at.as_ref()) {
+            if p == params && at == now {
+                return Ok(Arc::clone(d));
+            }
+        }
+        // Dropped before the next is built: one design in memory, not two.
+        *last = None;
+        let d = Arc::new(
+            Design::new(&self.rows, params, &self.lin, &self.names)
+                .map_err(|e| CalibrationError::Core("columns", e))?,
+        );
+        if let Some(at) = &self.rows.at {
+            *last = Some((params.to_vec(), at.clone(), Arc::clone(&d)));
+        }
+        Ok(d)
     }
 
     /// Recomputes the rows at the current geometry.

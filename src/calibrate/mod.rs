@@ -155,6 +155,7 @@ pub fn calibrate(
         policy,
         heldout: settings.heldout,
         progress,
+        last_design: Default::default(),
     };
     e.relinearise()?;
     plausibility::check_torques(&model, &e.rows, &e.names, &policy, &data.file)?;
