@@ -17,7 +17,7 @@
 //! identity does not reproduce; the engine refits those from the moments
 //! per configuration and axis ([`super::moments`]), without the rows.
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use super::design::Design;
 
@@ -50,9 +50,48 @@ pub fn ols_heldout(d: &Design, cols: &[usize]) -> Option<Vec<Option<Vec<Vector3<
     for (i, &g) in d.group.iter().enumerate() {
         rows.get_mut(g)?.push(i);
     }
+    let n = cols.len();
+    // A group of one row (one point per configuration: the case with the
+    // most groups) in fixed-size arithmetic without an allocation per
+    // group: `w_a = Λ⁻¹ b_aᵀ` from the inverse, `H_ab = b_b · w_a`.
+    let inv = chol.inverse();
+    let mut w = vec![0.0; 3 * n];
+    let one = |i: usize, w: &mut [f64]| {
+        let bg = |a: usize, c: usize| b[(3 * i + a, c)];
+        let mut e = Vector3::from_fn(|a, _| y[3 * i + a]);
+        for (c, xc) in x.iter().enumerate() {
+            for a in 0..3 {
+                e[a] -= bg(a, c) * xc;
+            }
+        }
+        for a in 0..3 {
+            for (r, wr) in w[a * n..(a + 1) * n].iter_mut().enumerate() {
+                *wr = (0..n).map(|c| inv[(r, c)] * bg(a, c)).sum();
+            }
+        }
+        let ih = Matrix3::from_fn(|a, c| {
+            let h: f64 = (0..n).map(|r| bg(c, r) * w[a * n + r]).sum();
+            f64::from(u8::from(a == c)) - h
+        });
+        // Symmetric by construction; its rounding is not.
+        let ih = (ih + ih.transpose()) * 0.5;
+        let eig = ih.symmetric_eigen();
+        if eig
+            .eigenvalues
+            .iter()
+            .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
+        {
+            return None;
+        }
+        let t = eig.eigenvectors.tr_mul(&e).component_div(&eig.eigenvalues);
+        Some(vec![eig.eigenvectors * t])
+    };
     let out = rows
         .iter()
         .map(|rs| {
+            if let [i] = rs[..] {
+                return one(i, &mut w);
+            }
             let m = 3 * rs.len();
             let bg = DMatrix::from_fn(m, cols.len(), |r, c| b[(3 * rs[r / 3] + r % 3, c)]);
             let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &x;
