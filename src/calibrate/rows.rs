@@ -226,7 +226,9 @@ impl Rows {
             };
             let values: Vec<f64> = qs.iter().map(|v| v.0).collect();
             let mut sorted = values.clone();
-            sorted.sort_by(f64::total_cmp);
+            // (Equal under `total_cmp` is the same bits: unstable is the
+            // same order, and faster on a million values.)
+            sorted.sort_unstable_by(f64::total_cmp);
             let mut centres = Vec::new();
             clusters(&sorted, |c| centres.push(c));
             let mut jb = Vec::new();

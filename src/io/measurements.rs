@@ -187,7 +187,7 @@ pub fn read_measurements_limited(
 ) -> Result<Measurements, InputError> {
     let path = path.as_ref();
     let bytes = super::input::read_limited(path, "the measurements", max_bytes)?;
-    parse_measurements(bytes.as_slice(), path, robot, setup)
+    parse_bytes(&bytes, path.to_path_buf(), robot, setup)
 }
 
 /// As [`read_measurements`], from any reader; `file` names it in errors.
@@ -210,6 +210,17 @@ pub fn parse_measurements<R: std::io::Read>(
             format!("cannot read the measurements: {e}"),
         )
     })?;
+    parse_bytes(&bytes, file, robot, setup)
+}
+
+/// As [`parse_measurements`], from the file's bytes (not copied again: a
+/// file of a million rows is ~200 MB).
+fn parse_bytes(
+    bytes: &[u8],
+    file: PathBuf,
+    robot: &Robot,
+    setup: &Setup,
+) -> Result<Measurements, InputError> {
     // Line numbers from byte offsets: the csv crate's own line count is off
     // after CRLF line ends and does not count blank lines. A line ends at
     // `\n`, `\r\n` or a lone `\r` (old Mac files), as the csv crate's
@@ -254,7 +265,7 @@ pub fn parse_measurements<R: std::io::Read>(
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
-        .from_reader(bytes.as_slice());
+        .from_reader(bytes);
     let header = rdr.headers().map_err(csv_err)?.clone();
     if header.iter().all(str::is_empty) {
         return Err(err(ErrorKind::Syntax, 1, "no header row".into()));
