@@ -4,7 +4,7 @@
 use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::linearisation::Linearisation;
-use super::rows::Rows;
+use super::rows::{Row, Rows};
 use crate::estimate::{Accumulator, Block, Identifiability};
 use crate::model::Param;
 use crate::Error;
@@ -32,7 +32,7 @@ pub struct Design {
 impl Design {
     /// Columns of `params` at `rows` (at their last relinearisation, each
     /// row's frames recomputed there); `load_com` about the compliances of
-    /// `lin`.
+    /// `lin`. The rows' columns on [`super::parallel::threads`] threads.
     ///
     /// # Errors
     /// [`Error`] when a column cannot be computed (a parameter naming a
@@ -43,26 +43,57 @@ impl Design {
         lin: &Linearisation,
         names: &super::names::Names,
     ) -> Result<Self, Error> {
+        let threads = super::parallel::threads(all.rows.len());
+        Self::new_on(all, params, lin, names, threads)
+    }
+
+    /// [`Design::new`] on `threads` threads: the same design whatever their
+    /// number.
+    ///
+    /// # Errors
+    /// As [`Design::new`] (the first row's error in row order).
+    pub fn new_on(
+        all: &Rows,
+        params: &[Param],
+        lin: &Linearisation,
+        names: &super::names::Names,
+        threads: usize,
+    ) -> Result<Self, Error> {
         let (rows, groups) = (&all.rows[..], all.configs.len());
         let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
-        let mut b = DMatrix::zeros(3 * rows.len(), params.len());
-        let mut y = Vec::with_capacity(3 * rows.len());
-        for (i, row) in rows.iter().enumerate() {
-            let k = if linearised {
-                lin.compliance_at(&row.q)
-            } else {
-                Vec::new()
-            };
-            let frames = all.frames(row)?;
-            let sample = row.sample(&frames, &k);
-            for (c, p) in params.iter().enumerate() {
-                let col = p.column_si(&sample)? * names.unit(p).si;
-                for a in 0..3 {
-                    b[(3 * i + a, c)] = col[a];
+        let (m, n) = (rows.len(), params.len());
+        let si: Vec<f64> = params.iter().map(|p| names.unit(p).si).collect();
+        // Column-major `3·rows × params`; each thread writes its run of rows
+        // into its piece of every column.
+        let mut data = vec![0.0; 3 * m * n];
+        let per = m.div_ceil(threads.max(1)).max(1);
+        let mut pieces: Vec<Vec<&mut [f64]>> = (0..m.div_ceil(per)).map(|_| Vec::new()).collect();
+        for column in data.chunks_mut((3 * m).max(1)) {
+            for (piece, run) in column.chunks_mut(3 * per).zip(pieces.iter_mut()) {
+                run.push(piece);
+            }
+        }
+        let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
+        super::parallel::for_runs_mut(&mut { runs }, threads, |runs| {
+            for (run, columns) in runs.iter_mut() {
+                for (i, row) in run.iter().enumerate() {
+                    let k = if linearised {
+                        lin.compliance_at(&row.q)
+                    } else {
+                        Vec::new()
+                    };
+                    let frames = all.frames(row)?;
+                    let sample = row.sample(&frames, &k);
+                    for ((p, &si), column) in params.iter().zip(&si).zip(columns.iter_mut()) {
+                        let col = p.column_si(&sample)? * si;
+                        column[3 * i..3 * i + 3].copy_from_slice(col.as_slice());
+                    }
                 }
             }
-            y.extend_from_slice(row.y.as_slice());
-        }
+            Ok::<_, Error>(())
+        })?;
+        let b = DMatrix::from_vec(3 * m, n, data);
+        let y = rows.iter().flat_map(|r| r.y.iter().copied()).collect();
         let instrument_sigma = rows.iter().all(|r| r.sigma.is_some()).then(|| {
             let mut ss = vec![Vector3::<f64>::zeros(); groups];
             let mut n = vec![0.0_f64; groups];

@@ -32,6 +32,7 @@
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
+//! | [`parallel`] | the rows of a relinearisation and of a design on the host's cores, answers independent of the number of threads |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
@@ -67,6 +68,7 @@ pub mod linearisation;
 pub mod model_file;
 pub mod moments;
 pub mod names;
+pub mod parallel;
 pub mod plausibility;
 pub mod predict;
 pub mod report;
