@@ -47,7 +47,10 @@ fn units_are_converted_to_si() {
     );
     // deg: f64::to_radians; mm: the decimal point moved (correctly rounded).
     assert_eq!(o.q, [90f64.to_radians(), (-45.5f64).to_radians(), 0.15]);
-    assert_eq!(o.q_written, ["90", "-45.5", "150"]);
+    assert_eq!(
+        o.q_written.iter().collect::<Vec<_>>(),
+        ["90", "-45.5", "150"]
+    );
     assert_eq!(o.p_m, [1.2345, -0.00025, 1.0]);
     assert_eq!(o.t_s, None);
     assert!(!m.has_time);

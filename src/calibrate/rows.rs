@@ -211,16 +211,16 @@ impl Rows {
         let mut bins = Vec::with_capacity(dof);
         let mut compensator_ok = Vec::with_capacity(dof);
         for j in 0..dof {
-            let qs: Vec<(f64, &str, i64)> = if use_absolute {
+            let qs: Vec<(f64, Option<&str>, i64)> = if use_absolute {
                 data.unloaded()
-                    .map(|o| (o.q[j], o.q_written[j].as_str(), o.config))
+                    .map(|o| (o.q[j], o.q_written.get(j), o.config))
                     .collect()
             } else {
                 data.deflections
                     .iter()
                     .map(|d| {
                         let o = &data.observations[d.rows[1]];
-                        (o.q[j], o.q_written[j].as_str(), o.config)
+                        (o.q[j], o.q_written.get(j), o.config)
                     })
                     .collect()
             };
@@ -239,11 +239,12 @@ impl Rows {
                 // for bins that are then not used.)
                 by_first_appearance(&mut centres, &values);
                 for c in &centres {
-                    let near = |v: &&(f64, &str, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
+                    let near = |v: &&(f64, Option<&str>, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
                     let written = qs
                         .iter()
                         .find(near)
-                        .map_or_else(|| format!("{c}"), |v| v.1.trim().to_string());
+                        .and_then(|v| v.1)
+                        .map_or_else(|| format!("{c}"), |w| w.trim().to_string());
                     let mut cfgs: Vec<i64> = qs.iter().filter(near).map(|v| v.2).collect();
                     cfgs.sort_unstable();
                     cfgs.dedup();

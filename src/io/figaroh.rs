@@ -134,7 +134,7 @@ impl MocapFile {
                     marker: (k + 1) as u32,
                     load_kg: 0.0,
                     q: perm.iter().map(|&i| p.q[i]).collect(),
-                    q_written: Vec::new(),
+                    q_written: Default::default(),
                     p_m: *point,
                     t_s: p.t_mid_s,
                     sigma_m: None,

@@ -76,7 +76,7 @@ pub struct Observation {
     /// Joint cells as written in the CSV (trimmed), chain order: the
     /// contract names angle-dependent compliances after them. Empty for rows
     /// not read from a file; the writer ignores it.
-    pub q_written: Vec<String>,
+    pub q_written: WrittenCells,
     /// Marker position \[m\].
     pub p_m: [f64; 3],
     /// Time \[s\], when the file has a `t` column.
@@ -86,6 +86,53 @@ pub struct Observation {
     pub sigma_m: Option<[f64; 3]>,
     /// 1-based line in the file (header is line 1); ignored by the writer.
     pub line: usize,
+}
+
+/// A row's joint cells as written in the CSV, in chain order, in one string
+/// (one allocation per row, not one per cell: a file of a million rows held
+/// ~300 MB of cells as separate strings). The cells are joined by the
+/// unit separator `\u{1f}`, which a cell that parsed as a number cannot
+/// hold.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct WrittenCells(String);
+
+impl WrittenCells {
+    const SEPARATOR: char = '\u{1f}';
+
+    /// The cells, in order.
+    pub fn new<'a>(cells: impl IntoIterator<Item = &'a str>) -> Self {
+        let mut s = String::new();
+        for (k, c) in cells.into_iter().enumerate() {
+            if k > 0 {
+                s.push(Self::SEPARATOR);
+            }
+            s.push_str(c);
+        }
+        Self(s)
+    }
+
+    /// Cell `j` (`None` past the last, or when there is none).
+    pub fn get(&self, j: usize) -> Option<&str> {
+        self.iter().nth(j)
+    }
+
+    /// The cells, in order (none for a row not read from a file).
+    pub fn iter(&self) -> impl Iterator<Item = &str> {
+        (!self.0.is_empty())
+            .then(|| self.0.split(Self::SEPARATOR))
+            .into_iter()
+            .flatten()
+    }
+
+    /// The number of cells.
+    pub fn len(&self) -> usize {
+        self.iter().count()
+    }
+
+    /// Whether there is no cell.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
 }
 
 /// A loaded row minus the unloaded row with the same `config`, `rep`,
@@ -346,6 +393,10 @@ fn parse_bytes(
         }
     }
     let has_time = cols.contains(&Col::Time);
+    // The record field of each joint.
+    let joint_field: Vec<Option<usize>> = (0..robot.dof())
+        .map(|j| cols.iter().position(|&c| c == Col::Joint(j)))
+        .collect();
     // `sx, sy, sz` come together (data contract 7.2).
     let sigma_cols = (0..3).filter(|&k| cols.contains(&Col::Sigma(k))).count();
     if sigma_cols != 0 && sigma_cols != 3 {
@@ -370,7 +421,6 @@ fn parse_bytes(
         let line = line_at(record.position());
         let mut o = Observation {
             q: vec![0.0; dof],
-            q_written: vec![String::new(); dof],
             line,
             rep: 1,
             marker: markers.first().copied().unwrap_or(1),
@@ -464,7 +514,6 @@ fn parse_bytes(
                         }
                     }
                     o.q[j] = v;
-                    o.q_written[j] = cell.to_owned();
                 }
                 Col::Pos(k) => {
                     let v = parse_real(cell, Scale::Length(units.length))
@@ -519,6 +568,12 @@ fn parse_bytes(
                 }
             }
         }
+        // Every joint has its column (checked with the header).
+        o.q_written = WrittenCells::new(
+            joint_field
+                .iter()
+                .map(|&f| f.and_then(|f| record.get(f)).unwrap_or("")),
+        );
         observations.push(o);
     }
     if observations.is_empty() {

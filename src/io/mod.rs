@@ -80,7 +80,7 @@ pub use atomic::{write_all_atomic, write_atomic};
 pub use job::Job;
 pub use measurements::{
     parse_measurements, read_measurements, read_measurements_limited, Deflection, Measurements,
-    Observation,
+    Observation, WrittenCells,
 };
 pub use setup::{
     AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,
