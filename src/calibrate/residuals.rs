@@ -49,17 +49,27 @@ pub fn lack_of_fit(
     residuals: &[Vector3<f64>],
 ) -> Option<LackOfFit> {
     let (cell, n_cells) = cells(rows);
-    let mut groups: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); n_cells];
+    // Per cell, in row order: the sum, then the squares about the mean (the
+    // sums of one vector per cell, without one per cell: a million rows
+    // may be a million cells).
+    let weighted =
+        |row: &super::rows::Row, r: &Vector3<f64>| r.component_mul(&fit.weights[row.group]);
+    let mut sum = vec![Vector3::<f64>::zeros(); n_cells];
+    let mut count = vec![0usize; n_cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
-        groups[c].push(r.component_mul(&fit.weights[row.group]));
+        sum[c] += weighted(row, r);
+        count[c] += 1;
+    }
+    let mean: Vec<Vector3<f64>> = sum.iter().zip(&count).map(|(s, &n)| s / n as f64).collect();
+    let mut pe = vec![0.0_f64; n_cells];
+    for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
+        pe[c] += (weighted(row, r) - mean[c]).norm_squared();
     }
     let (mut ss_lof, mut ss_pe, mut df_pe) = (0.0, 0.0, 0usize);
-    for v in &groups {
-        let n = v.len() as f64;
-        let mean = v.iter().sum::<Vector3<f64>>() / n;
-        ss_lof += n * mean.norm_squared();
-        ss_pe += v.iter().map(|r| (r - mean).norm_squared()).sum::<f64>();
-        df_pe += 3 * (v.len() - 1);
+    for c in 0..n_cells {
+        ss_lof += count[c] as f64 * mean[c].norm_squared();
+        ss_pe += pe[c];
+        df_pe += 3 * (count[c] - 1);
     }
     let df_lof = (3 * n_cells).checked_sub(params)?;
     LackOfFit::new(ss_lof, df_lof, ss_pe, df_pe)
