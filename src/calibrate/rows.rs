@@ -426,10 +426,10 @@ impl Rows {
                         e => CalibrationError::Core(what, e),
                     }
                 };
-                let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
-                let p_rigid = rigid.point_m(&m);
                 match lin.law(&row.q, absolute) {
                     None => {
+                        let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+                        let p_rigid = rigid.point_m(&m);
                         loading
                             .torques(chain, &rigid, &mut row.tau)
                             .map_err(core("torques"))?;
@@ -444,6 +444,16 @@ impl Rows {
                         };
                     }
                     Some(law) => {
+                        // The rigid robot's point: only a deflection row
+                        // subtracts it.
+                        let p_rigid = if absolute {
+                            Vector3::zeros()
+                        } else {
+                            chain
+                                .frames(&row.q)
+                                .map_err(core("forward kinematics"))?
+                                .point_m(&m)
+                        };
                         // From the last equilibrium of this row when there is
                         // one (the law moves little between relinearisations).
                         let guess: Vec<f64> = if row.frames.theta.len() == row.q.len() {
