@@ -138,23 +138,34 @@ impl Reweightable<f64, Dyn> for View<'_> {
         let mut ss = vec![Vector3::<f64>::zeros(); self.d.groups];
         let mut h = vec![Vector3::<f64>::zeros(); self.d.groups];
         let mut n = vec![0usize; self.d.groups];
-        // The row's three axes side by side, contiguous.
+        // `LANES` rows at a time, their three axes side by side:
+        // `b[(3k + a) LANES + j]` is column `k`, axis `a` of the batch's row
+        // `j` (unused lanes zero).
         let p = self.cols.len();
-        let mut b = vec![0.0; 3 * p];
-        for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
-            let r = self.d.residual(self.cols, fit.x.as_slice(), i);
-            let g = self.d.group[i];
-            ss[g] += r.component_mul(&r);
+        let inv = fit.lambda_inv.as_slice();
+        let included: Vec<usize> = (0..self.d.rows()).filter(|&i| self.included(i)).collect();
+        let mut b = vec![0.0; 3 * p * LANES];
+        for batch in included.chunks(LANES) {
+            b.fill(0.0);
             for (k, &c) in self.cols.iter().enumerate() {
-                for a in 0..3 {
-                    b[3 * k + a] = self.d.b[(3 * i + a, c)];
+                let column = self.d.b.column(c);
+                for (j, &i) in batch.iter().enumerate() {
+                    for a in 0..3 {
+                        b[(3 * k + a) * LANES + j] = column[3 * i + a];
+                    }
                 }
             }
-            let q = leverage3(fit.lambda_inv.as_slice(), p, &b);
-            for a in 0..3 {
-                h[g][a] += weights[g][a] * weights[g][a] * q[a];
+            let q = leverage3_rows(inv, p, &b);
+            // The sums per group in row order, as row by row.
+            for (j, &i) in batch.iter().enumerate() {
+                let r = self.d.residual(self.cols, fit.x.as_slice(), i);
+                let g = self.d.group[i];
+                ss[g] += r.component_mul(&r);
+                for a in 0..3 {
+                    h[g][a] += weights[g][a] * weights[g][a] * q[a * LANES + j];
+                }
+                n[g] += 1;
             }
-            n[g] += 1;
         }
         for g in 0..groups {
             sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[g][a], n[g], h[g][a]));
@@ -167,21 +178,28 @@ impl Reweightable<f64, Dyn> for View<'_> {
     }
 }
 
-/// `bᵀ Λ⁻¹ b` of the three axes of one row (`b[3k + a]`: column `k`, axis
-/// `a`; `inv` column-major `p × p`): for each axis the arithmetic of
-/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in index order), bit
-/// for bit, the three axes' sums as independent chains.
-fn leverage3(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3] {
-    let mut q = [0.0; 3];
+/// Rows whose leverages [`leverage3_rows`] computes at once.
+const LANES: usize = 4;
+
+/// `bᵀ Λ⁻¹ b` of the three axes of `LANES` rows (`b[(3k + a) LANES + j]`:
+/// column `k`, axis `a`, row `j`; `inv` column-major `p × p`), at
+/// `q[a LANES + j]`: for each row and axis the arithmetic of
+/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in
+/// index order), bit for bit; the `3 LANES` sums are independent chains
+/// side by side (the processor overlaps them, the compiler may vectorise
+/// across them: neither changes any lane's arithmetic).
+fn leverage3_rows(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
+    let mut q = [0.0; 3 * LANES];
+    let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
     for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
-        let mut s = [0.0; 3];
+        let mut s = [0.0; 3 * LANES];
         for (r, &v) in col.iter().enumerate() {
-            s[0] += v * b[3 * r];
-            s[1] += v * b[3 * r + 1];
-            s[2] += v * b[3 * r + 2];
+            for (s, &x) in s.iter_mut().zip(bk(r)) {
+                *s += v * x;
+            }
         }
-        for a in 0..3 {
-            q[a] += s[a] * b[3 * c + a];
+        for ((q, s), &x) in q.iter_mut().zip(&s).zip(bk(c)) {
+            *q += s * x;
         }
     }
     q
@@ -350,4 +368,45 @@ pub fn test(
     let c: Vec<bool> = m.iter().map(|v| !v).collect();
     let sol = acc.solve_active(&m)?;
     nested_test(&acc, &m, &sol, &c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{leverage3_rows, LANES};
+
+    /// The leverage of one row and axis as [`crate::estimate::leverage`]
+    /// sums it.
+    fn one(inv: &[f64], p: usize, b: impl Fn(usize) -> f64) -> f64 {
+        let mut q = 0.0;
+        for c in 0..p {
+            let mut s = 0.0;
+            for r in 0..p {
+                s += inv[c * p + r] * b(r);
+            }
+            q += s * b(c);
+        }
+        q
+    }
+
+    #[test]
+    fn batched_leverages_are_the_row_by_row_ones_bit_for_bit() {
+        let mut s = 7_u64;
+        let mut next = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for p in [1, 2, 5, 43] {
+            let inv: Vec<f64> = (0..p * p).map(|_| next() * 1e3).collect();
+            let b: Vec<f64> = (0..3 * p * LANES).map(|_| next()).collect();
+            let q = leverage3_rows(&inv, p, &b);
+            for j in 0..LANES {
+                for a in 0..3 {
+                    let want = one(&inv, p, |k| b[(3 * k + a) * LANES + j]);
+                    assert_eq!(q[a * LANES + j].to_bits(), want.to_bits());
+                }
+            }
+        }
+    }
 }
