@@ -29,6 +29,7 @@
 //! | [`declared`] | the setup's `[model]` as parameters |
 //! | [`design`] | the stacked columns of some parameters; the independence test |
 //! | [`fit`] | the core's fits and nested test on a design, at the exact size |
+//! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
@@ -74,6 +75,7 @@ pub mod residuals;
 pub mod rows;
 pub mod settings;
 pub mod validate;
+mod view;
 
 use nalgebra::Vector3;
 
