@@ -35,6 +35,7 @@
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
+//! | `parallel` | independent fits (the held-out folds) on worker threads, the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
@@ -68,6 +69,7 @@ pub mod linearisation;
 pub mod model_file;
 pub mod moments;
 pub mod names;
+mod parallel;
 pub mod plausibility;
 pub mod predict;
 pub mod report;
