@@ -1,5 +1,5 @@
 //! The estimator on the host: the fits and tests the engine asks for, on
-//! the rows of a [`Design`] ([`super::view`], a [`Reweightable`] source of
+//! the rows of a [`Design`] (`view`, a [`Reweightable`] source of
 //! the core at the exact number of parameters, `Dyn`) or on its moments
 //! per configuration and axis ([`super::moments`]).
 
