@@ -2,10 +2,9 @@
 //! against the residuals, add the first that passes, refit, repeat; report
 //! the errors before and after each step.
 
-use super::effects::{candidates, Candidate};
+use super::effects::{candidates, inadmissible, Candidate};
 use super::engine::{Engine, Fitted};
 use super::fit::{self, Method};
-use super::parallel;
 use super::report::{
     ConfigNoise, EffectStep, LeftOut, NearDependent, PlotSeries, Report, RowError, Tested,
     Unexplained,
@@ -13,7 +12,6 @@ use super::report::{
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
 use super::rows::RowKind;
 use super::settings::{CalibrationError, Settings};
-use super::trial::{Start, Trial, Verdict};
 use crate::model::Param;
 use crate::Error;
 use nalgebra::Vector3;
@@ -36,6 +34,30 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
             e.rows.configs[g]
         )
     })
+}
+
+/// The model `params` with candidate `c` added: its parameters go where the
+/// parameters they replace were, else at the end; then the identifiable
+/// subset.
+fn extended(
+    e: &Engine<'_>,
+    params: &[Param],
+    c: &Candidate,
+) -> Result<Vec<Param>, CalibrationError> {
+    let at = params
+        .iter()
+        .position(|p| c.remove.contains(p))
+        .unwrap_or(params.len());
+    let mut new: Vec<Param> = params[..at]
+        .iter()
+        .filter(|p| !c.remove.contains(p))
+        .copied()
+        .collect();
+    new.extend(c.add.iter().filter(|a| !params.contains(a)));
+    new.extend(params[at..].iter().filter(|p| !c.remove.contains(p)));
+    let d = e.design(&new)?;
+    let all: Vec<usize> = (0..new.len()).collect();
+    Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
 }
 
 /// The declared model fitted. A parameter that a Gauss–Newton step makes
@@ -192,12 +214,11 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
 ///   at least `min_share` of the lack-of-fit sum of squares above its noise
 ///   expectation: an effect that only nibbles at a structure it does not
 ///   describe is not named;
-/// - and only if its estimate is physical ([`super::effects::inadmissible`]) and the
+/// - and only if its estimate is physical ([`inadmissible`]) and the
 ///   leave-one-configuration-out RMS drops with it (when it is computed):
 ///   a significant effect that predicts unseen configurations worse is
 ///   fitting this data set, not the robot. The candidates are tried in
-///   order of p-value until one passes, each from the state the round's
-///   tests left (independent trials, on worker threads).
+///   order of p-value until one passes.
 ///
 /// # Errors
 /// [`CalibrationError`] from the fits.
@@ -263,44 +284,69 @@ pub fn run(
             }
             // The most significant candidate whose estimate is physical and that
             // lowers the leave-one-configuration-out RMS; one that fails is
-            // rejected (a note the first time) and the next is tried. The
-            // trials start from the same state and are independent
-            // (`trial`): on worker threads, their verdicts taken in order,
-            // the later ones dropped once one ends the round.
-            let start = Start::of(&e);
-            let trials = parallel::map_until(
-                eligible.len(),
-                parallel::threads(),
-                |k| start.trial(&current, &cands[eligible[k].0], &eligible[k].1),
-                Trial::ends_round,
-            );
+            // rejected (a note the first time) and the next is tried.
             let mut accepted = None;
-            for (trial, (ci, t)) in trials.into_iter().zip(&eligible) {
-                for m in &trial.messages {
-                    (e.progress)(m);
-                }
-                match trial.verdict {
-                    Verdict::Failed(err) => return Err(err),
-                    Verdict::Accepted(next, end) => {
-                        end.restore(&mut e);
-                        accepted = Some((*ci, t.clone(), *next));
-                        break;
+            for (ci, t) in eligible {
+                let c = &cands[*ci];
+                let on = t
+                    .about
+                    .as_deref()
+                    .map(|a| format!(" on {a}"))
+                    .unwrap_or_default();
+                let new_params = extended(&e, &current.params, c)?;
+                // A candidate whose fit cannot be made is rejected, never
+                // the run: no equilibrium under its estimate, or a column
+                // the estimator finds dependent on the others.
+                let next = match e.fit(&new_params) {
+                    Ok(next) => Ok(next),
+                    Err(CalibrationError::NoEquilibrium(why)) => Err(format!(
+                        "rejected: with its estimate the robot has no equilibrium ({why})"
+                    )),
+                    Err(CalibrationError::Dependent(_)) => Err(
+                        "rejected: at its fitted geometry a column is a combination of the others"
+                            .to_string(),
+                    ),
+                    Err(CalibrationError::Core(
+                        _,
+                        err @ (Error::NotIdentifiable { .. }
+                        | Error::TooFewEquations { .. }
+                        | Error::NotConverged { .. }),
+                    )) => Err(format!("rejected: its fit cannot be made ({err})")),
+                    Err(err) => return Err(err),
+                };
+                let why = match next.map(|next| {
+                    let bad = inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add);
+                    (next, bad)
+                }) {
+                    Err(why) => Some(why),
+                    Ok((_, Some(why))) => {
+                        Some(format!("rejected: its estimate is not physical ({why})"))
                     }
-                    Verdict::Rejected(why) => {
-                        let c = &cands[*ci];
-                        let on = t
-                            .about
-                            .as_deref()
-                            .map(|a| format!(" on {a}"))
-                            .unwrap_or_default();
-                        let key = format!("{}{on}", c.effect);
-                        if !rejected.contains(&key) {
-                            let note = format!("{key} {why} (step {})", steps.len() + 1);
-                            (e.progress)(&note);
-                            notes.push(note);
-                            rejected.push(key);
+                    Ok((next, None)) => {
+                        let next = e.with_heldout(next)?;
+                        match (current.heldout_rms_um, next.heldout_rms_um) {
+                            (Some(before), Some(after)) if after >= before => Some(format!(
+                                "not added: significant (p = {:.1e}) but the \
+                             leave-one-configuration-out RMS does not drop \
+                             ({before:.1} -> {after:.1} um)",
+                                t.p_value
+                            )),
+                            _ => {
+                                accepted = Some((*ci, t.clone(), next));
+                                break;
+                            }
                         }
                     }
+                };
+                if let Some(why) = why {
+                    let key = format!("{}{on}", c.effect);
+                    if !rejected.contains(&key) {
+                        let note = format!("{key} {why} (step {})", steps.len() + 1);
+                        (e.progress)(&note);
+                        notes.push(note);
+                        rejected.push(key);
+                    }
+                    e.restore(&current)?;
                 }
             }
             let Some((ci, t, next)) = accepted else {

@@ -35,11 +35,10 @@
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
-//! | `parallel` | independent fits (candidate trials, held-out folds) on worker threads, the serial loop's answers bit for bit; `ROBCAL_THREADS` |
+//! | `parallel` | independent fits (the held-out folds) on worker threads, the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
-//! | `trial` | one candidate of the loop tried on its own copy of the engine, from the round's state |
 //! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
@@ -77,7 +76,6 @@ pub mod report;
 pub mod residuals;
 pub mod rows;
 pub mod settings;
-mod trial;
 pub mod validate;
 mod view;
 

@@ -1,18 +1,18 @@
 //! Independent computations of the engine on worker threads, with the
 //! answers of the serial order (issue 16).
 //!
-//! The closed loop's candidate trials ([`super::trial`]) and the held-out
-//! folds of a weighted fit ([`super::engine::Engine::heldout`]) are
-//! independent of one another: each item is computed by the same code as
-//! in a serial loop, on one thread, from the same inputs, and the results
-//! are handed back by index. The answers are therefore bit for bit those
-//! of the serial loop, whatever the number of threads (tests: `tests`
-//! below, and `tests/cli_threads.rs` on kr270 and the TIAGo runs).
+//! The held-out folds of a weighted fit
+//! ([`super::engine::Engine::heldout`]) are independent of one another:
+//! each item is computed by the same code as in a serial loop, on one
+//! thread, from the same inputs, and the results are handed back by index.
+//! The answers are therefore bit for bit those of the serial loop, whatever
+//! the number of threads (tests: `tests` below, and `tests/cli_threads.rs`
+//! on the TIAGo runs).
 //!
 //! The number of threads is `ROBCAL_THREADS` (a positive integer; `1` runs
 //! everything on the calling thread), else
 //! [`std::thread::available_parallelism`]. Work that is already on a
-//! worker (a candidate's held-out folds) runs serially on it: no nesting.
+//! worker runs serially on it: no nesting.
 //! The calling thread works too; no thread outlives the call.
 
 use std::cell::Cell;
