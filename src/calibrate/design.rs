@@ -32,7 +32,7 @@ pub struct Design {
 impl Design {
     /// Columns of `params` at `rows` (at their last relinearisation, each
     /// row's frames recomputed there); `load_com` about the compliances of
-    /// `lin`. The rows' columns on [`super::parallel::threads`] threads.
+    /// `lin`. The rows' columns on [`super::parallel::for_rows`] threads.
     ///
     /// # Errors
     /// [`Error`] when a column cannot be computed (a parameter naming a
@@ -43,7 +43,7 @@ impl Design {
         lin: &Linearisation,
         names: &super::names::Names,
     ) -> Result<Self, Error> {
-        let threads = super::parallel::threads(all.rows.len());
+        let threads = super::parallel::for_rows(all.rows.len());
         Self::new_on(all, params, lin, names, threads)
     }
 

@@ -284,7 +284,31 @@ impl Engine<'_> {
                 r.push(i);
             }
         }
-        for g in 0..self.rows.configs.len() {
+        // The folds from the moments are independent: on worker threads
+        // (`parallel`; bit for bit the serial loop's), unless the problem
+        // is too small for threads to pay.
+        let groups = self.rows.configs.len();
+        let settings = self.fit_settings;
+        let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
+            Some(m) => {
+                let small = groups * groups * cols.len() * cols.len() < 20_000;
+                let threads = if small { 1 } else { super::parallel::threads() };
+                super::parallel::map(groups, threads, |g| {
+                    // An error is left to the refit below, which decides as
+                    // before (a column dropped, no held-out error, or the
+                    // error).
+                    let out = fit_moments(m, &d, &cols, Some(g), &settings).ok()?;
+                    Some(
+                        rows_of[g]
+                            .iter()
+                            .map(|&i| d.residual(&cols, &out.x, i))
+                            .collect(),
+                    )
+                })
+            }
+            None => Vec::new(),
+        };
+        for g in 0..groups {
             if let Some(r) = fast
                 .as_ref()
                 .and_then(|f| f.get(g))
@@ -293,15 +317,9 @@ impl Engine<'_> {
                 res.extend_from_slice(r);
                 continue;
             }
-            if let Some(m) = &moments {
-                // An error is left to the refit below, which decides as
-                // before (a column dropped, no held-out error, or the error).
-                if let Ok(out) = fit_moments(m, &d, &cols, Some(g), &self.fit_settings) {
-                    for &i in &rows_of[g] {
-                        res.push(d.residual(&cols, &out.x, i));
-                    }
-                    continue;
-                }
+            if let Some(r) = folds.get(g).and_then(Option::as_ref) {
+                res.extend_from_slice(r);
+                continue;
             }
             let mut use_cols = cols.clone();
             let out = loop {

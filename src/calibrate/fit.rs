@@ -1,15 +1,16 @@
-//! The estimator on the host: the rows of a [`Design`] as a
-//! [`Reweightable`] source of the core, at the exact number of parameters
-//! (`Dyn`), and the fits and tests the engine asks for.
+//! The estimator on the host: the fits and tests the engine asks for, on
+//! the rows of a [`Design`] (`view`, a [`Reweightable`] source of
+//! the core at the exact number of parameters, `Dyn`) or on its moments
+//! per configuration and axis ([`super::moments`]).
 
-use nalgebra::{Dyn, OMatrix, Vector3, U3};
+use nalgebra::{Dyn, OMatrix, Vector3};
 
 use super::design::Design;
 use super::moments::DesignMoments;
 pub use super::settings::Method;
+use super::view::View;
 use crate::estimate::{
-    group_dof, group_sigma, nested_test, robust_weights, Accumulator, Block, Fit, IrlsSettings,
-    NestedTest, Noise, Reweightable, RobustWeight, Solution,
+    nested_test, robust_weights, Fit, IrlsSettings, NestedTest, Reweightable, RobustWeight,
 };
 pub use crate::io::Weighting;
 use crate::Error;
@@ -71,122 +72,6 @@ pub struct Step {
     pub change: f64,
 }
 
-/// The rows of a [`Design`] on some of its columns, optionally without one
-/// group (leave-one-out).
-struct View<'a> {
-    d: &'a Design,
-    cols: &'a [usize],
-    skip_group: Option<usize>,
-    /// A floor for the residual σ per group and axis \[m\]: the
-    /// instrument's ([`Weighting::Both`]).
-    floor: Option<&'a [Vector3<f64>]>,
-}
-
-impl View<'_> {
-    fn included(&self, i: usize) -> bool {
-        Some(self.d.group[i]) != self.skip_group
-    }
-}
-
-impl Reweightable<f64, Dyn> for View<'_> {
-    fn group_count(&self) -> usize {
-        self.d.groups
-    }
-
-    fn weighted(
-        &self,
-        weights: &[Vector3<f64>],
-        noise: Option<Noise<'_, f64>>,
-    ) -> Result<Accumulator<f64, Dyn>, Error> {
-        if weights.len() != self.d.groups || noise.is_some_and(|n| !n.fits(self.d.groups)) {
-            return Err(Error::Mismatch {
-                what: "one weight per group",
-            });
-        }
-        let n = self.cols.len();
-        let mut acc = Accumulator::zeros(Dyn(n));
-        // One block, refilled for every row.
-        let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
-        for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
-            let g = self.d.group[i];
-            for (k, &c) in self.cols.iter().enumerate() {
-                for a in 0..3 {
-                    block.b[(a, k)] = self.d.b[(3 * i + a, c)];
-                }
-            }
-            block.dp = Vector3::new(self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]);
-            block.w = weights[g];
-            block.sigma = noise.map(|n| n.sigma(g, &weights[g]));
-            acc.update(&block)?;
-        }
-        Ok(acc)
-    }
-
-    fn residual_sigma_into(
-        &self,
-        fit: &Solution<f64, Dyn>,
-        weights: &[Vector3<f64>],
-        sigma: &mut [Vector3<f64>],
-        dof: &mut [Vector3<f64>],
-    ) -> Result<(), Error> {
-        let groups = self.d.groups;
-        if sigma.len() != groups || dof.len() != groups || weights.len() != groups {
-            return Err(Error::Mismatch {
-                what: "one sigma and one weight per group",
-            });
-        }
-        let mut ss = vec![Vector3::<f64>::zeros(); self.d.groups];
-        let mut h = vec![Vector3::<f64>::zeros(); self.d.groups];
-        let mut n = vec![0usize; self.d.groups];
-        // The row's three axes side by side, contiguous.
-        let p = self.cols.len();
-        let mut b = vec![0.0; 3 * p];
-        for i in (0..self.d.rows()).filter(|&i| self.included(i)) {
-            let r = self.d.residual(self.cols, fit.x.as_slice(), i);
-            let g = self.d.group[i];
-            ss[g] += r.component_mul(&r);
-            for (k, &c) in self.cols.iter().enumerate() {
-                for a in 0..3 {
-                    b[3 * k + a] = self.d.b[(3 * i + a, c)];
-                }
-            }
-            let q = leverage3(fit.lambda_inv.as_slice(), p, &b);
-            for a in 0..3 {
-                h[g][a] += weights[g][a] * weights[g][a] * q[a];
-            }
-            n[g] += 1;
-        }
-        for g in 0..groups {
-            sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[g][a], n[g], h[g][a]));
-            if let Some(floor) = self.floor.and_then(|f| f.get(g)) {
-                sigma[g] = sigma[g].sup(floor);
-            }
-            dof[g] = Vector3::from_fn(|a, _| group_dof(n[g], h[g][a]));
-        }
-        Ok(())
-    }
-}
-
-/// `bᵀ Λ⁻¹ b` of the three axes of one row (`b[3k + a]`: column `k`, axis
-/// `a`; `inv` column-major `p × p`): for each axis the arithmetic of
-/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in index order), bit
-/// for bit, the three axes' sums as independent chains.
-fn leverage3(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3] {
-    let mut q = [0.0; 3];
-    for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
-        let mut s = [0.0; 3];
-        for (r, &v) in col.iter().enumerate() {
-            s[0] += v * b[3 * r];
-            s[1] += v * b[3 * r + 1];
-            s[2] += v * b[3 * r + 2];
-        }
-        for a in 0..3 {
-            q[a] += s[a] * b[3 * c + a];
-        }
-    }
-    q
-}
-
 /// Fits the columns `cols` of `d` (all rows, or all but group `skip_group`)
 /// by the method of `s`.
 ///
@@ -199,12 +84,8 @@ pub fn fit(
     s: &FitSettings,
 ) -> Result<FitOut, Error> {
     let instrument = d.instrument_sigma.as_deref();
-    let view = View {
-        d,
-        cols,
-        skip_group,
-        floor: instrument.filter(|_| s.weighting == Weighting::Both),
-    };
+    let floor = instrument.filter(|_| s.weighting == Weighting::Both);
+    let view = View::new(d, cols, skip_group, floor);
     fit_source(&view, cols, instrument, s)
 }
 
@@ -339,12 +220,7 @@ pub fn test(
 ) -> Result<NestedTest, Error> {
     let mut cols = model.to_vec();
     cols.extend_from_slice(candidate);
-    let view = View {
-        d,
-        cols: &cols,
-        skip_group: None,
-        floor: None,
-    };
+    let view = View::new(d, &cols, None, None);
     let acc = view.weighted(weights, None)?;
     let m: Vec<bool> = (0..cols.len()).map(|i| i < model.len()).collect();
     let c: Vec<bool> = m.iter().map(|v| !v).collect();

@@ -29,12 +29,13 @@
 //! | [`declared`] | the setup's `[model]` as parameters |
 //! | [`design`] | the stacked columns of some parameters; the independence test |
 //! | [`fit`] | the core's fits and nested test on a design, at the exact size |
+//! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
-//! | [`parallel`] | the rows of a relinearisation and of a design on the host's cores, answers independent of the number of threads |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
+//! | [`parallel`] | independent work on worker threads (the held-out folds; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
@@ -76,6 +77,7 @@ pub mod residuals;
 pub mod rows;
 pub mod settings;
 pub mod validate;
+mod view;
 
 use nalgebra::Vector3;
 

@@ -160,18 +160,20 @@ impl Folded<'_> {
         let mut upper = vec![0.0; packed(n)];
         let mut eta = DVector::<f64>::zeros(n);
         let (mut yy, mut equations) = (0.0, 0);
+        let mut terms = Vec::with_capacity(3 * m.groups);
         for g in self.groups() {
             for (a, &w) in weights[g].iter().enumerate() {
                 let c = 3 * g + a;
                 let Some(w2) = moment_weight(w, None, m.rows[c])? else {
                     continue;
                 };
-                axpy(&mut upper, m.s(c), w2);
+                terms.push((m.s(c), w2));
                 axpy(eta.as_mut_slice(), m.u(c), w2);
                 yy += w2 * m.yy[c];
                 equations += m.rows[c];
             }
         }
+        axpy_cells(&mut upper, &terms);
         if !yy.is_finite() || !upper.iter().chain(eta.iter()).all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "overflow" });
         }
@@ -190,6 +192,7 @@ impl Folded<'_> {
             estimated_from: estimated.then_some(&*dof),
         };
         let mut middle = vec![0.0; packed(n)];
+        terms.clear();
         for g in self.groups() {
             let s = noise.sigma(g, &weights[g]);
             for (a, (&w, &s)) in weights[g].iter().zip(s.iter()).enumerate() {
@@ -197,9 +200,10 @@ impl Folded<'_> {
                 let Some(w2) = moment_weight(w, Some(s), m.rows[c])? else {
                     continue;
                 };
-                axpy(&mut middle, m.s(c), w2 * w2 * s * s);
+                terms.push((m.s(c), w2 * w2 * s * s));
             }
         }
+        axpy_cells(&mut middle, &terms);
         if !middle.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "overflow" });
         }
@@ -285,9 +289,9 @@ impl Reweightable<f64, Dyn> for Folded<'_> {
                 sigma[g] = Vector3::repeat(group_sigma(0.0, 0, 0.0));
                 dof[g] = Vector3::repeat(group_dof(0, 0.0));
             } else {
-                for a in 0..3 {
+                let sums = dot2x3(&inv2, &xx2, [m.s(3 * g), m.s(3 * g + 1), m.s(3 * g + 2)]);
+                for (a, (tr, xsx)) in sums.into_iter().enumerate() {
                     let c = 3 * g + a;
-                    let (tr, xsx) = dot2(&inv2, &xx2, m.s(c));
                     let h = weights[g][a] * weights[g][a] * tr;
                     let rss = (m.yy[c] - 2.0 * dot(x.as_slice(), m.u(c)) + xsx).max(0.0);
                     sigma[g][a] = group_sigma(rss, m.rows[c], h);
@@ -350,24 +354,55 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
-/// `(Σ aᵢ sᵢ, Σ bᵢ sᵢ)` in one pass over `s`, each in four partial sums
-/// (independent chains the processor can overlap).
-fn dot2(a: &[f64], b: &[f64], s: &[f64]) -> (f64, f64) {
-    let (mut p, mut q) = ([0.0; 4], [0.0; 4]);
-    let (ac, bc, sc) = (a.chunks_exact(4), b.chunks_exact(4), s.chunks_exact(4));
-    let (ar, br, sr) = (ac.remainder(), bc.remainder(), sc.remainder());
-    for ((a, b), s) in ac.zip(bc).zip(sc) {
-        for k in 0..4 {
-            p[k] += a[k] * s[k];
-            q[k] += b[k] * s[k];
+/// `y += Σ_c x_c k_c` over the terms `(x_c, k_c)` in order, each element's
+/// sum as one [`axpy`] after the other (`y + x₁k₁`, then `+ x₂k₂`, …), four
+/// terms per pass over `y`.
+fn axpy_cells(y: &mut [f64], terms: &[(&[f64], f64)]) {
+    let mut fours = terms.chunks_exact(4);
+    for t in fours.by_ref() {
+        let (x0, x1, x2, x3) = (
+            &t[0].0[..y.len()],
+            &t[1].0[..y.len()],
+            &t[2].0[..y.len()],
+            &t[3].0[..y.len()],
+        );
+        let (k0, k1, k2, k3) = (t[0].1, t[1].1, t[2].1, t[3].1);
+        for (i, y) in y.iter_mut().enumerate() {
+            *y = (((*y + x0[i] * k0) + x1[i] * k1) + x2[i] * k2) + x3[i] * k3;
         }
     }
-    let (mut p0, mut q0) = ((p[0] + p[1]) + (p[2] + p[3]), (q[0] + q[1]) + (q[2] + q[3]));
-    for ((a, b), s) in ar.iter().zip(br).zip(sr) {
-        p0 += a * s;
-        q0 += b * s;
+    for &(x, k) in fours.remainder() {
+        axpy(y, x, k);
     }
-    (p0, q0)
+}
+
+/// `(Σ aᵢ sᵢ, Σ bᵢ sᵢ)` of each of three `s` in one pass, each sum in four
+/// partial sums (independent chains the processor can overlap), combined
+/// as `(p₀ + p₁) + (p₂ + p₃)` and the remainder added after.
+fn dot2x3(a: &[f64], b: &[f64], s: [&[f64]; 3]) -> [(f64, f64); 3] {
+    let (mut p, mut q) = ([[0.0; 4]; 3], [[0.0; 4]; 3]);
+    let len = 4 * (a.len() / 4);
+    for i in (0..len).step_by(4) {
+        let (a, b) = (&a[i..i + 4], &b[i..i + 4]);
+        for c in 0..3 {
+            let s = &s[c][i..i + 4];
+            for k in 0..4 {
+                p[c][k] += a[k] * s[k];
+                q[c][k] += b[k] * s[k];
+            }
+        }
+    }
+    let mut out = [(0.0, 0.0); 3];
+    for c in 0..3 {
+        let (p, q) = (p[c], q[c]);
+        let (mut p0, mut q0) = ((p[0] + p[1]) + (p[2] + p[3]), (q[0] + q[1]) + (q[2] + q[3]));
+        for i in len..a.len() {
+            p0 += a[i] * s[c][i];
+            q0 += b[i] * s[c][i];
+        }
+        out[c] = (p0, q0);
+    }
+    out
 }
 
 /// The `n × n` upper-triangular matrix of a packed triangle.
@@ -467,6 +502,58 @@ mod tests {
                 let scale = rows.std.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
                 close(&mom.std, &rows.std, scale);
                 assert_eq!(mom.iterations, rows.iterations);
+            }
+        }
+    }
+
+    /// The one-cell sums the passes of several cells replace.
+    fn dot2(a: &[f64], b: &[f64], s: &[f64]) -> (f64, f64) {
+        let (mut p, mut q) = ([0.0; 4], [0.0; 4]);
+        let (ac, bc, sc) = (a.chunks_exact(4), b.chunks_exact(4), s.chunks_exact(4));
+        let (ar, br, sr) = (ac.remainder(), bc.remainder(), sc.remainder());
+        for ((a, b), s) in ac.zip(bc).zip(sc) {
+            for k in 0..4 {
+                p[k] += a[k] * s[k];
+                q[k] += b[k] * s[k];
+            }
+        }
+        let (mut p0, mut q0) = ((p[0] + p[1]) + (p[2] + p[3]), (q[0] + q[1]) + (q[2] + q[3]));
+        for ((a, b), s) in ar.iter().zip(br).zip(sr) {
+            p0 += a * s;
+            q0 += b * s;
+        }
+        (p0, q0)
+    }
+
+    #[test]
+    fn several_cells_per_pass_sum_as_one_at_a_time() {
+        let d = design(1, 60, 1, 4, false);
+        let v: Vec<f64> = d.y.iter().map(|y| y * 1e3).collect();
+        for len in [1, 4, 7, 10, 21] {
+            let (a, b) = (&v[..len], &v[len..2 * len]);
+            let s = [
+                &v[2 * len..3 * len],
+                &v[3 * len..4 * len],
+                &v[4 * len..5 * len],
+            ];
+            let got = dot2x3(a, b, s);
+            for c in 0..3 {
+                let want = dot2(a, b, s[c]);
+                assert_eq!(got[c].0.to_bits(), want.0.to_bits());
+                assert_eq!(got[c].1.to_bits(), want.1.to_bits());
+            }
+            for cells in 0..=6 {
+                let terms: Vec<(&[f64], f64)> = (0..cells)
+                    .map(|c| (&v[c * len..(c + 1) * len], v[100 + c]))
+                    .collect();
+                let mut got = v[6 * len..7 * len].to_vec();
+                let mut want = got.clone();
+                axpy_cells(&mut got, &terms);
+                for (x, k) in &terms {
+                    axpy(&mut want, x, *k);
+                }
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want));
             }
         }
     }

@@ -368,7 +368,7 @@ impl Rows {
         geometry: &Geometry,
         lin: &Linearisation,
     ) -> Result<(), CalibrationError> {
-        let threads = super::parallel::threads(self.rows.len());
+        let threads = super::parallel::for_rows(self.rows.len());
         self.relinearise_on(geometry, lin, threads)
     }
 

@@ -1,0 +1,503 @@
+//! The rows of a [`Design`] on some of its columns, optionally without one
+//! configuration: the [`Reweightable`] source of the host's row-by-row fits
+//! ([`super::fit::fit`]).
+//!
+//! Every sum is the core's ([`crate::estimate::Accumulator::update`] and
+//! [`crate::estimate::leverage`]), bit for bit, in a layout the processor
+//! streams faster (issue 16):
+//!
+//! - the included rows are copied once per view, each row's three axes as
+//!   three contiguous runs of its columns, so that the rank-3 update of a
+//!   column of `Λ` runs over contiguous values (vectorised across the
+//!   elements of the column, each element's sum unchanged);
+//! - two rows are added per pass over the triangle (each element gets the
+//!   first row's three terms, then the second's: the order of the row by
+//!   row stream);
+//! - the sandwich's middle term `M` is summed alone (the core's pass with σ
+//!   sums `Λ` again, which the fit does not use);
+//! - the leverages of four rows are computed side by side.
+//!
+//! Where a weight, σ or sum is not finite (or a weight negative), the
+//! core's [`crate::estimate::Accumulator::update`] is run instead: it gives
+//! the errors it always gave. `tests` compare both ways bit for bit.
+
+use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3, U3};
+
+use super::design::Design;
+use crate::estimate::accumulator::symmetric;
+use crate::estimate::{
+    group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Block, Fit, Noise,
+    Reweightable, RobustWeight, Solution,
+};
+use crate::Error;
+
+/// The rows of a [`Design`] on some of its columns, optionally without one
+/// group (leave-one-out).
+pub(super) struct View<'a> {
+    d: &'a Design,
+    cols: &'a [usize],
+    /// A floor for the residual σ per group and axis \[m\]: the
+    /// instrument's ([`super::fit::Weighting::Both`]).
+    floor: Option<&'a [Vector3<f64>]>,
+    /// The included rows, in order.
+    rows: Vec<usize>,
+    /// Their columns: row `k`'s axis `a` at `b[(3k + a) n..(3k + a + 1) n]`.
+    b: Vec<f64>,
+}
+
+impl<'a> View<'a> {
+    /// The rows of `d` on the columns `cols`, without group `skip_group`.
+    pub(super) fn new(
+        d: &'a Design,
+        cols: &'a [usize],
+        skip_group: Option<usize>,
+        floor: Option<&'a [Vector3<f64>]>,
+    ) -> Self {
+        let rows: Vec<usize> = (0..d.rows())
+            .filter(|&i| Some(d.group[i]) != skip_group)
+            .collect();
+        let n = cols.len();
+        let mut b = vec![0.0; 3 * n * rows.len()];
+        for (k, &c) in cols.iter().enumerate() {
+            let column = d.b.column(c);
+            for (r, &i) in rows.iter().enumerate() {
+                for a in 0..3 {
+                    b[(3 * r + a) * n + k] = column[3 * i + a];
+                }
+            }
+        }
+        Self {
+            d,
+            cols,
+            floor,
+            rows,
+            b,
+        }
+    }
+
+    /// The three axes of the `r`-th included row.
+    fn row(&self, r: usize) -> [&[f64]; 3] {
+        let n = self.cols.len();
+        let at = |a: usize| &self.b[(3 * r + a) * n..(3 * r + a + 1) * n];
+        [at(0), at(1), at(2)]
+    }
+
+    /// `Δp` of design row `i`.
+    fn y(&self, i: usize) -> [f64; 3] {
+        [self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]]
+    }
+
+    /// The core's accumulator, one [`Accumulator::update`] per row.
+    fn streamed(
+        &self,
+        weights: &[Vector3<f64>],
+        noise: Option<Noise<'_, f64>>,
+    ) -> Result<Accumulator<f64, Dyn>, Error> {
+        let n = self.cols.len();
+        let mut acc = Accumulator::zeros(Dyn(n));
+        // One block, refilled for every row.
+        let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
+        for (r, &i) in self.rows.iter().enumerate() {
+            let g = self.d.group[i];
+            for (a, axis) in self.row(r).into_iter().enumerate() {
+                for (k, &v) in axis.iter().enumerate() {
+                    block.b[(a, k)] = v;
+                }
+            }
+            block.dp = Vector3::from(self.y(i));
+            block.w = weights[g];
+            block.sigma = noise.map(|n| n.sigma(g, &weights[g]));
+            acc.update(&block)?;
+        }
+        Ok(acc)
+    }
+
+    /// `Λ` (upper triangle), `η`, `Σ Δpᵀ W² Δp` and the rows with a
+    /// positive weight, as [`Accumulator::update`] sums them; `None` where
+    /// a weight is negative or anything is not finite.
+    fn sums(&self, weights: &[Vector3<f64>]) -> Option<Accumulator<f64, Dyn>> {
+        let n = self.cols.len();
+        let mut info = DMatrix::<f64>::zeros(n, n);
+        let mut eta = DVector::<f64>::zeros(n);
+        let (mut yy, mut equations) = (0.0, 0);
+        let mut terms = Vec::with_capacity(self.rows.len());
+        for (r, &i) in self.rows.iter().enumerate() {
+            let w = weights[self.d.group[i]];
+            if !w.iter().all(|w| *w >= 0.0 && w.is_finite()) {
+                return None;
+            }
+            let (k, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
+            yy = ((yy + k[0] * y[0] * y[0]) + k[1] * y[1] * y[1]) + k[2] * y[2] * y[2];
+            equations += k.iter().filter(|k| **k > 0.0).count();
+            terms.push(Term {
+                b: self.row(r),
+                k,
+                y,
+            });
+        }
+        add_terms(info.as_mut_slice(), Some(eta.as_mut_slice()), n, &terms);
+        let finite = yy.is_finite() && info.iter().chain(eta.iter()).all(|v| v.is_finite());
+        finite.then(|| Accumulator::from_sums(info, eta, yy, equations))
+    }
+
+    /// The sandwich's middle term `M = Σ Bᵀ W² Σ² W² B` with σ of `noise`
+    /// (the full symmetric matrix, as [`Accumulator::middle`]).
+    fn middle(
+        &self,
+        weights: &[Vector3<f64>],
+        noise: Noise<'_, f64>,
+    ) -> Result<OMatrix<f64, Dyn, Dyn>, Error> {
+        let n = self.cols.len();
+        let mut m = DMatrix::<f64>::zeros(n, n);
+        let mut terms = Vec::with_capacity(self.rows.len());
+        let mut ok = true;
+        for (r, &i) in self.rows.iter().enumerate() {
+            let g = self.d.group[i];
+            let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+            ok &= w.iter().all(|w| *w >= 0.0 && w.is_finite());
+            ok &= s.iter().all(|s| *s > 0.0 && s.is_finite());
+            let k = |a: usize| {
+                let w2 = w[a] * w[a];
+                w2 * w2 * s[a] * s[a]
+            };
+            terms.push(Term {
+                b: self.row(r),
+                k: [k(0), k(1), k(2)],
+                y: [0.0; 3],
+            });
+        }
+        if ok {
+            add_terms(m.as_mut_slice(), None, n, &terms);
+            if m.iter().all(|v| v.is_finite()) {
+                return Ok(symmetric(&m));
+            }
+        }
+        Ok(self.streamed(weights, Some(noise))?.middle())
+    }
+
+    /// [`crate::estimate::Reweightable::fit_weighted`]'s fit (`estimated`:
+    /// [`crate::estimate::Reweightable::fit_reweighted`]'s), step by step as
+    /// the core's, `M` summed alone.
+    fn fit(
+        &self,
+        weights: &[Vector3<f64>],
+        active: &[bool],
+        sigma: &mut [Vector3<f64>],
+        dof: &mut [Vector3<f64>],
+        estimated: bool,
+    ) -> Result<Fit<f64, Dyn>, Error> {
+        let solution = self.weighted(weights, None)?.solve_active(active)?;
+        self.residual_sigma_into(&solution, weights, sigma, dof)?;
+        pool_small_groups(sigma, dof);
+        let noise = Noise {
+            sigma,
+            estimated_from: estimated.then_some(&*dof),
+        };
+        let middle = self.middle(weights, noise)?;
+        let covariance = solution.cov_sandwich(&middle);
+        Ok(Fit {
+            solution,
+            covariance,
+            iterations: 0,
+            converged: false,
+        })
+    }
+}
+
+impl Reweightable<f64, Dyn> for View<'_> {
+    fn group_count(&self) -> usize {
+        self.d.groups
+    }
+
+    fn weighted(
+        &self,
+        weights: &[Vector3<f64>],
+        noise: Option<Noise<'_, f64>>,
+    ) -> Result<Accumulator<f64, Dyn>, Error> {
+        if weights.len() != self.d.groups || noise.is_some_and(|n| !n.fits(self.d.groups)) {
+            return Err(Error::Mismatch {
+                what: "one weight per group",
+            });
+        }
+        match noise {
+            None => match self.sums(weights) {
+                Some(acc) => Ok(acc),
+                None => self.streamed(weights, None),
+            },
+            Some(noise) => self.streamed(weights, Some(noise)),
+        }
+    }
+
+    fn residual_sigma_into(
+        &self,
+        fit: &Solution<f64, Dyn>,
+        weights: &[Vector3<f64>],
+        sigma: &mut [Vector3<f64>],
+        dof: &mut [Vector3<f64>],
+    ) -> Result<(), Error> {
+        let groups = self.d.groups;
+        if sigma.len() != groups || dof.len() != groups || weights.len() != groups {
+            return Err(Error::Mismatch {
+                what: "one sigma and one weight per group",
+            });
+        }
+        let mut ss = vec![Vector3::<f64>::zeros(); groups];
+        let mut h = vec![Vector3::<f64>::zeros(); groups];
+        let mut n = vec![0usize; groups];
+        // `LANES` rows at a time, their three axes side by side:
+        // `b[(3k + a) LANES + j]` is column `k`, axis `a` of the batch's row
+        // `j` (unused lanes zero).
+        let p = self.cols.len();
+        let inv = fit.lambda_inv.as_slice();
+        let mut b = vec![0.0; 3 * p * LANES];
+        for (batch, first) in self.rows.chunks(LANES).zip((0..).step_by(LANES)) {
+            b.fill(0.0);
+            for j in 0..batch.len() {
+                for (a, axis) in self.row(first + j).into_iter().enumerate() {
+                    for (k, &v) in axis.iter().enumerate() {
+                        b[(3 * k + a) * LANES + j] = v;
+                    }
+                }
+            }
+            let q = leverage3_rows(inv, p, &b);
+            // The sums per group in row order, as row by row.
+            for (j, &i) in batch.iter().enumerate() {
+                let r = self.d.residual(self.cols, fit.x.as_slice(), i);
+                let g = self.d.group[i];
+                ss[g] += r.component_mul(&r);
+                for a in 0..3 {
+                    h[g][a] += weights[g][a] * weights[g][a] * q[a * LANES + j];
+                }
+                n[g] += 1;
+            }
+        }
+        for g in 0..groups {
+            sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[g][a], n[g], h[g][a]));
+            if let Some(floor) = self.floor.and_then(|f| f.get(g)) {
+                sigma[g] = sigma[g].sup(floor);
+            }
+            dof[g] = Vector3::from_fn(|a, _| group_dof(n[g], h[g][a]));
+        }
+        Ok(())
+    }
+
+    fn fit_weighted(
+        &self,
+        weights: &[Vector3<f64>],
+        active: &[bool],
+        sigma: &mut [Vector3<f64>],
+        dof: &mut [Vector3<f64>],
+    ) -> Result<Fit<f64, Dyn>, Error> {
+        self.fit(weights, active, sigma, dof, false)
+    }
+
+    fn fit_reweighted(
+        &self,
+        weight: &RobustWeight<f64>,
+        active: &[bool],
+        weights: &mut [Vector3<f64>],
+        sigma: &mut [Vector3<f64>],
+        dof: &mut [Vector3<f64>],
+    ) -> Result<Fit<f64, Dyn>, Error> {
+        robust_weights(sigma, weight, weights)?;
+        self.fit(weights, active, sigma, dof, true)
+    }
+}
+
+/// One row's share of a rank-3 update: its three axes' columns, the factor
+/// of each axis (`w²`, or `w⁴σ²` for `M`) and its `Δp`.
+struct Term<'a> {
+    b: [&'a [f64]; 3],
+    k: [f64; 3],
+    y: [f64; 3],
+}
+
+/// `m[i][j] += Σ_a b_a[i] (k_a b_a[j])` for `i ≤ j` (`m` column-major
+/// `n × n`) and `η_j += Σ_a (k_a b_a[j]) y_a`, for every term in order:
+/// each element's sum is the core's (`add_upper3`: the three axes left to
+/// right, row after row), two rows per pass over the triangle.
+fn add_terms(m: &mut [f64], mut eta: Option<&mut [f64]>, n: usize, terms: &[Term<'_>]) {
+    let mut pairs = terms.chunks_exact(2);
+    for pair in pairs.by_ref() {
+        let (t, u) = (&pair[0], &pair[1]);
+        for (j, column) in m.chunks_exact_mut(n.max(1)).enumerate().take(n) {
+            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
+            let c = [u.k[0] * u.b[0][j], u.k[1] * u.b[1][j], u.k[2] * u.b[2][j]];
+            if let Some(e) = eta.as_deref_mut() {
+                let v = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
+                e[j] = ((v + c[0] * u.y[0]) + c[1] * u.y[1]) + c[2] * u.y[2];
+            }
+            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
+            let ub = (&u.b[0][..=j], &u.b[1][..=j], &u.b[2][..=j]);
+            for (i, x) in column[..=j].iter_mut().enumerate() {
+                let v = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
+                *x = ((v + ub.0[i] * c[0]) + ub.1[i] * c[1]) + ub.2[i] * c[2];
+            }
+        }
+    }
+    for t in pairs.remainder() {
+        for (j, column) in m.chunks_exact_mut(n.max(1)).enumerate().take(n) {
+            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
+            if let Some(e) = eta.as_deref_mut() {
+                e[j] = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
+            }
+            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
+            for (i, x) in column[..=j].iter_mut().enumerate() {
+                *x = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
+            }
+        }
+    }
+}
+
+/// Rows whose leverages [`leverage3_rows`] computes at once.
+const LANES: usize = 4;
+
+/// `bᵀ Λ⁻¹ b` of the three axes of `LANES` rows (`b[(3k + a) LANES + j]`:
+/// column `k`, axis `a`, row `j`; `inv` column-major `p × p`), at
+/// `q[a LANES + j]`: for each row and axis the arithmetic of
+/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in
+/// index order), bit for bit; the `3 LANES` sums are independent chains
+/// side by side (the processor overlaps them, the compiler may vectorise
+/// across them: neither changes any lane's arithmetic).
+fn leverage3_rows(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
+    let mut q = [0.0; 3 * LANES];
+    let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
+    for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
+        let mut s = [0.0; 3 * LANES];
+        for (r, &v) in col.iter().enumerate() {
+            for (s, &x) in s.iter_mut().zip(bk(r)) {
+                *s += v * x;
+            }
+        }
+        for ((q, s), &x) in q.iter_mut().zip(&s).zip(bk(c)) {
+            *q += s * x;
+        }
+    }
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The leverage of one row and axis as [`crate::estimate::leverage`]
+    /// sums it.
+    fn one(inv: &[f64], p: usize, b: impl Fn(usize) -> f64) -> f64 {
+        let mut q = 0.0;
+        for c in 0..p {
+            let mut s = 0.0;
+            for r in 0..p {
+                s += inv[c * p + r] * b(r);
+            }
+            q += s * b(c);
+        }
+        q
+    }
+
+    fn rng(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    #[test]
+    fn batched_leverages_are_the_row_by_row_ones_bit_for_bit() {
+        let mut next = rng(7);
+        for p in [1, 2, 5, 43] {
+            let inv: Vec<f64> = (0..p * p).map(|_| next() * 1e3).collect();
+            let b: Vec<f64> = (0..3 * p * LANES).map(|_| next()).collect();
+            let q = leverage3_rows(&inv, p, &b);
+            for j in 0..LANES {
+                for a in 0..3 {
+                    let want = one(&inv, p, |k| b[(3 * k + a) * LANES + j]);
+                    assert_eq!(q[a * LANES + j].to_bits(), want.to_bits());
+                }
+            }
+        }
+    }
+
+    /// `groups` groups of `per` rows on `n` columns, pseudo-random.
+    fn design(groups: usize, per: usize, n: usize, seed: u64) -> Design {
+        let mut next = rng(seed);
+        let rows = groups * per;
+        Design {
+            params: Vec::new(),
+            b: DMatrix::from_fn(3 * rows, n, |_, _| next()),
+            y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
+            group: (0..rows).map(|i| i / per).collect(),
+            groups,
+            instrument_sigma: None,
+        }
+    }
+
+    fn same(a: &[f64], b: &[f64]) {
+        assert_eq!(a.len(), b.len());
+        for (a, b) in a.iter().zip(b) {
+            assert_eq!(a.to_bits(), b.to_bits(), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn the_sums_are_the_cores_bit_for_bit() {
+        // Odd and even row counts (the pairs and the last row alone), some
+        // zero weights, every column or some.
+        for (groups, per, n, seed) in [(5, 3, 7, 1), (4, 4, 43, 2), (1, 1, 3, 3)] {
+            let d = design(groups, per, n, seed);
+            let mut next = rng(seed + 10);
+            let weights: Vec<Vector3<f64>> = (0..groups)
+                .map(|g| {
+                    let w = Vector3::from_fn(|_, _| next() + 0.6);
+                    if g == 1 {
+                        Vector3::new(0.0, w.y, w.z)
+                    } else {
+                        w
+                    }
+                })
+                .collect();
+            let sigma: Vec<Vector3<f64>> = (0..groups)
+                .map(|_| Vector3::from_fn(|_, _| (next() + 0.6) * 1e-5))
+                .collect();
+            let all: Vec<usize> = (0..n).collect();
+            let some: Vec<usize> = (0..n).step_by(2).collect();
+            for cols in [&all, &some] {
+                for skip in [None, Some(0)] {
+                    let v = View::new(&d, cols, skip, None);
+                    let fast = v.weighted(&weights, None).expect("sums");
+                    let core = v.streamed(&weights, None).expect("stream");
+                    assert_eq!(fast.equations(), core.equations());
+                    assert_eq!(fast.weighted_yy().to_bits(), core.weighted_yy().to_bits());
+                    same(fast.eta().as_slice(), core.eta().as_slice());
+                    same(fast.information().as_slice(), core.information().as_slice());
+                    let noise = Noise::known(&sigma);
+                    let m = v.middle(&weights, noise).expect("middle");
+                    let core = v.streamed(&weights, Some(noise)).expect("stream");
+                    same(m.as_slice(), core.middle().as_slice());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_weights_give_the_cores_errors() {
+        let d = design(3, 2, 4, 5);
+        let cols: Vec<usize> = (0..4).collect();
+        let v = View::new(&d, &cols, None, None);
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
+            let mut w = vec![Vector3::repeat(1.0); 3];
+            w[1].y = bad;
+            assert_eq!(
+                v.weighted(&w, None).map(|_| ()),
+                v.streamed(&w, None).map(|_| ())
+            );
+            let sigma = vec![Vector3::repeat(1e-5); 3];
+            assert_eq!(
+                v.middle(&w, Noise::known(&sigma)).map(|_| ()),
+                v.streamed(&w, Some(Noise::known(&sigma))).map(|_| ())
+            );
+        }
+    }
+}
