@@ -69,6 +69,23 @@ fn add_scaled<T: RealField + Copy>(dst: &mut [T], src: &[T], f: T) {
     }
 }
 
+/// Bit `j` set when column `j` of `B` (3 × `p`, column-major; `p ≤ 64`,
+/// else 0) has a value that is not zero (a sum of magnitudes, positive
+/// when one of them is; finite values).
+#[inline(always)]
+pub(super) fn nonzero_columns<T: RealField + Copy>(bs: &[T]) -> u64 {
+    let zero = T::zero();
+    if bs.len() > 3 * 64 {
+        return 0;
+    }
+    let mut m = 0;
+    for (j, c) in bs.chunks_exact(3).enumerate() {
+        let sum = c[0].abs() + c[1].abs() + c[2].abs();
+        m |= u64::from(sum > zero) << j;
+    }
+    m
+}
+
 /// The largest magnitude in `v` and whether every value is finite (four
 /// independent maxima, not one chain of dependent compares; finite as
 /// `x · 0 = 0`, a floating-point compare, where `is_finite` compares the
