@@ -34,7 +34,7 @@ use super::linalg::dot;
 use crate::Error;
 
 mod kernel;
-use kernel::{add_rows, grow, magnitude, nonzero_columns};
+use kernel::{add_rows, grow, grow_support, magnitude};
 
 /// Moments of the rows of one group and one axis.
 #[derive(Debug, Clone, PartialEq)]
@@ -287,7 +287,7 @@ where
         }
         self.bound = bound;
         if let Some(m) = self.support.get_mut(index) {
-            *m |= nonzero_columns(bs);
+            *m = grow_support(*m, bs, p);
         }
         add_rows(&mut self.groups[index].axes, p, bs, ys);
         Ok(())

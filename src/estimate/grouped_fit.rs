@@ -149,10 +149,23 @@ where
         // finite stays so whatever is added to it.
         let mut idx = [0u8; 64];
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
-            let support = support_indices(supports[gi], n, &mut idx).map(|m| &idx[..m]);
-            // The three axes' weights first (0: the axis adds nothing); a
-            // bad one ends the sums after the axes before it, as one axis
-            // at a time would.
+            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+                for (ax, &w) in g.axes.iter().zip(w.iter()) {
+                    let w2 = match moment_weight(w, None, ax.n) {
+                        Ok(Some(w2)) => w2,
+                        Ok(None) => continue,
+                        Err(e) => return Err(overflow_first(&info, Some(&eta), yy, e)),
+                    };
+                    add_upper(&mut info, &ax.s_upper, w2);
+                    eta.zip_apply(&ax.u, |a, v| *a += v * w2);
+                    yy += w2 * ax.yy;
+                    equations += ax.n;
+                }
+                continue;
+            };
+            // On the support: the three axes' weights first (0: the axis
+            // adds nothing); a bad one ends the sums after the axes before
+            // it, as one axis at a time would.
             let mut k = [T::zero(); 3];
             let mut bad = None;
             for (a, (ax, &w)) in g.axes.iter().zip(w.iter()).enumerate() {
@@ -164,7 +177,7 @@ where
                     }
                 }
             }
-            add_group(&mut info, g, k, support);
+            add_group(&mut info, g, k, &idx[..m]);
             for (ax, &w2) in g.axes.iter().zip(&k) {
                 if w2 != T::zero() {
                     eta.zip_apply(&ax.u, |a, v| *a += v * w2);
@@ -211,7 +224,17 @@ where
         let mut idx = [0u8; 64];
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
             let s = noise.sigma(gi, w);
-            let support = support_indices(supports[gi], n, &mut idx).map(|m| &idx[..m]);
+            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+                for ((ax, &w), &s) in g.axes.iter().zip(w.iter()).zip(s.iter()) {
+                    let w2 = match moment_weight(w, Some(s), ax.n) {
+                        Ok(Some(w2)) => w2,
+                        Ok(None) => continue,
+                        Err(e) => return Err(overflow_first(&middle, None, T::zero(), e)),
+                    };
+                    add_upper(&mut middle, &ax.s_upper, w2 * w2 * s * s);
+                }
+                continue;
+            };
             let mut k = [T::zero(); 3];
             let mut bad = None;
             for (a, ((ax, &w), &s)) in g.axes.iter().zip(w.iter()).zip(s.iter()).enumerate() {
@@ -223,7 +246,7 @@ where
                     }
                 }
             }
-            add_group(&mut middle, g, k, support);
+            add_group(&mut middle, g, k, &idx[..m]);
             if let Some(e) = bad {
                 return Err(overflow_first(&middle, None, T::zero(), e));
             }
@@ -266,27 +289,19 @@ fn moment_weight<T: RealField + Copy>(
 }
 
 /// `m += S₀ k₀`, `+= S₁ k₁`, `+= S₂ k₂` on the upper triangle, `Sₐ` the
-/// group's axes, `kₐ = 0` for an axis that adds nothing. With `support`
-/// (the group's, from [`GroupedStats::supports`]) only the elements whose row
-/// and column are both in it, the three axes at once: every `S` is zero
+/// group's axes (`kₐ = 0`: the axis adds nothing), only the elements whose
+/// row and column are both in `idx` (the group's support, from
+/// [`GroupedStats::supports`]), the three axes at once: every `S` is zero
 /// elsewhere, and an exact zero added changes no sum, so every element
 /// gets the same sums in the same order as one axis at a time.
 fn add_group<T: RealField + Copy, D: Dim>(
     m: &mut OMatrix<T, D, D>,
     g: &GroupMoments<T, D>,
     k: [T; 3],
-    support: Option<&[u8]>,
+    idx: &[u8],
 ) where
     DefaultAllocator: Alloc<D>,
 {
-    let Some(idx) = support else {
-        for (ax, &k) in g.axes.iter().zip(&k) {
-            if k != T::zero() {
-                add_upper(m, &ax.s_upper, k);
-            }
-        }
-        return;
-    };
     let n = m.nrows();
     let s = g.axes.each_ref().map(|ax| ax.s_upper.as_slice());
     let m = m.as_mut_slice();

@@ -69,19 +69,26 @@ fn add_scaled<T: RealField + Copy>(dst: &mut [T], src: &[T], f: T) {
     }
 }
 
-/// Bit `j` set when column `j` of `B` (3 × `p`, column-major; `p ≤ 64`,
-/// else 0) has a value that is not zero (a sum of magnitudes, positive
-/// when one of them is; finite values).
+/// `mask` with bit `j` set for every column `j` of `B` (3 × `p`,
+/// column-major) that has a value that is not zero: only the columns not
+/// in it yet are looked at (none once every column is: full rows cost
+/// nothing after the first). 0 for more than 64 parameters (not tracked).
 #[inline(always)]
-pub(super) fn nonzero_columns<T: RealField + Copy>(bs: &[T]) -> u64 {
-    let zero = T::zero();
-    if bs.len() > 3 * 64 {
+pub(super) fn grow_support<T: RealField + Copy>(mask: u64, bs: &[T], p: usize) -> u64 {
+    if p == 0 || p > 64 {
         return 0;
     }
-    let mut m = 0;
-    for (j, c) in bs.chunks_exact(3).enumerate() {
-        let sum = c[0].abs() + c[1].abs() + c[2].abs();
-        m |= u64::from(sum > zero) << j;
+    let zero = T::zero();
+    let full = u64::MAX >> (64 - p);
+    let (mut rest, mut m) = (!mask & full, mask);
+    while rest != 0 {
+        let j = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        if let Some(c) = bs.get(3 * j..3 * j + 3) {
+            if (c[0] != zero) | (c[1] != zero) | (c[2] != zero) {
+                m |= 1 << j;
+            }
+        }
     }
     m
 }
