@@ -50,6 +50,11 @@ where
 /// Heteroscedastic rows, groups of different sizes (one with 2 rows, so
 /// its σ is pooled), `x` of different scales.
 fn stats(seed: u64) -> GroupedStats<f64, D, G> {
+    stats_with(seed, |_, _| true)
+}
+
+/// As [`stats`], `B`'s column `j` zero in group `g` unless `keep(g, j)`.
+fn stats_with(seed: u64, keep: impl Fn(usize, usize) -> bool) -> GroupedStats<f64, D, G> {
     let mut rng = StdRng::seed_from_u64(seed);
     let x = SVector::<f64, N>::from_fn(|i, _| (i as f64 - 2.0) * 10f64.powi(i as i32 - 2));
     let mut s = GroupedStats::new();
@@ -58,7 +63,12 @@ fn stats(seed: u64) -> GroupedStats<f64, D, G> {
         let rows = if g == 3 { 2 } else { rng.random_range(5..40) };
         for _ in 0..rows {
             let b = SMatrix::<f64, 3, N>::from_fn(|_, j| {
-                rng.random_range(-1.0..1.0) * 10f64.powi(2 - j as i32)
+                let v = rng.random_range(-1.0..1.0) * 10f64.powi(2 - j as i32);
+                if keep(g, j) {
+                    v
+                } else {
+                    0.0
+                }
             });
             let e = Vector3::from_fn(|a, _| Normal::new(0.0, sigma[a]).unwrap().sample(&mut rng));
             s.update(g as i32, &b, &(b * x + e)).unwrap();
@@ -116,6 +126,95 @@ fn irls_is_the_generic_path_bit_for_bit() {
                 "seed {seed}: the reweighting took {} steps",
                 a.4.len()
             );
+        }
+    }
+}
+
+/// Groups whose rows leave columns of `B` zero (as the KR-270's: a
+/// compliance of one q2 group, and the shared ones), which the fits leave
+/// out of their sums (`GroupedStats`' supports): the generic path's sums
+/// (`Λ`, `M` through an `Accumulator`, every element) bit for bit, and the
+/// residual σ those of the full traces and quadratic forms.
+#[test]
+#[allow(clippy::needless_range_loop)] // the sums in the order of their definitions
+fn zero_columns_left_out_change_no_bit() {
+    // Group 5 has every column (the full path beside the others).
+    let keep = |g: usize, j: usize| g == 5 || j == g % 3 || j >= 3;
+    let settings = IrlsSettings::new(RobustWeight::new(0.001, 1.0).unwrap());
+    for seed in 0..10 {
+        let s = stats_with(seed, keep);
+        let mut out = Vec::new();
+        for fast in [true, false] {
+            let (mut w, mut sg, mut d) = (
+                vec![Vector3::zeros(); G],
+                vec![Vector3::zeros(); G],
+                vec![Vector3::zeros(); G],
+            );
+            let fit = if fast {
+                s.fit_irls(&settings, &[true; N], &mut w, &mut sg, &mut d, |_| {})
+            } else {
+                Generic(&s).fit_irls(&settings, &[true; N], &mut w, &mut sg, &mut d, |_| {})
+            }
+            .unwrap();
+            out.push((fit, w, sg, d));
+        }
+        same(&out[0].0, &out[1].0);
+        assert_eq!(
+            (&out[0].1, &out[0].2),
+            (&out[1].1, &out[1].2),
+            "seed {seed}"
+        );
+
+        // The residual σ of the final fit, summed over every element.
+        let (fit, w) = (&out[0].0.solution, &out[0].1);
+        let (mut sigma, mut dof) = (vec![Vector3::zeros(); G], vec![Vector3::zeros(); G]);
+        s.residual_sigma_into(fit, w, &mut sigma, &mut dof).unwrap();
+        let (inv, x) = (fit.lambda_inv.as_slice(), fit.x.as_slice());
+        for (gi, g) in s.groups().iter().enumerate() {
+            for (a, ax) in g.axes.iter().enumerate() {
+                let sv = ax.s_upper.as_slice();
+                let mut tr = 0.0;
+                for c in 0..N {
+                    tr += inv[c * N + c] * sv[c * N + c];
+                    for r in 0..c {
+                        tr += (inv[c * N + r] + inv[c * N + r]) * sv[c * N + r];
+                    }
+                }
+                let rss = ax.rss(&fit.x);
+                let mut xu = 0.0;
+                for k in 0..N {
+                    xu += x[k] * ax.u[k];
+                }
+                assert_eq!(
+                    rss.to_bits(),
+                    (ax.yy - 2.0 * xu + {
+                        let mut q = 0.0;
+                        for i in 0..N {
+                            let mut y = 0.0;
+                            for k in 0..N {
+                                let at = if k < i { i * N + k } else { k * N + i };
+                                y += sv[at] * x[k];
+                            }
+                            q += y * x[i];
+                        }
+                        q
+                    })
+                    .max(0.0)
+                    .to_bits()
+                );
+                let h = w[gi][a] * w[gi][a] * tr;
+                let want = robcal::estimate::group_sigma(rss, ax.n, h);
+                // (`residual_sigma_into` itself does not pool.)
+                assert_eq!(
+                    sigma[gi][a].to_bits(),
+                    want.to_bits(),
+                    "seed {seed} {gi} {a}"
+                );
+                assert_eq!(
+                    dof[gi][a].to_bits(),
+                    robcal::estimate::group_dof(ax.n, h).to_bits()
+                );
+            }
         }
     }
 }

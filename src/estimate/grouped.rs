@@ -15,8 +15,9 @@
 //! - the re-weighted statistics `Λ = Σ w²_ga S_ga`, `η = Σ w²_ga u_ga`;
 //! - the sandwich middle term `M = Σ w⁴_ga σ²_ga S_ga` (eq. 11).
 //!
-//! Memory is `G · 3 · (n² + n + 2)` scalars, fixed: it grows with the number
-//! of configurations, never with the number of measurements.
+//! Memory is `G · 3 · (n² + n + 2)` scalars (and a 64-bit mask per group),
+//! fixed: it grows with the number of configurations, never with the
+//! number of measurements.
 //!
 //! The residual sum of squares is a difference of large terms; it keeps its
 //! accuracy while `yy` is within a few orders of magnitude of the residuals'
@@ -33,7 +34,7 @@ use super::linalg::dot;
 use crate::Error;
 
 mod kernel;
-use kernel::{add_rows, grow, magnitude};
+use kernel::{add_rows, grow, grow_support, magnitude};
 
 /// Moments of the rows of one group and one axis.
 #[derive(Debug, Clone, PartialEq)]
@@ -141,6 +142,11 @@ where
     /// every `yy` (the overflow guard of [`GroupedStats::update`]); not
     /// part of the statistics.
     bound: T,
+    /// Per group, the parameters whose column of `B` was not zero in some
+    /// row (bit `j`; 0 with more than 64 parameters): every element of the
+    /// group's `S` outside them is zero, and the fits leave them out
+    /// (adding an exact zero changes no sum). Not part of the statistics.
+    support: [u64; G],
 }
 
 /// The statistics compared, not the overflow guard's bound.
@@ -182,6 +188,7 @@ where
             dim,
             groups: heapless::Vec::new(),
             bound: T::zero(),
+            support: [0; G],
         }
     }
 
@@ -279,6 +286,9 @@ where
                 })?;
         }
         self.bound = bound;
+        if let Some(m) = self.support.get_mut(index) {
+            *m = grow_support(*m, bs, p);
+        }
         add_rows(&mut self.groups[index].axes, p, bs, ys);
         Ok(())
     }
@@ -341,6 +351,18 @@ where
         sigma: &mut [Vector3<T>],
         dof: &mut [Vector3<T>],
     ) -> Result<(), Error> {
+        self.residual_sigma_with(fit, weights, sigma, dof, &self.supports())
+    }
+
+    /// [`GroupedStats::residual_sigma_into`] with the groups' `supports`.
+    pub(crate) fn residual_sigma_with(
+        &self,
+        fit: &Solution<T, D>,
+        weights: &[Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
+        supports: &[u64; G],
+    ) -> Result<(), Error> {
         let g = self.groups.len();
         if sigma.len() != g || dof.len() != g || weights.len() != g {
             return Err(Error::Mismatch {
@@ -354,19 +376,29 @@ where
             });
         }
         let two = T::one() + T::one();
-        for (((o, d), g), w) in sigma
+        let mut idx = [0u8; 64];
+        for (gi, (((o, d), g), w)) in sigma
             .iter_mut()
             .zip(dof.iter_mut())
             .zip(&self.groups)
             .zip(weights)
+            .enumerate()
         {
             // The three axes side by side: each sum is a chain of dependent
             // additions (the same, in the same order, as one axis at a
             // time), and three independent chains keep the processor busy
             // where one would wait on each addition.
             let s = g.axes.each_ref().map(|ax| ax.s_upper.as_slice());
-            let tr = traces3(inv.as_slice(), n, s);
-            let q = quadratics3(s, n, fit.x.as_slice());
+            let (tr, q) = match support_indices(supports[gi], n, &mut idx) {
+                Some(m) => (
+                    traces3_sparse(inv.as_slice(), n, s, &idx[..m]),
+                    quadratics3_sparse(s, n, fit.x.as_slice(), &idx[..m]),
+                ),
+                None => (
+                    traces3(inv.as_slice(), n, s),
+                    quadratics3(s, n, fit.x.as_slice()),
+                ),
+            };
             for a in 0..3 {
                 let ax = &g.axes[a];
                 let h = w[a] * w[a] * tr[a];
@@ -377,6 +409,12 @@ where
             }
         }
         Ok(())
+    }
+
+    /// Per group, the parameters outside which all its `S` are zero (bit
+    /// `j`; 0 when not known).
+    pub(crate) fn supports(&self) -> [u64; G] {
+        self.support
     }
 
     /// The weighted statistics: every row of group `g`, axis `a` carries the
@@ -466,6 +504,66 @@ fn quadratics3<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T]) -> [T; 3] {
         }
         for a in 0..3 {
             q[a] += y[a] * xi;
+        }
+    }
+    q
+}
+
+/// The parameters of a support mask ([`GroupedStats::supports`]) in
+/// increasing order, into `idx`: their number, or `None` when the mask is
+/// not known (0) or holds all `p` parameters.
+pub(crate) fn support_indices(mask: u64, p: usize, idx: &mut [u8; 64]) -> Option<usize> {
+    if mask == 0 || mask.count_ones() as usize >= p {
+        return None;
+    }
+    let (mut bits, mut m) = (mask, 0);
+    while bits != 0 {
+        // (A bit index, below 64.)
+        idx[m] = bits.trailing_zeros() as u8;
+        bits &= bits - 1;
+        m += 1;
+    }
+    Some(m)
+}
+
+/// [`traces3`] over the parameters `idx` only (increasing; every element
+/// of `S` outside them is zero): the same sums, in the same order, without
+/// the terms that are exact zeros (adding one changes no sum).
+fn traces3_sparse<T: RealField + Copy>(inv: &[T], n: usize, s: [&[T]; 3], idx: &[u8]) -> [T; 3] {
+    let mut t = [T::zero(); 3];
+    for (ci, &c) in idx.iter().enumerate() {
+        let c = usize::from(c);
+        let d = inv[c * n + c];
+        for a in 0..3 {
+            t[a] += d * s[a][c * n + c];
+        }
+        for &r in &idx[..ci] {
+            let r = usize::from(r);
+            let v = inv[c * n + r] + inv[c * n + r];
+            for a in 0..3 {
+                t[a] += v * s[a][c * n + r];
+            }
+        }
+    }
+    t
+}
+
+/// [`quadratics3`] over the parameters `idx` only, likewise: a row `i`
+/// outside them has `(SX)ᵢ = 0` and adds an exact zero.
+fn quadratics3_sparse<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T], idx: &[u8]) -> [T; 3] {
+    let mut q = [T::zero(); 3];
+    for &i in idx {
+        let i = usize::from(i);
+        let mut y = [T::zero(); 3];
+        for &k in idx {
+            let k = usize::from(k);
+            let at = if k < i { i * n + k } else { k * n + i };
+            for a in 0..3 {
+                y[a] += s[a][at] * x[k];
+            }
+        }
+        for a in 0..3 {
+            q[a] += y[a] * x[i];
         }
     }
     q

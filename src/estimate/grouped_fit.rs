@@ -8,13 +8,17 @@
 //! triangle), and the second pass computes `M = Σ w⁴ σ² S` alone. The
 //! checks, the errors and every sum (groups and axes in the same order,
 //! element by element) are those of the generic path, so the result is the
-//! same bit for bit (`host-tests/tests/grouped_fit.rs`).
+//! same bit for bit (`host-tests/tests/grouped_fit.rs`). Where a group's
+//! rows leave columns of `B` zero (the KR-270's: 5 of 9 parameters per
+//! configuration), its `S` are zero outside the others' rows and columns,
+//! and every pass leaves those elements out: an exact zero added changes
+//! no sum.
 
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector3};
 
 use super::accumulator::{symmetric, Accumulator};
 use super::factor::Solution;
-use super::grouped::GroupedStats;
+use super::grouped::{support_indices, GroupMoments, GroupedStats};
 use super::irls::{pool_small_groups, robust_weights, Fit, Noise, Reweightable};
 use super::weights::RobustWeight;
 use super::Alloc;
@@ -85,7 +89,8 @@ fn fit_grouped<T: RealField + Copy, D: Dim, const G: usize>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let info = stats.information_upper(weights)?;
+    let supports = stats.supports();
+    let info = stats.information_upper(weights, &supports)?;
     // As `Accumulator::solve_active`.
     let (equations, parameters) = (info.equations, active.iter().filter(|a| **a).count());
     if active.len() == info.upper.nrows() && equations < parameters {
@@ -96,13 +101,13 @@ where
     }
     let lambda = symmetric(&info.upper);
     let solution = Solution::new(&lambda, &info.eta, info.yy, equations, active)?;
-    stats.residual_sigma_into(&solution, weights, sigma, dof)?;
+    stats.residual_sigma_with(&solution, weights, sigma, dof, &supports)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = symmetric(&stats.middle_upper(weights, noise)?);
+    let middle = symmetric(&stats.middle_upper(weights, noise, &supports)?);
     let covariance = solution.cov_sandwich(&middle);
     Ok(Fit {
         solution,
@@ -125,6 +130,7 @@ where
     pub(crate) fn information_upper(
         &self,
         weights: &[Vector3<T>],
+        supports: &[u64; G],
     ) -> Result<Information<T, D>, Error> {
         if weights.len() != self.groups().len() {
             return Err(Error::Mismatch {
@@ -132,6 +138,7 @@ where
             });
         }
         let dim = self.dim();
+        let n = dim.value();
         let mut info = OMatrix::<T, D, D>::zeros_generic(dim, dim);
         let mut eta = OVector::<T, D>::zeros_generic(dim, Const::<1>);
         let (mut yy, mut equations) = (T::zero(), 0);
@@ -140,17 +147,46 @@ where
         // everything is added and the sums are checked once, at the end or
         // at a bad weight: the same verdict, because a sum that is not
         // finite stays so whatever is added to it.
-        for (g, w) in self.groups().iter().zip(weights) {
-            for (ax, &w) in g.axes.iter().zip(w.iter()) {
-                let w2 = match moment_weight(w, None, ax.n) {
-                    Ok(Some(w2)) => w2,
-                    Ok(None) => continue,
-                    Err(e) => return Err(overflow_first(&info, Some(&eta), yy, e)),
-                };
-                add_upper(&mut info, &ax.s_upper, w2);
-                eta.zip_apply(&ax.u, |a, v| *a += v * w2);
-                yy += w2 * ax.yy;
-                equations += ax.n;
+        let mut idx = [0u8; 64];
+        for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
+            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+                for (ax, &w) in g.axes.iter().zip(w.iter()) {
+                    let w2 = match moment_weight(w, None, ax.n) {
+                        Ok(Some(w2)) => w2,
+                        Ok(None) => continue,
+                        Err(e) => return Err(overflow_first(&info, Some(&eta), yy, e)),
+                    };
+                    add_upper(&mut info, &ax.s_upper, w2);
+                    eta.zip_apply(&ax.u, |a, v| *a += v * w2);
+                    yy += w2 * ax.yy;
+                    equations += ax.n;
+                }
+                continue;
+            };
+            // On the support: the three axes' weights first (0: the axis
+            // adds nothing); a bad one ends the sums after the axes before
+            // it, as one axis at a time would.
+            let mut k = [T::zero(); 3];
+            let mut bad = None;
+            for (a, (ax, &w)) in g.axes.iter().zip(w.iter()).enumerate() {
+                match moment_weight(w, None, ax.n) {
+                    Ok(w2) => k[a] = w2.unwrap_or(T::zero()),
+                    Err(e) => {
+                        bad = Some(e);
+                        break;
+                    }
+                }
+            }
+            add_group(&mut info, g, k, &idx[..m]);
+            for (ax, &w2) in g.axes.iter().zip(&k) {
+                if w2 != T::zero() {
+                    eta.zip_apply(&ax.u, |a, v| *a += v * w2);
+                    yy += w2 * ax.yy;
+                    equations += ax.n;
+                }
+            }
+            if let Some(e) = bad {
+                return Err(overflow_first(&info, Some(&eta), yy, e));
             }
         }
         if !finite_sums(&info, Some(&eta), yy) {
@@ -173,6 +209,7 @@ where
         &self,
         weights: &[Vector3<T>],
         noise: Noise<'_, T>,
+        supports: &[u64; G],
     ) -> Result<OMatrix<T, D, D>, Error> {
         let groups = self.groups().len();
         if weights.len() != groups || !noise.fits(groups) {
@@ -181,17 +218,37 @@ where
             });
         }
         let dim = self.dim();
+        let n = dim.value();
         let mut middle = OMatrix::<T, D, D>::zeros_generic(dim, dim);
         // The overflow check once, as in `information_upper`.
+        let mut idx = [0u8; 64];
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
             let s = noise.sigma(gi, w);
-            for ((ax, &w), &s) in g.axes.iter().zip(w.iter()).zip(s.iter()) {
-                let w2 = match moment_weight(w, Some(s), ax.n) {
-                    Ok(Some(w2)) => w2,
-                    Ok(None) => continue,
-                    Err(e) => return Err(overflow_first(&middle, None, T::zero(), e)),
-                };
-                add_upper(&mut middle, &ax.s_upper, w2 * w2 * s * s);
+            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+                for ((ax, &w), &s) in g.axes.iter().zip(w.iter()).zip(s.iter()) {
+                    let w2 = match moment_weight(w, Some(s), ax.n) {
+                        Ok(Some(w2)) => w2,
+                        Ok(None) => continue,
+                        Err(e) => return Err(overflow_first(&middle, None, T::zero(), e)),
+                    };
+                    add_upper(&mut middle, &ax.s_upper, w2 * w2 * s * s);
+                }
+                continue;
+            };
+            let mut k = [T::zero(); 3];
+            let mut bad = None;
+            for (a, ((ax, &w), &s)) in g.axes.iter().zip(w.iter()).zip(s.iter()).enumerate() {
+                match moment_weight(w, Some(s), ax.n) {
+                    Ok(w2) => k[a] = w2.map_or(T::zero(), |w2| w2 * w2 * s * s),
+                    Err(e) => {
+                        bad = Some(e);
+                        break;
+                    }
+                }
+            }
+            add_group(&mut middle, g, k, &idx[..m]);
+            if let Some(e) = bad {
+                return Err(overflow_first(&middle, None, T::zero(), e));
             }
         }
         if !finite_sums(&middle, None, T::zero()) {
@@ -229,6 +286,31 @@ fn moment_weight<T: RealField + Copy>(
     }
     let w2 = w * w;
     Ok((n > 0 && w2 != T::zero()).then_some(w2))
+}
+
+/// `m += S₀ k₀`, `+= S₁ k₁`, `+= S₂ k₂` on the upper triangle, `Sₐ` the
+/// group's axes (`kₐ = 0`: the axis adds nothing), only the elements whose
+/// row and column are both in `idx` (the group's support, from
+/// [`GroupedStats::supports`]), the three axes at once: every `S` is zero
+/// elsewhere, and an exact zero added changes no sum, so every element
+/// gets the same sums in the same order as one axis at a time.
+fn add_group<T: RealField + Copy, D: Dim>(
+    m: &mut OMatrix<T, D, D>,
+    g: &GroupMoments<T, D>,
+    k: [T; 3],
+    idx: &[u8],
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = m.nrows();
+    let s = g.axes.each_ref().map(|ax| ax.s_upper.as_slice());
+    let m = m.as_mut_slice();
+    for (ci, &c) in idx.iter().enumerate() {
+        for &r in &idx[..=ci] {
+            let o = usize::from(c) * n + usize::from(r);
+            m[o] = ((m[o] + s[0][o] * k[0]) + s[1][o] * k[1]) + s[2][o] * k[2];
+        }
+    }
 }
 
 /// `m += s k` on the upper triangle (column by column, each column's rows

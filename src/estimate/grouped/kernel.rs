@@ -69,6 +69,30 @@ fn add_scaled<T: RealField + Copy>(dst: &mut [T], src: &[T], f: T) {
     }
 }
 
+/// `mask` with bit `j` set for every column `j` of `B` (3 × `p`,
+/// column-major) that has a value that is not zero: only the columns not
+/// in it yet are looked at (none once every column is: full rows cost
+/// nothing after the first). 0 for more than 64 parameters (not tracked).
+#[inline(always)]
+pub(super) fn grow_support<T: RealField + Copy>(mask: u64, bs: &[T], p: usize) -> u64 {
+    if p == 0 || p > 64 {
+        return 0;
+    }
+    let zero = T::zero();
+    let full = u64::MAX >> (64 - p);
+    let (mut rest, mut m) = (!mask & full, mask);
+    while rest != 0 {
+        let j = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        if let Some(c) = bs.get(3 * j..3 * j + 3) {
+            if (c[0] != zero) | (c[1] != zero) | (c[2] != zero) {
+                m |= 1 << j;
+            }
+        }
+    }
+    m
+}
+
 /// The largest magnitude in `v` and whether every value is finite (four
 /// independent maxima, not one chain of dependent compares; finite as
 /// `x · 0 = 0`, a floating-point compare, where `is_finite` compares the
