@@ -21,7 +21,7 @@
 //! [`crate::robot::JointFrame::carries`] is set, and every other joint's
 //! columns are zero for a point on the tip. A tree with markers on several
 //! links is one chain per marker link, all sharing the joints
-//! ([`Chain::with_tip`]): the parameters of a shared joint are one column.
+//! (`Chain::with_tip`, `tree` feature): the parameters of a shared joint are one column.
 
 use nalgebra::{Isometry3, RealField, Translation3, Unit, UnitQuaternion, Vector3};
 
@@ -102,7 +102,7 @@ impl<T: RealField + Copy> Joint<T> {
 }
 
 /// Where a tip is fixed: a movable joint's frame (or the base frame) and the
-/// fixed transform from it (see [`Chain::with_tip`]).
+/// fixed transform from it (see `Chain::with_tip`, `tree` feature).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct End<T: RealField + Copy> {
