@@ -6,10 +6,12 @@
 //! [`crate::estimate::leverage`]), bit for bit, in a layout the processor
 //! streams faster (issue 16):
 //!
-//! - the included rows are copied once per view, each row's three axes as
-//!   three contiguous runs of its columns, so that the rank-3 update of a
-//!   column of `Λ` runs over contiguous values (vectorised across the
-//!   elements of the column, each element's sum unchanged);
+//! - the included rows are copied, each row's three axes as three
+//!   contiguous runs of its columns, so that the rank-3 update of a column
+//!   of `Λ` runs over contiguous values (vectorised across the elements of
+//!   the column, each element's sum unchanged): once per view when it has
+//!   at most [`BLOCK_ROWS`] rows, else [`BLOCK_ROWS`] at a time in each
+//!   pass (a copy of a million rows' columns was 190 MB while a fit ran);
 //! - two rows are added per pass over the triangle (each element gets the
 //!   first row's three terms, then the second's: the order of the row by
 //!   row stream);
@@ -41,9 +43,16 @@ pub(super) struct View<'a> {
     floor: Option<&'a [Vector3<f64>]>,
     /// The included rows, in order.
     rows: Vec<usize>,
-    /// Their columns: row `k`'s axis `a` at `b[(3k + a) n..(3k + a + 1) n]`.
+    /// Rows copied at a time (even: the pairs of [`add_terms`] never
+    /// straddle two copies).
+    block: usize,
+    /// Their columns when there are at most `block` rows (else empty):
+    /// row `k`'s axis `a` at `b[(3k + a) n..(3k + a + 1) n]`.
     b: Vec<f64>,
 }
+
+/// Rows a view copies at a time ([`View`]).
+const BLOCK_ROWS: usize = 4096;
 
 impl<'a> View<'a> {
     /// The rows of `d` on the columns `cols`, without group `skip_group`.
@@ -53,33 +62,75 @@ impl<'a> View<'a> {
         skip_group: Option<usize>,
         floor: Option<&'a [Vector3<f64>]>,
     ) -> Self {
+        Self::blocked(d, cols, skip_group, floor, BLOCK_ROWS)
+    }
+
+    /// [`View::new`], copying `block` rows at a time (rounded up to even).
+    fn blocked(
+        d: &'a Design,
+        cols: &'a [usize],
+        skip_group: Option<usize>,
+        floor: Option<&'a [Vector3<f64>]>,
+        block: usize,
+    ) -> Self {
         let rows: Vec<usize> = (0..d.rows())
             .filter(|&i| Some(d.group[i]) != skip_group)
             .collect();
-        let n = cols.len();
-        let mut b = vec![0.0; 3 * n * rows.len()];
-        for (k, &c) in cols.iter().enumerate() {
-            let column = d.b.column(c);
-            for (r, &i) in rows.iter().enumerate() {
+        let block = block.max(2).next_multiple_of(2);
+        let mut view = Self {
+            d,
+            cols,
+            floor,
+            rows,
+            block,
+            b: Vec::new(),
+        };
+        if view.rows.len() <= block {
+            view.b = view.copy(0, view.rows.len());
+        }
+        view
+    }
+
+    /// The columns of the included rows `first..first + len`: row `k`'s
+    /// axis `a` at `[(3k + a) n..(3k + a + 1) n]`.
+    fn copy(&self, first: usize, len: usize) -> Vec<f64> {
+        let n = self.cols.len();
+        let mut b = vec![0.0; 3 * n * len];
+        for (k, &c) in self.cols.iter().enumerate() {
+            let column = self.d.b.column(c);
+            for (r, &i) in self.rows[first..first + len].iter().enumerate() {
                 for a in 0..3 {
                     b[(3 * r + a) * n + k] = column[3 * i + a];
                 }
             }
         }
-        Self {
-            d,
-            cols,
-            floor,
-            rows,
-            b,
+        b
+    }
+
+    /// `f(rows, b)` for the included rows in runs of at most `block`, in
+    /// order: `rows` the run's design rows, `b` their columns as
+    /// [`View::copy`] lays them out.
+    fn each_block(&self, mut f: impl FnMut(&[usize], &[f64])) {
+        if self.rows.len() <= self.block {
+            f(&self.rows, &self.b);
+            return;
+        }
+        for first in (0..self.rows.len()).step_by(self.block) {
+            let len = self.block.min(self.rows.len() - first);
+            f(&self.rows[first..first + len], &self.copy(first, len));
         }
     }
 
-    /// The three axes of the `r`-th included row.
-    fn row(&self, r: usize) -> [&[f64]; 3] {
+    /// The three axes of row `k` of a copy `b`.
+    fn row_of<'b>(&self, b: &'b [f64], k: usize) -> [&'b [f64]; 3] {
         let n = self.cols.len();
-        let at = |a: usize| &self.b[(3 * r + a) * n..(3 * r + a + 1) * n];
+        let at = |a: usize| &b[(3 * k + a) * n..(3 * k + a + 1) * n];
         [at(0), at(1), at(2)]
+    }
+
+    /// Column `k` of axis `a` of design row `i`.
+    fn at(&self, i: usize, a: usize, k: usize) -> f64 {
+        self.d.b[(3 * i + a, self.cols[k])]
     }
 
     /// `Δp` of design row `i`.
@@ -97,11 +148,11 @@ impl<'a> View<'a> {
         let mut acc = Accumulator::zeros(Dyn(n));
         // One block, refilled for every row.
         let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
-        for (r, &i) in self.rows.iter().enumerate() {
+        for &i in &self.rows {
             let g = self.d.group[i];
-            for (a, axis) in self.row(r).into_iter().enumerate() {
-                for (k, &v) in axis.iter().enumerate() {
-                    block.b[(a, k)] = v;
+            for a in 0..3 {
+                for k in 0..n {
+                    block.b[(a, k)] = self.at(i, a, k);
                 }
             }
             block.dp = Vector3::from(self.y(i));
@@ -120,22 +171,25 @@ impl<'a> View<'a> {
         let mut info = DMatrix::<f64>::zeros(n, n);
         let mut eta = DVector::<f64>::zeros(n);
         let (mut yy, mut equations) = (0.0, 0);
-        let mut terms = Vec::with_capacity(self.rows.len());
-        for (r, &i) in self.rows.iter().enumerate() {
-            let w = weights[self.d.group[i]];
-            if !w.iter().all(|w| *w >= 0.0 && w.is_finite()) {
-                return None;
-            }
-            let (k, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
-            yy = ((yy + k[0] * y[0] * y[0]) + k[1] * y[1] * y[1]) + k[2] * y[2] * y[2];
-            equations += k.iter().filter(|k| **k > 0.0).count();
-            terms.push(Term {
-                b: self.row(r),
-                k,
-                y,
-            });
+        let ok = |w: &Vector3<f64>| w.iter().all(|w| *w >= 0.0 && w.is_finite());
+        if !self.rows.iter().all(|&i| ok(&weights[self.d.group[i]])) {
+            return None;
         }
-        add_terms(info.as_mut_slice(), Some(eta.as_mut_slice()), n, &terms);
+        self.each_block(|rows, b| {
+            let mut terms = Vec::with_capacity(rows.len());
+            for (k, &i) in rows.iter().enumerate() {
+                let w = weights[self.d.group[i]];
+                let (f, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
+                yy = ((yy + f[0] * y[0] * y[0]) + f[1] * y[1] * y[1]) + f[2] * y[2] * y[2];
+                equations += f.iter().filter(|f| **f > 0.0).count();
+                terms.push(Term {
+                    b: self.row_of(b, k),
+                    k: f,
+                    y,
+                });
+            }
+            add_terms(info.as_mut_slice(), Some(eta.as_mut_slice()), n, &terms);
+        });
         let finite = yy.is_finite() && info.iter().chain(eta.iter()).all(|v| v.is_finite());
         finite.then(|| Accumulator::from_sums(info, eta, yy, equations))
     }
@@ -149,25 +203,30 @@ impl<'a> View<'a> {
     ) -> Result<OMatrix<f64, Dyn, Dyn>, Error> {
         let n = self.cols.len();
         let mut m = DMatrix::<f64>::zeros(n, n);
-        let mut terms = Vec::with_capacity(self.rows.len());
-        let mut ok = true;
-        for (r, &i) in self.rows.iter().enumerate() {
+        let ok = self.rows.iter().all(|&i| {
             let g = self.d.group[i];
             let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
-            ok &= w.iter().all(|w| *w >= 0.0 && w.is_finite());
-            ok &= s.iter().all(|s| *s > 0.0 && s.is_finite());
-            let k = |a: usize| {
-                let w2 = w[a] * w[a];
-                w2 * w2 * s[a] * s[a]
-            };
-            terms.push(Term {
-                b: self.row(r),
-                k: [k(0), k(1), k(2)],
-                y: [0.0; 3],
-            });
-        }
+            w.iter().all(|w| *w >= 0.0 && w.is_finite())
+                && s.iter().all(|s| *s > 0.0 && s.is_finite())
+        });
         if ok {
-            add_terms(m.as_mut_slice(), None, n, &terms);
+            self.each_block(|rows, b| {
+                let mut terms = Vec::with_capacity(rows.len());
+                for (r, &i) in rows.iter().enumerate() {
+                    let g = self.d.group[i];
+                    let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+                    let k = |a: usize| {
+                        let w2 = w[a] * w[a];
+                        w2 * w2 * s[a] * s[a]
+                    };
+                    terms.push(Term {
+                        b: self.row_of(b, r),
+                        k: [k(0), k(1), k(2)],
+                        y: [0.0; 3],
+                    });
+                }
+                add_terms(m.as_mut_slice(), None, n, &terms);
+            });
             if m.iter().all(|v| v.is_finite()) {
                 return Ok(symmetric(&m));
             }
@@ -250,12 +309,12 @@ impl Reweightable<f64, Dyn> for View<'_> {
         let p = self.cols.len();
         let inv = fit.lambda_inv.as_slice();
         let mut b = vec![0.0; 3 * p * LANES];
-        for (batch, first) in self.rows.chunks(LANES).zip((0..).step_by(LANES)) {
+        for batch in self.rows.chunks(LANES) {
             b.fill(0.0);
-            for j in 0..batch.len() {
-                for (a, axis) in self.row(first + j).into_iter().enumerate() {
-                    for (k, &v) in axis.iter().enumerate() {
-                        b[(3 * k + a) * LANES + j] = v;
+            for (j, &i) in batch.iter().enumerate() {
+                for a in 0..3 {
+                    for k in 0..p {
+                        b[(3 * k + a) * LANES + j] = self.at(i, a, k);
                     }
                 }
             }
@@ -464,8 +523,13 @@ mod tests {
             let all: Vec<usize> = (0..n).collect();
             let some: Vec<usize> = (0..n).step_by(2).collect();
             for cols in [&all, &some] {
-                for skip in [None, Some(0)] {
-                    let v = View::new(&d, cols, skip, None);
+                for (skip, block) in [
+                    (None, BLOCK_ROWS),
+                    (Some(0), BLOCK_ROWS),
+                    (None, 2),
+                    (Some(1), 4),
+                ] {
+                    let v = View::blocked(&d, cols, skip, None, block);
                     let fast = v.weighted(&weights, None).expect("sums");
                     let core = v.streamed(&weights, None).expect("stream");
                     assert_eq!(fast.equations(), core.equations());
