@@ -74,7 +74,7 @@ impl Design {
             }
         }
         let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
-        super::parallel::for_runs_mut(&mut { runs }, threads, |runs| {
+        super::parallel::for_runs_mut(&mut { runs }, threads, |_, runs| {
             for (run, columns) in runs.iter_mut() {
                 for (i, row) in run.iter().enumerate() {
                     let k = if linearised {

@@ -391,122 +391,143 @@ impl Rows {
         let gravity = geometry.base.rotation * self.gravity;
         let com = self.com;
         let file = &self.file;
-        super::parallel::for_runs_mut(&mut self.rows, threads, |run| {
-            for row in run {
-                let m = geometry
-                    .markers
-                    .get(usize::from(row.marker))
-                    .copied()
-                    .unwrap_or_default();
-                let absolute = row.kind == RowKind::Absolute;
-                // The chain of the row's marker's link (one end but for a tree).
-                let end = geometry.end_of(row.marker).min(chains.len() - 1);
-                let chain = &chains[end];
-                row.frames.chain = end;
-                let loading = Loading {
-                    load: (!absolute).then_some(PointLoad {
-                        mass_kg: row.load_kg,
-                        com_m: com,
-                        gravity_mps2: gravity,
-                    }),
-                    own_weight_mps2: absolute.then_some(gravity),
-                };
-                let core = |what: &'static str| {
-                    let line = row.line;
-                    let file = file.clone();
-                    move |e: Error| match e {
-                        Error::NotConverged { .. }
-                        | Error::NotIdentifiable { .. }
-                        | Error::NonFinite {
-                            what: "equilibrium",
-                        } => CalibrationError::NoEquilibrium(format!(
-                            "{file}:{line}: the loaded robot has no equilibrium near the \
+        // With several threads, a run after the first row that fails may
+        // already have moved its rows' equilibria, the starting points of
+        // the next relinearisation (a damped step retries from them); the
+        // serial loop stops at that row: their starting points are put back,
+        // so that the retry is the same on any number of threads. (Only the
+        // exact model starts from them.)
+        let before: Option<Vec<Vec<f64>>> = (threads > 1
+            && lin.model == super::DeflectionModel::Exact)
+            .then(|| self.rows.iter().map(|r| r.frames.theta.clone()).collect());
+        let one = |row: &mut Row| -> Result<(), CalibrationError> {
+            let m = geometry
+                .markers
+                .get(usize::from(row.marker))
+                .copied()
+                .unwrap_or_default();
+            let absolute = row.kind == RowKind::Absolute;
+            // The chain of the row's marker's link (one end but for a tree).
+            let end = geometry.end_of(row.marker).min(chains.len() - 1);
+            let chain = &chains[end];
+            row.frames.chain = end;
+            let loading = Loading {
+                load: (!absolute).then_some(PointLoad {
+                    mass_kg: row.load_kg,
+                    com_m: com,
+                    gravity_mps2: gravity,
+                }),
+                own_weight_mps2: absolute.then_some(gravity),
+            };
+            let core = |what: &'static str| {
+                let line = row.line;
+                let file = file.clone();
+                move |e: Error| match e {
+                    Error::NotConverged { .. }
+                    | Error::NotIdentifiable { .. }
+                    | Error::NonFinite {
+                        what: "equilibrium",
+                    } => CalibrationError::NoEquilibrium(format!(
+                        "{file}:{line}: the loaded robot has no equilibrium near the \
                          measured pose under the current joint law ({e})"
-                        )),
-                        e => CalibrationError::Core(what, e),
-                    }
-                };
-                match lin.law(&row.q, absolute) {
-                    None => {
-                        let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
-                        let p_rigid = rigid.point_m(&m);
-                        loading
-                            .torques(chain, &rigid, &mut row.tau)
-                            .map_err(core("torques"))?;
-                        row.load = loading.load.map(|l| l.wrench(&rigid));
-                        row.frames.theta.clear();
-                        row.p = p_rigid;
-                        row.twists.clear();
-                        row.y = if absolute {
-                            row.measured - p_rigid
-                        } else {
-                            row.measured
-                        };
-                    }
-                    Some(law) => {
-                        // The rigid robot's point: only a deflection row
-                        // subtracts it.
-                        let p_rigid = if absolute {
-                            Vector3::zeros()
-                        } else {
-                            chain
-                                .frames(&row.q)
-                                .map_err(core("forward kinematics"))?
-                                .point_m(&m)
-                        };
-                        // From the last equilibrium of this row when there is
-                        // one (the law moves little between relinearisations).
-                        let guess: Vec<f64> = if row.frames.theta.len() == row.q.len() {
-                            row.frames.theta.clone()
-                        } else {
-                            row.q.clone()
-                        };
-                        let eq = equilibrium(chain, &row.q, &guess, &loading, &law, &EQUILIBRIUM)
-                            .or_else(|_| {
-                                equilibrium(chain, &row.q, &row.q, &loading, &law, &EQUILIBRIUM)
-                            })
-                            .map_err(core("equilibrium"))?;
-                        let dof = row.q.len();
-                        // A joint that softens under torque (nonlinear stiffness)
-                        // until its stiffness turns negative has no stable
-                        // equilibrium there.
-                        if let Some(j) = (0..dof).find(|&j| {
-                            law.quadratic[j] != 0.0 && law.deflection(j, eq.tau[j]).1 < 0.0
-                        }) {
-                            return Err(CalibrationError::NoEquilibrium(format!(
-                                "{file}:{}: joint {} would have a negative stiffness at its \
+                    )),
+                    e => CalibrationError::Core(what, e),
+                }
+            };
+            match lin.law(&row.q, absolute) {
+                None => {
+                    let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+                    let p_rigid = rigid.point_m(&m);
+                    loading
+                        .torques(chain, &rigid, &mut row.tau)
+                        .map_err(core("torques"))?;
+                    row.load = loading.load.map(|l| l.wrench(&rigid));
+                    row.frames.theta.clear();
+                    row.p = p_rigid;
+                    row.twists.clear();
+                    row.y = if absolute {
+                        row.measured - p_rigid
+                    } else {
+                        row.measured
+                    };
+                }
+                Some(law) => {
+                    // The rigid robot's point: only a deflection row
+                    // subtracts it.
+                    let p_rigid = if absolute {
+                        Vector3::zeros()
+                    } else {
+                        chain
+                            .frames(&row.q)
+                            .map_err(core("forward kinematics"))?
+                            .point_m(&m)
+                    };
+                    // From the last equilibrium of this row when there is
+                    // one (the law moves little between relinearisations).
+                    let guess: Vec<f64> = if row.frames.theta.len() == row.q.len() {
+                        row.frames.theta.clone()
+                    } else {
+                        row.q.clone()
+                    };
+                    let eq = equilibrium(chain, &row.q, &guess, &loading, &law, &EQUILIBRIUM)
+                        .or_else(|_| {
+                            equilibrium(chain, &row.q, &row.q, &loading, &law, &EQUILIBRIUM)
+                        })
+                        .map_err(core("equilibrium"))?;
+                    let dof = row.q.len();
+                    // A joint that softens under torque (nonlinear stiffness)
+                    // until its stiffness turns negative has no stable
+                    // equilibrium there.
+                    if let Some(j) = (0..dof)
+                        .find(|&j| law.quadratic[j] != 0.0 && law.deflection(j, eq.tau[j]).1 < 0.0)
+                    {
+                        return Err(CalibrationError::NoEquilibrium(format!(
+                            "{file}:{}: joint {} would have a negative stiffness at its \
                              torque of {:.3} (nonlinear stiffness)",
-                                row.line,
-                                j + 1,
-                                eq.tau[j]
-                            )));
-                        }
-                        let p = eq.frames.point_m(&m);
-                        row.twists = (0..dof)
-                            .map(|j| eq.twist_column(j, &p))
-                            .collect::<Result<_, _>>()
-                            .map_err(core("equilibrium"))?;
-                        let linear: Vector3<f64> = row
-                            .twists
-                            .iter()
-                            .zip(&eq.deflection)
-                            .map(|(t, d)| t * *d)
-                            .sum();
-                        row.tau.copy_from_slice(&eq.tau[..dof]);
-                        row.load = loading.load.map(|l| l.wrench(&eq.frames));
-                        row.y = if absolute {
-                            row.measured - p + linear
-                        } else {
-                            row.measured - (p - p_rigid) + linear
-                        };
-                        row.frames.theta.clear();
-                        row.frames.theta.extend_from_slice(eq.frames.q());
-                        row.p = p;
+                            row.line,
+                            j + 1,
+                            eq.tau[j]
+                        )));
                     }
+                    let p = eq.frames.point_m(&m);
+                    row.twists = (0..dof)
+                        .map(|j| eq.twist_column(j, &p))
+                        .collect::<Result<_, _>>()
+                        .map_err(core("equilibrium"))?;
+                    let linear: Vector3<f64> = row
+                        .twists
+                        .iter()
+                        .zip(&eq.deflection)
+                        .map(|(t, d)| t * *d)
+                        .sum();
+                    row.tau.copy_from_slice(&eq.tau[..dof]);
+                    row.load = loading.load.map(|l| l.wrench(&eq.frames));
+                    row.y = if absolute {
+                        row.measured - p + linear
+                    } else {
+                        row.measured - (p - p_rigid) + linear
+                    };
+                    row.frames.theta.clear();
+                    row.frames.theta.extend_from_slice(eq.frames.q());
+                    row.p = p;
                 }
             }
             Ok(())
-        })?;
+        };
+        let done = super::parallel::for_runs_mut(&mut self.rows, threads, |first, run| {
+            for (k, row) in run.iter_mut().enumerate() {
+                one(row).map_err(|e| (first + k, e))?;
+            }
+            Ok(())
+        });
+        if let Err((at, e)) = done {
+            if let Some(before) = before {
+                for (row, theta) in self.rows.iter_mut().zip(before).skip(at + 1) {
+                    row.frames.theta = theta;
+                }
+            }
+            return Err(e);
+        }
         self.at = Some((geometry.clone(), lin.clone()));
         Ok(())
     }
