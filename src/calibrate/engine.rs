@@ -237,13 +237,13 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
-        if self.rows.at.as_ref() == Some(&(f.geometry.clone(), f.linearisation.clone())) {
-            self.lin = f.linearisation.clone();
-            self.geometry = f.geometry.clone();
-            return Ok(());
-        }
+        let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
+        let there = self.rows.at.as_ref().is_some_and(at);
         self.lin = f.linearisation.clone();
         self.geometry = f.geometry.clone();
+        if there {
+            return Ok(());
+        }
         self.relinearise()
     }
 

@@ -8,7 +8,7 @@
 //! - The rows of a relinearisation ([`super::rows::Rows::relinearise`])
 //!   and of a design ([`super::design::Design::new`]): each thread takes a
 //!   contiguous run of rows and the results come back in row order
-//!   ([`map_runs`], [`for_runs_mut`]); never more than one thread per
+//!   ([`for_runs_mut`]); never more than one thread per
 //!   [`MIN_ROWS_PER_THREAD`] rows ([`for_rows`]: a thread costs tens of µs
 //!   to start, a small job stays on the calling thread).
 //!
@@ -27,7 +27,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
 thread_local! {
-    /// Whether this thread is running an item of [`map_until`].
+    /// Whether this thread is running an item of [`map_until`] or a run of
+    /// [`for_runs_mut`].
     static INSIDE: Cell<bool> = const { Cell::new(false) };
 }
 
@@ -135,35 +136,6 @@ pub const MIN_ROWS_PER_THREAD: usize = 4096;
 /// [`MIN_ROWS_PER_THREAD`] rows.
 pub fn for_rows(rows: usize) -> usize {
     threads().min(rows / MIN_ROWS_PER_THREAD).max(1)
-}
-
-/// `f` on `threads` contiguous runs of `items` (one run on the calling
-/// thread when `threads <= 1`): each run's result, in order.
-pub fn map_runs<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    f: impl Fn(&[T]) -> R + Sync,
-) -> Vec<R> {
-    if threads <= 1 || items.len() < 2 {
-        return vec![f(items)];
-    }
-    let per = items.len().div_ceil(threads);
-    let f = &f;
-    std::thread::scope(|s| {
-        let handles: Vec<_> = items
-            .chunks(per)
-            .map(|run| {
-                s.spawn(move || {
-                    let _inside = Inside::enter();
-                    f(run)
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .collect()
-    })
 }
 
 /// `f(first, run)` on `threads` contiguous runs of `items`, mutably
@@ -332,15 +304,6 @@ mod tests {
             }
         }
         assert!(part_way > 0, "no relinearisation failed part way");
-    }
-
-    #[test]
-    fn runs_come_back_in_order() {
-        let v: Vec<u32> = (0..1000).collect();
-        for t in [1, 2, 3, 7] {
-            let sums: Vec<Vec<u32>> = map_runs(&v, t, |r| r.to_vec());
-            assert_eq!(sums.concat(), v);
-        }
     }
 
     #[test]

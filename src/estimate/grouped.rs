@@ -34,7 +34,10 @@ use super::linalg::dot;
 use crate::Error;
 
 mod kernel;
+mod sums;
 use kernel::{add_rows, grow, grow_support, magnitude};
+pub(crate) use sums::support_indices;
+use sums::{quadratics3, quadratics3_sparse, traces3, traces3_sparse};
 
 /// Moments of the rows of one group and one axis.
 #[derive(Debug, Clone, PartialEq)]
@@ -351,18 +354,6 @@ where
         sigma: &mut [Vector3<T>],
         dof: &mut [Vector3<T>],
     ) -> Result<(), Error> {
-        self.residual_sigma_with(fit, weights, sigma, dof, &self.supports())
-    }
-
-    /// [`GroupedStats::residual_sigma_into`] with the groups' `supports`.
-    pub(crate) fn residual_sigma_with(
-        &self,
-        fit: &Solution<T, D>,
-        weights: &[Vector3<T>],
-        sigma: &mut [Vector3<T>],
-        dof: &mut [Vector3<T>],
-        supports: &[u64; G],
-    ) -> Result<(), Error> {
         let g = self.groups.len();
         if sigma.len() != g || dof.len() != g || weights.len() != g {
             return Err(Error::Mismatch {
@@ -389,7 +380,7 @@ where
             // time), and three independent chains keep the processor busy
             // where one would wait on each addition.
             let s = g.axes.each_ref().map(|ax| ax.s_upper.as_slice());
-            let (tr, q) = match support_indices(supports[gi], n, &mut idx) {
+            let (tr, q) = match support_indices(self.support[gi], n, &mut idx) {
                 Some(m) => (
                     traces3_sparse(inv.as_slice(), n, s, &idx[..m]),
                     quadratics3_sparse(s, n, fit.x.as_slice(), &idx[..m]),
@@ -413,8 +404,8 @@ where
 
     /// Per group, the parameters outside which all its `S` are zero (bit
     /// `j`; 0 when not known).
-    pub(crate) fn supports(&self) -> [u64; G] {
-        self.support
+    pub(crate) fn supports(&self) -> &[u64; G] {
+        &self.support
     }
 
     /// The weighted statistics: every row of group `g`, axis `a` carries the
@@ -465,108 +456,6 @@ where
         }
         Ok(acc)
     }
-}
-
-/// `tr(Λ⁻¹ S)` of three `n × n` matrices `S` from their upper triangles
-/// (column-major slices, as `inv`): the diagonal term and then the column's
-/// off-diagonal ones, doubled, column by column.
-fn traces3<T: RealField + Copy>(inv: &[T], n: usize, s: [&[T]; 3]) -> [T; 3] {
-    let mut t = [T::zero(); 3];
-    for c in 0..n {
-        let d = inv[c * n + c];
-        for a in 0..3 {
-            t[a] += d * s[a][c * n + c];
-        }
-        for r in 0..c {
-            let v = inv[c * n + r] + inv[c * n + r];
-            for a in 0..3 {
-                t[a] += v * s[a][c * n + r];
-            }
-        }
-    }
-    t
-}
-
-/// `XᵀSX` of three matrices `S` from their upper triangles, each with the
-/// arithmetic of `AxisMoments::rss` (`(SX)ᵢ` over `k` in index order, then
-/// `Σᵢ (SX)ᵢ Xᵢ`).
-fn quadratics3<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T]) -> [T; 3] {
-    let x = &x[..x.len().min(n)];
-    let mut q = [T::zero(); 3];
-    for (i, &xi) in x.iter().enumerate() {
-        let mut y = [T::zero(); 3];
-        for (k, &xk) in x.iter().enumerate() {
-            // `Sᵢₖ` from the upper triangle.
-            let at = if k < i { i * n + k } else { k * n + i };
-            for a in 0..3 {
-                y[a] += s[a][at] * xk;
-            }
-        }
-        for a in 0..3 {
-            q[a] += y[a] * xi;
-        }
-    }
-    q
-}
-
-/// The parameters of a support mask ([`GroupedStats::supports`]) in
-/// increasing order, into `idx`: their number, or `None` when the mask is
-/// not known (0) or holds all `p` parameters.
-pub(crate) fn support_indices(mask: u64, p: usize, idx: &mut [u8; 64]) -> Option<usize> {
-    if mask == 0 || mask.count_ones() as usize >= p {
-        return None;
-    }
-    let (mut bits, mut m) = (mask, 0);
-    while bits != 0 {
-        // (A bit index, below 64.)
-        idx[m] = bits.trailing_zeros() as u8;
-        bits &= bits - 1;
-        m += 1;
-    }
-    Some(m)
-}
-
-/// [`traces3`] over the parameters `idx` only (increasing; every element
-/// of `S` outside them is zero): the same sums, in the same order, without
-/// the terms that are exact zeros (adding one changes no sum).
-fn traces3_sparse<T: RealField + Copy>(inv: &[T], n: usize, s: [&[T]; 3], idx: &[u8]) -> [T; 3] {
-    let mut t = [T::zero(); 3];
-    for (ci, &c) in idx.iter().enumerate() {
-        let c = usize::from(c);
-        let d = inv[c * n + c];
-        for a in 0..3 {
-            t[a] += d * s[a][c * n + c];
-        }
-        for &r in &idx[..ci] {
-            let r = usize::from(r);
-            let v = inv[c * n + r] + inv[c * n + r];
-            for a in 0..3 {
-                t[a] += v * s[a][c * n + r];
-            }
-        }
-    }
-    t
-}
-
-/// [`quadratics3`] over the parameters `idx` only, likewise: a row `i`
-/// outside them has `(SX)ᵢ = 0` and adds an exact zero.
-fn quadratics3_sparse<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T], idx: &[u8]) -> [T; 3] {
-    let mut q = [T::zero(); 3];
-    for &i in idx {
-        let i = usize::from(i);
-        let mut y = [T::zero(); 3];
-        for &k in idx {
-            let k = usize::from(k);
-            let at = if k < i { i * n + k } else { k * n + i };
-            for a in 0..3 {
-                y[a] += s[a][at] * x[k];
-            }
-        }
-        for a in 0..3 {
-            q[a] += y[a] * x[i];
-        }
-    }
-    q
 }
 
 /// `σ̂ = √(RSS / (n − h))`: the residual σ of one group and axis from its

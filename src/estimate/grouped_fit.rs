@@ -89,8 +89,7 @@ fn fit_grouped<T: RealField + Copy, D: Dim, const G: usize>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let supports = stats.supports();
-    let info = stats.information_upper(weights, &supports)?;
+    let info = stats.information_upper(weights)?;
     // As `Accumulator::solve_active`.
     let (equations, parameters) = (info.equations, active.iter().filter(|a| **a).count());
     if active.len() == info.upper.nrows() && equations < parameters {
@@ -101,13 +100,13 @@ where
     }
     let lambda = symmetric(&info.upper);
     let solution = Solution::new(&lambda, &info.eta, info.yy, equations, active)?;
-    stats.residual_sigma_with(&solution, weights, sigma, dof, &supports)?;
+    stats.residual_sigma_into(&solution, weights, sigma, dof)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = symmetric(&stats.middle_upper(weights, noise, &supports)?);
+    let middle = symmetric(&stats.middle_upper(weights, noise)?);
     let covariance = solution.cov_sandwich(&middle);
     Ok(Fit {
         solution,
@@ -130,7 +129,6 @@ where
     pub(crate) fn information_upper(
         &self,
         weights: &[Vector3<T>],
-        supports: &[u64; G],
     ) -> Result<Information<T, D>, Error> {
         if weights.len() != self.groups().len() {
             return Err(Error::Mismatch {
@@ -149,7 +147,7 @@ where
         // finite stays so whatever is added to it.
         let mut idx = [0u8; 64];
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
-            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+            let Some(m) = support_indices(self.supports()[gi], n, &mut idx) else {
                 for (ax, &w) in g.axes.iter().zip(w.iter()) {
                     let w2 = match moment_weight(w, None, ax.n) {
                         Ok(Some(w2)) => w2,
@@ -209,7 +207,6 @@ where
         &self,
         weights: &[Vector3<T>],
         noise: Noise<'_, T>,
-        supports: &[u64; G],
     ) -> Result<OMatrix<T, D, D>, Error> {
         let groups = self.groups().len();
         if weights.len() != groups || !noise.fits(groups) {
@@ -224,7 +221,7 @@ where
         let mut idx = [0u8; 64];
         for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
             let s = noise.sigma(gi, w);
-            let Some(m) = support_indices(supports[gi], n, &mut idx) else {
+            let Some(m) = support_indices(self.supports()[gi], n, &mut idx) else {
                 for ((ax, &w), &s) in g.axes.iter().zip(w.iter()).zip(s.iter()) {
                     let w2 = match moment_weight(w, Some(s), ax.n) {
                         Ok(Some(w2)) => w2,

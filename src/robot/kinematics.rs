@@ -79,30 +79,6 @@ pub struct Frames<T: RealField + Copy, const J: usize> {
 }
 
 impl<T: RealField + Copy, const J: usize> Frames<T, J> {
-    /// The frames from their parts, as [`Frames::joints`], [`Frames::q`] and
-    /// [`Frames::tip`] return them: to keep many frames in the memory of
-    /// the chain's joints rather than `J`'s, and rebuild them.
-    ///
-    /// # Errors
-    /// [`Error::Mismatch`] when `joints` and `q` differ in length;
-    /// [`Error::CapacityExceeded`] for more than `J` joints.
-    pub fn from_parts(joints: &[JointFrame<T>], q: &[T], tip: Isometry3<T>) -> Result<Self, Error> {
-        if joints.len() != q.len() {
-            return Err(Error::Mismatch {
-                what: "one joint value per joint frame",
-            });
-        }
-        let full = |_| Error::CapacityExceeded {
-            what: "frames",
-            capacity: J,
-        };
-        Ok(Self {
-            joints: heapless::Vec::from_slice(joints).map_err(full)?,
-            q: heapless::Vec::from_slice(q).map_err(full)?,
-            tip,
-        })
-    }
-
     /// The joint frames, base to tip.
     pub fn joints(&self) -> &[JointFrame<T>] {
         &self.joints

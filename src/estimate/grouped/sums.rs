@@ -1,0 +1,118 @@
+//! The per-group sums of [`super::GroupedStats::residual_sigma_into`]:
+//! the leverage share `tr(Λ⁻¹ S)` and the quadratic form `xᵀ S x` of a
+//! group's three axes side by side, over every parameter or over the
+//! group's support (the parameters outside which its `S` are zero).
+
+use nalgebra::RealField;
+
+/// `tr(Λ⁻¹ S)` of three `n × n` matrices `S` from their upper triangles
+/// (column-major slices, as `inv`): the diagonal term and then the column's
+/// off-diagonal ones, doubled, column by column.
+pub(super) fn traces3<T: RealField + Copy>(inv: &[T], n: usize, s: [&[T]; 3]) -> [T; 3] {
+    let mut t = [T::zero(); 3];
+    for c in 0..n {
+        let d = inv[c * n + c];
+        for a in 0..3 {
+            t[a] += d * s[a][c * n + c];
+        }
+        for r in 0..c {
+            let v = inv[c * n + r] + inv[c * n + r];
+            for a in 0..3 {
+                t[a] += v * s[a][c * n + r];
+            }
+        }
+    }
+    t
+}
+
+/// `XᵀSX` of three matrices `S` from their upper triangles, each with the
+/// arithmetic of `AxisMoments::rss` (`(SX)ᵢ` over `k` in index order, then
+/// `Σᵢ (SX)ᵢ Xᵢ`).
+pub(super) fn quadratics3<T: RealField + Copy>(s: [&[T]; 3], n: usize, x: &[T]) -> [T; 3] {
+    let x = &x[..x.len().min(n)];
+    let mut q = [T::zero(); 3];
+    for (i, &xi) in x.iter().enumerate() {
+        let mut y = [T::zero(); 3];
+        for (k, &xk) in x.iter().enumerate() {
+            // `Sᵢₖ` from the upper triangle.
+            let at = if k < i { i * n + k } else { k * n + i };
+            for a in 0..3 {
+                y[a] += s[a][at] * xk;
+            }
+        }
+        for a in 0..3 {
+            q[a] += y[a] * xi;
+        }
+    }
+    q
+}
+
+/// The parameters of a support mask ([`super::GroupedStats::supports`]) in
+/// increasing order, into `idx`: their number, or `None` when the mask is
+/// not known (0) or holds all `p` parameters.
+pub(crate) fn support_indices(mask: u64, p: usize, idx: &mut [u8; 64]) -> Option<usize> {
+    if mask == 0 || mask.count_ones() as usize >= p {
+        return None;
+    }
+    let (mut bits, mut m) = (mask, 0);
+    while bits != 0 {
+        // (A bit index, below 64.)
+        idx[m] = bits.trailing_zeros() as u8;
+        bits &= bits - 1;
+        m += 1;
+    }
+    Some(m)
+}
+
+/// [`traces3`] over the parameters `idx` only (increasing; every element
+/// of `S` outside them is zero): the same sums, in the same order, without
+/// the terms that are exact zeros (adding one changes no sum).
+pub(super) fn traces3_sparse<T: RealField + Copy>(
+    inv: &[T],
+    n: usize,
+    s: [&[T]; 3],
+    idx: &[u8],
+) -> [T; 3] {
+    let mut t = [T::zero(); 3];
+    for (ci, &c) in idx.iter().enumerate() {
+        let c = usize::from(c);
+        let d = inv[c * n + c];
+        for a in 0..3 {
+            t[a] += d * s[a][c * n + c];
+        }
+        for &r in &idx[..ci] {
+            let r = usize::from(r);
+            let v = inv[c * n + r] + inv[c * n + r];
+            for a in 0..3 {
+                t[a] += v * s[a][c * n + r];
+            }
+        }
+    }
+    t
+}
+
+/// [`quadratics3`] over the parameters `idx` only, likewise: a row `i`
+/// outside them has `(SX)ᵢ = 0` and adds an exact zero.
+pub(super) fn quadratics3_sparse<T: RealField + Copy>(
+    s: [&[T]; 3],
+    n: usize,
+    x: &[T],
+    idx: &[u8],
+) -> [T; 3] {
+    let mut q = [T::zero(); 3];
+    for &i in idx {
+        let i = usize::from(i);
+        let mut y = [T::zero(); 3];
+        for &k in idx {
+            let k = usize::from(k);
+            let at = if k < i { i * n + k } else { k * n + i };
+            for a in 0..3 {
+                y[a] += s[a][at] * x[k];
+            }
+        }
+        for a in 0..3 {
+            q[a] += y[a] * x[i];
+        }
+    }
+    q
+}
