@@ -5,6 +5,7 @@ use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::linearisation::Linearisation;
 use super::rows::{Row, Rows};
+use super::view::View;
 use crate::estimate::{Accumulator, Block, Identifiability};
 use crate::model::Param;
 use crate::Error;
@@ -169,6 +170,11 @@ impl Design {
         let n = cols.len();
         if n == 0 {
             return None;
+        }
+        // Λ in the view's layout (the same sums as the blocks below); the
+        // blocks where a sum is not finite (the core's checks decide).
+        if let Some(acc) = View::new(self, &cols, None, None).information() {
+            return acc.identifiable().ok();
         }
         let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(n));
         let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());

@@ -194,6 +194,14 @@ impl<'a> View<'a> {
         finite.then(|| Accumulator::from_sums(info, eta, yy, equations))
     }
 
+    /// `Λ = Σ Bᵀ B` of the included rows, unit weights (the independence
+    /// test's information, [`super::design::Design::identifiability`]):
+    /// [`Accumulator::update`]'s sums of blocks with unit weights, bit for
+    /// bit; `None` where a sum is not finite.
+    pub(super) fn information(&self) -> Option<Accumulator<f64, Dyn>> {
+        self.sums(&vec![Vector3::repeat(1.0); self.d.groups])
+    }
+
     /// The sandwich's middle term `M = Σ Bᵀ W² Σ² W² B` with σ of `noise`
     /// (the full symmetric matrix, as [`Accumulator::middle`]).
     fn middle(
@@ -542,6 +550,27 @@ mod tests {
                     same(m.as_slice(), core.middle().as_slice());
                 }
             }
+        }
+    }
+
+    #[test]
+    fn the_information_is_the_unit_weight_blocks_bit_for_bit() {
+        // What `Design::identifiability` streamed before: blocks of the
+        // columns with unit weights and Δp = 0, one `update` per row.
+        for (groups, per, n, seed) in [(5, 3, 7, 4), (4, 4, 43, 5), (1, 1, 3, 6)] {
+            let d = design(groups, per, n, seed);
+            let cols: Vec<usize> = (0..n).rev().step_by(2).collect();
+            let fast = View::new(&d, &cols, None, None)
+                .information()
+                .expect("finite");
+            let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(cols.len()));
+            for i in 0..d.rows() {
+                let b =
+                    OMatrix::<f64, U3, Dyn>::from_fn(cols.len(), |a, k| d.b[(3 * i + a, cols[k])]);
+                core.update(&Block::new(b, Vector3::zeros()))
+                    .expect("finite");
+            }
+            same(fast.information().as_slice(), core.information().as_slice());
         }
     }
 
