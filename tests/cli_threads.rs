@@ -1,7 +1,10 @@
 //! The engine's worker threads change no answer (issue 16): `robcal
 //! calibrate` with `ROBCAL_THREADS=1` (everything on the calling thread)
 //! and with more threads writes the same report, byte for byte, and the
-//! same progress messages in the same order.
+//! same progress messages in the same order. On TIAGo this covers the
+//! candidates' trials side by side (`calibrate::trial`: several rejected
+//! before one is added), which give the serial loop's answers only because
+//! every trial starts from the current model's rows bit for bit.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

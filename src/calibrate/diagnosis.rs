@@ -2,7 +2,7 @@
 //! against the residuals, add the first that passes, refit, repeat; report
 //! the errors before and after each step.
 
-use super::effects::{candidates, inadmissible, Candidate};
+use super::effects::{candidates, Candidate};
 use super::engine::{Engine, Fitted};
 use super::fit::{self, Method};
 use super::report::{
@@ -12,6 +12,7 @@ use super::report::{
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
 use super::rows::RowKind;
 use super::settings::{CalibrationError, Settings};
+use super::trial::{self, Outcome};
 use crate::model::Param;
 use crate::Error;
 use nalgebra::Vector3;
@@ -34,30 +35,6 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
             e.rows.configs[g]
         )
     })
-}
-
-/// The model `params` with candidate `c` added: its parameters go where the
-/// parameters they replace were, else at the end; then the identifiable
-/// subset.
-fn extended(
-    e: &Engine<'_>,
-    params: &[Param],
-    c: &Candidate,
-) -> Result<Vec<Param>, CalibrationError> {
-    let at = params
-        .iter()
-        .position(|p| c.remove.contains(p))
-        .unwrap_or(params.len());
-    let mut new: Vec<Param> = params[..at]
-        .iter()
-        .filter(|p| !c.remove.contains(p))
-        .copied()
-        .collect();
-    new.extend(c.add.iter().filter(|a| !params.contains(a)));
-    new.extend(params[at..].iter().filter(|p| !c.remove.contains(p)));
-    let d = e.design(&new)?;
-    let all: Vec<usize> = (0..new.len()).collect();
-    Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
 }
 
 /// The declared model fitted. A parameter that a Gauss–Newton step makes
@@ -284,69 +261,52 @@ pub fn run(
             }
             // The most significant candidate whose estimate is physical and that
             // lowers the leave-one-configuration-out RMS; one that fails is
-            // rejected (a note the first time) and the next is tried.
+            // rejected (a note the first time) and the next is tried. Every
+            // trial starts from the current model's rows (`trial`).
+            let start = e.rows.start_points();
             let mut accepted = None;
-            for (ci, t) in eligible {
-                let c = &cands[*ci];
-                let on = t
-                    .about
-                    .as_deref()
-                    .map(|a| format!(" on {a}"))
-                    .unwrap_or_default();
-                let new_params = extended(&e, &current.params, c)?;
-                // A candidate whose fit cannot be made is rejected, never
-                // the run: no equilibrium under its estimate, or a column
-                // the estimator finds dependent on the others.
-                let next = match e.fit(&new_params) {
-                    Ok(next) => Ok(next),
-                    Err(CalibrationError::NoEquilibrium(why)) => Err(format!(
-                        "rejected: with its estimate the robot has no equilibrium ({why})"
-                    )),
-                    Err(CalibrationError::Dependent(_)) => Err(
-                        "rejected: at its fitted geometry a column is a combination of the others"
-                            .to_string(),
-                    ),
-                    Err(CalibrationError::Core(
-                        _,
-                        err @ (Error::NotIdentifiable { .. }
-                        | Error::TooFewEquations { .. }
-                        | Error::NotConverged { .. }),
-                    )) => Err(format!("rejected: its fit cannot be made ({err})")),
-                    Err(err) => return Err(err),
-                };
-                let why = match next.map(|next| {
-                    let bad = inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add);
-                    (next, bad)
-                }) {
-                    Err(why) => Some(why),
-                    Ok((_, Some(why))) => {
-                        Some(format!("rejected: its estimate is not physical ({why})"))
-                    }
-                    Ok((next, None)) => {
-                        let next = e.with_heldout(next)?;
-                        match (current.heldout_rms_um, next.heldout_rms_um) {
-                            (Some(before), Some(after)) if after >= before => Some(format!(
-                                "not added: significant (p = {:.1e}) but the \
-                             leave-one-configuration-out RMS does not drop \
-                             ({before:.1} -> {after:.1} um)",
-                                t.p_value
-                            )),
-                            _ => {
-                                accepted = Some((*ci, t.clone(), next));
-                                break;
+            let mut from = 0;
+            while accepted.is_none() && from < eligible.len() {
+                let queue: Vec<&Candidate> =
+                    eligible[from..].iter().map(|(ci, _)| &cands[*ci]).collect();
+                let outcomes = trial::first_admissible(&mut e, &current, &start, &queue)?;
+                for outcome in outcomes {
+                    let (ci, t) = eligible[from];
+                    from += 1;
+                    let c = &cands[*ci];
+                    let why = match outcome {
+                        Outcome::Rejected(why) => Some(why),
+                        Outcome::Admissible(next) => {
+                            let next = e.with_heldout(*next)?;
+                            match (current.heldout_rms_um, next.heldout_rms_um) {
+                                (Some(before), Some(after)) if after >= before => Some(format!(
+                                    "not added: significant (p = {:.1e}) but the \
+                                 leave-one-configuration-out RMS does not drop \
+                                 ({before:.1} -> {after:.1} um)",
+                                    t.p_value
+                                )),
+                                _ => {
+                                    accepted = Some((*ci, t.clone(), next));
+                                    None
+                                }
                             }
                         }
+                    };
+                    if let Some(why) = why {
+                        let on = t
+                            .about
+                            .as_deref()
+                            .map(|a| format!(" on {a}"))
+                            .unwrap_or_default();
+                        let key = format!("{}{on}", c.effect);
+                        if !rejected.contains(&key) {
+                            let note = format!("{key} {why} (step {})", steps.len() + 1);
+                            (e.progress)(&note);
+                            notes.push(note);
+                            rejected.push(key);
+                        }
+                        e.restore_from(&current, &start)?;
                     }
-                };
-                if let Some(why) = why {
-                    let key = format!("{}{on}", c.effect);
-                    if !rejected.contains(&key) {
-                        let note = format!("{key} {why} (step {})", steps.len() + 1);
-                        (e.progress)(&note);
-                        notes.push(note);
-                        rejected.push(key);
-                    }
-                    e.restore(&current)?;
                 }
             }
             let Some((ci, t, next)) = accepted else {

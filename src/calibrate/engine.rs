@@ -247,6 +247,22 @@ impl Engine<'_> {
         self.relinearise()
     }
 
+    /// [`Engine::restore`] with the rows' equilibria starting from `start`
+    /// ([`Rows::start_points`] taken at `f`'s linearisation): the rows are
+    /// then `f`'s, bit for bit, whatever was fitted in between (a
+    /// candidate's trial moves the equilibria it starts the next
+    /// relinearisation from).
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`].
+    pub fn restore_from(&mut self, f: &Fitted, start: &[Vec<f64>]) -> Result<(), CalibrationError> {
+        let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
+        if !self.rows.at.as_ref().is_some_and(at) {
+            self.rows.start_from(start);
+        }
+        self.restore(f)
+    }
+
     /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
     /// configuration predicted by a fit (same method, same linearisation)
     /// without it. Parameters the other configurations cannot identify are

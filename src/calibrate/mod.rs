@@ -35,10 +35,11 @@
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
-//! | [`parallel`] | independent work on worker threads (the held-out folds; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
+//! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
+//! | [`trial`] | a candidate's trial from the current model's state (several side by side when the rows are few) |
 //! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
@@ -76,6 +77,7 @@ pub mod report;
 pub mod residuals;
 pub mod rows;
 pub mod settings;
+pub mod trial;
 pub mod validate;
 mod view;
 

@@ -5,6 +5,9 @@
 //!   ([`super::engine::Engine::heldout`]): each item is computed by the
 //!   same code as in a serial loop, on one thread, from the same inputs,
 //!   and the results are handed back by index ([`map`], [`map_until`]).
+//! - The trials of a step's candidates ([`super::trial`]), each on a copy
+//!   of the engine's state, in order up to the first admissible one
+//!   ([`map_until`]), when the rows are too few for the item below.
 //! - The rows of a relinearisation ([`super::rows::Rows::relinearise`])
 //!   and of a design ([`super::design::Design::new`]): each thread takes a
 //!   contiguous run of rows and the results come back in row order

@@ -549,6 +549,23 @@ impl Rows {
         }
     }
 
+    /// Where each row's next equilibrium starts: the `θ` of its last one
+    /// (empty where it has none), for [`Rows::start_from`].
+    pub fn start_points(&self) -> Vec<Vec<f64>> {
+        self.rows.iter().map(|r| r.frames.theta.clone()).collect()
+    }
+
+    /// Makes `start` ([`Rows::start_points`] of these rows) the starting
+    /// points of the next relinearisation. Relinearised at the law and
+    /// geometry they were taken at, the rows are those of then, bit for
+    /// bit: Newton's method from an equilibrium takes no step, and the
+    /// frames are the forward kinematics at its `θ`.
+    pub fn start_from(&mut self, start: &[Vec<f64>]) {
+        for (row, theta) in self.rows.iter_mut().zip(start) {
+            row.frames.theta.clone_from(theta);
+        }
+    }
+
     /// Rows per configuration.
     pub fn per_group(&self) -> Vec<usize> {
         let mut n = vec![0usize; self.configs.len()];
