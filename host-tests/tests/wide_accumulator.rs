@@ -272,17 +272,49 @@ fn rejects_what_the_core_rejects_and_keeps_its_state() {
 
 #[test]
 fn large_finite_values_are_accepted_as_by_the_core() {
-    // b ≈ 1e150: each b² ≈ 1e300, the running bound overflows its cheap
-    // check and the exact one accepts, in both.
+    // b ≈ 1e150 (each b² ≈ 1e300) passes the cheap running bound; b ≈ 1e153
+    // (the sums ≈ 1e307) fails it, and the exact check accepts, in both.
+    // With and without σ, on an empty and on a primed accumulator.
     let n = 9;
-    let b = OMatrix::<f64, U3, Dyn>::from_fn(n, |r, c| 1e150 * (1.0 + (r + c) as f64 * 0.01));
-    let blk = Block::new(b, Vector3::new(1.0, 2.0, 3.0));
-    let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(n));
-    core.update(&blk).unwrap();
-    for mut wide in instruction_sets(n) {
-        wide.update(&blk).unwrap();
-        same_statistics(&wide.accumulator(), &core);
+    for scale in [1e150, 1e153] {
+        for sigma in [false, true] {
+            let b =
+                OMatrix::<f64, U3, Dyn>::from_fn(n, |r, c| scale * (1.0 + (r + c) as f64 * 0.01));
+            let mut blk = Block::new(b, Vector3::new(1.0, 2.0, 3.0));
+            if sigma {
+                blk = blk.with_sigma(Vector3::repeat(1e-3));
+            }
+            let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(n));
+            core.update(&blk).unwrap();
+            for mut wide in instruction_sets(n) {
+                wide.update(&blk).unwrap();
+                same_statistics(&wide.accumulator(), &core);
+            }
+            for instructions in [Instructions::Detected, Instructions::Scalar] {
+                let (mut wide, mut core) = primed(n, instructions).unwrap();
+                core.update(&blk).unwrap();
+                wide.update(&blk).unwrap();
+                same_statistics(&wide.accumulator(), &core);
+            }
+        }
     }
+}
+
+#[test]
+fn a_million_blocks_renew_the_running_bound() {
+    // The running bound grows by 2⁻¹⁰ per update (the core's margin) and
+    // reaches its limit after ~7·10⁵ updates: the exact check then renews
+    // it, as the core's does. Both take that path on this stream.
+    let n = 2;
+    let mut rng = Rng::new(11);
+    let ring: Vec<_> = (0..97).map(|k| block(&mut rng, n, 3 * k)).collect();
+    let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(n));
+    let mut wide = WideAccumulator::new(n);
+    for k in 0..1_000_000 {
+        core.update(&ring[k % ring.len()]).unwrap();
+        wide.update(&ring[k % ring.len()]).unwrap();
+    }
+    same_statistics(&wide.accumulator(), &core);
 }
 
 #[test]

@@ -330,15 +330,15 @@ impl WideAccumulator {
         let len = cap * mp;
         let (b, a) = (aligned(&self.b, len), aligned(&self.a, len));
         let s = (sigma || self.sigma_pending).then(|| aligned(&self.s, len));
-        let (c, cm) = (aligned(&self.c, mp * mp), aligned(&self.cm, mp * mp));
+        let c = aligned(&self.c, mp * mp);
+        let cm = (!self.cm.is_empty()).then(|| aligned(&self.cm, mp * mp));
         let limit = f64::MAX / 2.0;
         let mut bound = 0.0f64;
         for j in 0..=n {
             let (mut lambda, mut eta) = (c[j * mp + j], c[n * mp + j]);
-            let mut mid = if cm.is_empty() || j == n {
-                0.0
-            } else {
-                cm[j * mp + j]
+            let mut mid = match cm {
+                Some(cm) if j < n => cm[j * mp + j],
+                _ => 0.0,
             };
             for r in 0..self.rows + rows {
                 let x = b[at(l, cap, r, j)];
