@@ -260,6 +260,15 @@ fn rejects_what_the_core_rejects_and_keeps_its_state() {
         // Finite but the sums would overflow (b² ≈ 1e308 summed).
         rejects(n, &with(&|b| b.b.fill(1e154)));
         rejects(n, &with(&|b| b.w.fill(1e160)));
+        // w² = ∞ on a row of zeros: the core's `b (w² b)` is NaN there.
+        rejects(
+            n,
+            &with(&|b| {
+                b.w[0] = 1e155;
+                b.b.row_mut(0).fill(0.0);
+                b.dp[0] = 0.0;
+            }),
+        );
         // The wrong size.
         let other = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n + 1), Vector3::zeros());
         rejects(n, &other);

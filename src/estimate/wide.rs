@@ -5,19 +5,21 @@
 //! [`Accumulator::update`], several times faster on a processor with wide
 //! vectors.
 //!
-//! A block's rows are buffered (up to a few dozen rows, sized so that the
-//! buffers stay in the first-level cache); a full buffer of `k` rows is
-//! added to the upper triangles in one rank-`k` update `Λ += Bₖᵀ W² Bₖ`,
-//! blocked in register tiles, with fused multiply-adds on the widest
-//! vectors the processor has: AVX-512, AVX2 + FMA, or plain scalar code,
-//! chosen once at run time (the `pulp` crate: no `unsafe` in robcal, no
-//! `target-cpu`, one binary for every x86-64). `η` and `Σ Δpᵀ W² Δp` come
-//! from the same update, `Δp` being one more column (`[B | Δp]ᵀ W² [B | Δp]`).
+//! A block's rows are buffered, weighted (`U = W [B | Δp]`, up to a few
+//! dozen rows, sized so that they stay in the first-level cache); a full
+//! buffer of `k` rows is added to the upper triangles in one rank-`k`
+//! update `Λ += Uₖᵀ Uₖ = Bₖᵀ W² Bₖ`, blocked in register tiles, with fused
+//! multiply-adds on the widest vectors the processor has: AVX-512, AVX2 +
+//! FMA, or plain scalar code, chosen once at run time (the `pulp` crate: no
+//! `unsafe` in robcal, no `target-cpu`, one binary for every x86-64). `η`
+//! and `Σ Δpᵀ W² Δp` come from the same update, `Δp` being one more column
+//! (`[B | Δp]ᵀ W² [B | Δp]`); `M` from `V = W²Σ [B | Δp]` the same way.
 //!
-//! The sums are the scalar update's, row by row in the same order, except
-//! that each product is fused with its addition (one rounding instead of
-//! two): they agree with [`Accumulator`] to a few units in the last place
-//! per row, far inside the `1e-12` relative of issue 16
+//! The sums are the scalar update's terms, row by row in the same order;
+//! each term is `(w bᵢ)(w bⱼ)` where the core has `bᵢ (w² bⱼ)`, and each
+//! product is fused with its addition (one rounding instead of two): they
+//! agree with [`Accumulator`] to a few units in the last place per row, far
+//! inside the `1e-12` relative of issue 16
 //! (`host-tests/tests/wide_accumulator.rs`). The solution is the core's:
 //! [`WideAccumulator::accumulator`] hands the sums over to an
 //! [`Accumulator<f64, Dyn>`], whose `solve` and everything after it are the
@@ -81,14 +83,14 @@ pub struct WideAccumulator {
     /// The instruction set and its `f64` lanes (the buffers' chunk width).
     arch: pulp::Arch,
     lanes: usize,
-    /// Buffered rows `[bᵀ | Δp]`, their `W²` and `W⁴Σ²` multiples (`s`: empty
-    /// until a block carries σ), laid out for the kernel (`kernel::at`);
-    /// `PAD` more values than needed, to start at a 64-byte boundary.
-    b: Vec<f64>,
-    a: Vec<f64>,
-    s: Vec<f64>,
-    /// `[B | Δp]ᵀ W² [B | Δp]` (upper triangle, `mp × mp`, column-major) and
-    /// `M` (empty until σ), the rows flushed so far.
+    /// Buffered rows, weighted: `U = W [B | Δp]` and `V = W²Σ [B | Δp]` (`v`:
+    /// empty until a block carries σ), laid out for the kernel
+    /// (`kernel::at`); `PAD` more values than needed, to start at a 64-byte
+    /// boundary.
+    u: Vec<f64>,
+    v: Vec<f64>,
+    /// `Uᵀ U = [B | Δp]ᵀ W² [B | Δp]` (upper triangle, `mp × mp`,
+    /// column-major) and `M = Vᵀ V` (empty until σ), the rows flushed so far.
     c: Vec<f64>,
     cm: Vec<f64>,
     /// Rows in the buffer; whether one of their blocks carried σ.
@@ -103,8 +105,8 @@ pub struct WideAccumulator {
     bound: f64,
 }
 
-/// The bytes of `B` and `W² B` the buffer is sized to (two thirds of a
-/// 48 KiB first-level cache: the kernel's tile of `C` and its stack too).
+/// The bytes of `U` the buffer is sized to (half of a 48 KiB first-level
+/// cache: the rows stay there between the block's copy and the kernel).
 const BUFFER_BYTES: usize = 24 * 1024;
 
 /// `v[..len]` from the first 64-byte boundary (`v` has `PAD` spare values).
@@ -133,9 +135,8 @@ impl Clone for WideAccumulator {
             w
         };
         Self {
-            b: copy(&self.b),
-            a: copy(&self.a),
-            s: copy(&self.s),
+            u: copy(&self.u),
+            v: copy(&self.v),
             c: copy(&self.c),
             cm: copy(&self.cm),
             ..*self
@@ -166,16 +167,15 @@ impl WideAccumulator {
 
     fn on(n: usize, arch: pulp::Arch) -> Self {
         let mp = (n + 1).div_ceil(PAD) * PAD;
-        let cap = (BUFFER_BYTES / (16 * mp) / 3 * 3).clamp(24, 96);
+        let cap = (BUFFER_BYTES / (8 * mp) / 3 * 3).clamp(24, 96);
         Self {
             n,
             mp,
             cap,
             arch,
             lanes: kernel::lanes(arch),
-            b: vec![0.0; cap * mp + PAD],
-            a: vec![0.0; cap * mp + PAD],
-            s: Vec::new(),
+            u: vec![0.0; cap * mp + PAD],
+            v: Vec::new(),
             c: vec![0.0; mp * mp + PAD],
             cm: Vec::new(),
             rows: 0,
@@ -261,9 +261,9 @@ impl WideAccumulator {
         if rw.sigma {
             self.start_sigma();
         }
-        // Rows without σ in a buffer with σ rows: zero rows of `S`.
-        let s2 = if rw.sigma {
-            Some(rw.s2)
+        // Rows without σ in a buffer with σ rows: zero rows of `V`.
+        let ws = if rw.sigma {
+            Some(rw.ws)
         } else {
             self.sigma_pending.then_some([0.0; 3])
         };
@@ -271,14 +271,13 @@ impl WideAccumulator {
         let q = Push {
             b: b.as_slice(),
             dp: [dp[0], dp[1], dp[2]],
-            w2: rw.w2,
-            s2,
+            w: rw.w,
+            ws,
             rows,
             cap: self.cap,
             row0: self.rows,
-            dst: aligned_mut(&mut self.b, len),
-            da: aligned_mut(&mut self.a, len),
-            ds: s2.map(|_| aligned_mut(&mut self.s, len)),
+            du: aligned_mut(&mut self.u, len),
+            dv: ws.map(|_| aligned_mut(&mut self.v, len)),
         }
         .run(self.arch);
         // The core's running bound: `(Σ w² + Σ w⁴σ²) q` bounds the change of
@@ -289,7 +288,13 @@ impl WideAccumulator {
             next
         } else {
             validate_rows(b, dp, w, sigma, rows)?;
-            self.exact_bound(rows, rw.sigma)
+            // An infinite w² or w⁴σ² makes every one of the core's sums of
+            // that row infinite or NaN (`b · (w² b)`), whatever `b`; the
+            // rows here hold `w b`, which can stay finite.
+            let finite = rw.w2.iter().chain(&rw.s2).all(|v| v.is_finite());
+            finite
+                .then(|| self.exact_bound(rows, rw.sigma))
+                .flatten()
                 .ok_or(Error::NonFinite { what: "overflow" })?
         };
         // Commit: the rows written past `self.rows` join the buffer.
@@ -303,19 +308,19 @@ impl WideAccumulator {
         Ok(())
     }
 
-    /// The buffers of `M` at the first block with σ (zeros), and zero `S`
+    /// The buffers of `M` at the first block with σ (zeros), and zero `V`
     /// rows for the buffered rows without σ.
     fn start_sigma(&mut self) {
         let len = self.cap * self.mp;
         if self.cm.is_empty() {
             self.cm = vec![0.0; self.mp * self.mp + PAD];
         }
-        if self.s.is_empty() {
-            self.s = vec![0.0; len + PAD];
+        if self.v.is_empty() {
+            self.v = vec![0.0; len + PAD];
         } else if !self.sigma_pending {
             let (l, cap, rows) = (self.lanes, self.cap, self.rows);
-            let s = aligned_mut(&mut self.s, len);
-            for chunk in s.chunks_exact_mut(cap * l) {
+            let v = aligned_mut(&mut self.v, len);
+            for chunk in v.chunks_exact_mut(cap * l) {
                 chunk[..rows * l].fill(0.0);
             }
         }
@@ -328,8 +333,8 @@ impl WideAccumulator {
     fn exact_bound(&self, rows: usize, sigma: bool) -> Option<f64> {
         let (n, mp, cap, l) = (self.n, self.mp, self.cap, self.lanes);
         let len = cap * mp;
-        let (b, a) = (aligned(&self.b, len), aligned(&self.a, len));
-        let s = (sigma || self.sigma_pending).then(|| aligned(&self.s, len));
+        let u = aligned(&self.u, len);
+        let v = (sigma || self.sigma_pending).then(|| aligned(&self.v, len));
         let c = aligned(&self.c, mp * mp);
         let cm = (!self.cm.is_empty()).then(|| aligned(&self.cm, mp * mp));
         let limit = f64::MAX / 2.0;
@@ -341,11 +346,12 @@ impl WideAccumulator {
                 _ => 0.0,
             };
             for r in 0..self.rows + rows {
-                let x = b[at(l, cap, r, j)];
-                lambda += x * a[at(l, cap, r, j)];
-                eta += x * a[at(l, cap, r, n)];
-                if let (Some(s), true) = (s, j < n) {
-                    mid += x * s[at(l, cap, r, j)];
+                let x = u[at(l, cap, r, j)];
+                lambda += x * x;
+                eta += x * u[at(l, cap, r, n)];
+                if let (Some(v), true) = (v, j < n) {
+                    let y = v[at(l, cap, r, j)];
+                    mid += y * y;
                 }
             }
             // j = n: `lambda` is Σ Δpᵀ W² Δp.
@@ -364,13 +370,13 @@ impl WideAccumulator {
             return;
         }
         let (mp, cap, len) = (self.mp, self.cap, self.cap * self.mp);
-        let (b, a) = (aligned(&self.b, len), aligned(&self.a, len));
+        let u = aligned(&self.u, len);
         let c = aligned_mut(&mut self.c, mp * mp);
-        kernel::rank_k(self.arch, c, b, a, self.n + 1, mp, cap, self.rows);
+        kernel::rank_k(self.arch, c, u, u, self.n + 1, mp, cap, self.rows);
         if self.sigma_pending {
-            let s = aligned(&self.s, len);
+            let v = aligned(&self.v, len);
             let cm = aligned_mut(&mut self.cm, mp * mp);
-            kernel::rank_k(self.arch, cm, b, s, self.n, mp, cap, self.rows);
+            kernel::rank_k(self.arch, cm, v, v, self.n, mp, cap, self.rows);
         }
         self.rows = 0;
         self.sigma_pending = false;
@@ -403,10 +409,13 @@ impl WideAccumulator {
     }
 }
 
-/// The checked per-row quantities of one block, as the core's update
-/// computes them: `w²`, `w⁴σ²` (zero past the block's rows or without σ)
-/// and the rows with a positive weight.
+/// The checked per-row quantities of one block: `w`, `w²σ` (the rows'
+/// factors in `U` and `V`), `w²`, `w⁴σ²` (for the bound, as the core's
+/// update computes them; all zero past the block's rows or without σ) and
+/// the rows with a positive weight.
 struct RowWeights {
+    w: [f64; 3],
+    ws: [f64; 3],
     w2: [f64; 3],
     s2: [f64; 3],
     sigma: bool,
@@ -419,6 +428,8 @@ impl RowWeights {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn new(w: &[f64], sigma: Option<&nalgebra::Vector3<f64>>, rows: usize) -> Option<Self> {
         let mut rw = Self {
+            w: [0.0; 3],
+            ws: [0.0; 3],
             w2: [0.0; 3],
             s2: [0.0; 3],
             sigma: sigma.is_some(),
@@ -429,12 +440,13 @@ impl RowWeights {
             if !(w[r] >= 0.0) {
                 return None;
             }
-            rw.w2[r] = k;
+            (rw.w[r], rw.w2[r]) = (w[r], k);
             rw.equations += usize::from(k > 0.0);
             if let Some(s) = sigma {
                 if !(s[r] > 0.0) {
                     return None;
                 }
+                rw.ws[r] = k * s[r];
                 rw.s2[r] = k * k * s[r] * s[r];
             }
         }

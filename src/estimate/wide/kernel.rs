@@ -7,15 +7,15 @@
 //! Layout (all `f64`; `L` the dispatched lanes, `m = n + 1`, `mp` = `m`
 //! rounded up to [`PAD`]):
 //!
-//! - the buffer `B` holds up to `cap` rows `[bᵀ | Δp]` (`m` values, the rest
-//!   of `mp` zero) in chunks of `L` columns: chunk `q` is `cap` rows of `L`
-//!   values, so that each vector of a row streams contiguously through the
-//!   kernel ([`at`]);
-//! - the scaled rows `A = W² [B | Δp]` (and `S = W⁴Σ² [B | Δp]` for `M`),
+//! - the buffer `U` holds up to `cap` weighted rows `w [bᵀ | Δp]` (`m`
+//!   values, the rest of `mp` zero) in chunks of `L` columns: chunk `q` is
+//!   `cap` rows of `L` values, so that each vector of a row streams
+//!   contiguously through the kernel ([`at`]); `V = W²Σ [B | Δp]` for `M`,
 //!   the same layout;
-//! - the sums `C` (`mp × mp`, column-major): `C += Bᵀ A` on the upper
-//!   triangle, so that `C[..n, ..n] = Λ`, `C[..n, n] = η` and
-//!   `C[n, n] = Σ Δpᵀ W² Δp` (eq. 10) — one kernel for the three.
+//! - the sums `C` (`mp × mp`, column-major): `C += Uᵀ U` on the upper
+//!   triangle, so that `C[..n, ..n] = Λ = Σ Bᵀ W² B`, `C[..n, n] = η` and
+//!   `C[n, n] = Σ Δpᵀ W² Δp` (eq. 10) — one kernel for the three (and
+//!   `M = Vᵀ V`).
 //!
 //! The rank-`k` update ([`rank_k`]) walks `C` in column panels of `NC = L`
 //! columns (narrower at the end: 4, 2, 1); in a panel `j0 .. j0 + NC`, the
@@ -50,7 +50,7 @@ pub(super) fn lanes(arch: Arch) -> usize {
     arch.dispatch(Lanes)
 }
 
-/// `C += Bᵀ A` over the first `rows` buffered rows, on the upper triangle
+/// `C += Bᵀ A` over the first `rows` buffered rows (`A = B = U`, or `V`), on the upper triangle
 /// of the leading `m × m` block of `C` (see the module docs; the lower parts
 /// of the diagonal tiles get sums too, which are never read).
 #[allow(clippy::too_many_arguments)]
@@ -124,22 +124,36 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
 }
 
 /// Columns `j0 .. j0 + NC`, rows `0 .. j0 + NC` in whole vectors: tiles of
-/// `NV` vectors, then of 2 and 1.
+/// `NV` vectors where `NC` is the full panel width, taller ones (up to 24
+/// accumulators, 8 vectors) in the narrow panels, then one tile of what is
+/// left — so that no tile but the smallest panels' has fewer accumulators
+/// than cover the multiply-add latency.
 #[inline(always)]
 fn panel<S: Simd, const NV: usize, const NC: usize>(s: S, op: &mut RankK<'_>, j0: usize) {
     let nvec = (j0 + NC).div_ceil(S::F64_LANES);
+    let tall = if NC >= 8 { NV } else { (24 / NC).min(8) };
     let mut iv = 0;
-    while iv + NV <= nvec {
-        tile::<S, NV, NC>(s, op, iv, j0);
-        iv += NV;
+    while iv + tall <= nvec {
+        tiles::<S, NC>(s, op, iv, j0, tall);
+        iv += tall;
     }
-    if NV > 2 && iv + 2 <= nvec {
-        tile::<S, 2, NC>(s, op, iv, j0);
-        iv += 2;
+    if iv < nvec {
+        tiles::<S, NC>(s, op, iv, j0, nvec - iv);
     }
-    while iv < nvec {
-        tile::<S, 1, NC>(s, op, iv, j0);
-        iv += 1;
+}
+
+/// [`tile`] of `nv` (1 ..= 8) vectors.
+#[inline(always)]
+fn tiles<S: Simd, const NC: usize>(s: S, op: &mut RankK<'_>, iv: usize, j0: usize, nv: usize) {
+    match nv {
+        1 => tile::<S, 1, NC>(s, op, iv, j0),
+        2 => tile::<S, 2, NC>(s, op, iv, j0),
+        3 => tile::<S, 3, NC>(s, op, iv, j0),
+        4 => tile::<S, 4, NC>(s, op, iv, j0),
+        5 => tile::<S, 5, NC>(s, op, iv, j0),
+        6 => tile::<S, 6, NC>(s, op, iv, j0),
+        7 => tile::<S, 7, NC>(s, op, iv, j0),
+        _ => tile::<S, 8, NC>(s, op, iv, j0),
     }
 }
 
@@ -177,22 +191,21 @@ fn tile<S: Simd, const NV: usize, const NC: usize>(s: S, op: &mut RankK<'_>, iv:
     }
 }
 
-/// One block's rows into the buffers: row `row0 + r` of `B` gets
-/// `[bᵀ | Δp]` of the block's row `r` (`B` column-major 3 × n), of `A` the
-/// same times `w2[r]`, of `S` (with σ) times `s2[r]`, for `r < rows`.
-/// Returns `Σ b² + Σ Δp²` over those rows: not finite when a value is not
-/// (nor when the sum overflows).
+/// One block's rows into the buffers: row `row0 + r` of `U` gets
+/// `w[r] [bᵀ | Δp]` of the block's row `r` (`B` column-major 3 × n), of `V`
+/// (with σ) `ws[r] [bᵀ | Δp]`, for `r < rows`. Returns `Σ b² + Σ Δp²` over
+/// those rows (unweighted): not finite when a value is not (nor when the
+/// sum overflows).
 pub(super) struct Push<'a> {
     pub(super) b: &'a [f64],
     pub(super) dp: [f64; 3],
-    pub(super) w2: [f64; 3],
-    pub(super) s2: Option<[f64; 3]>,
+    pub(super) w: [f64; 3],
+    pub(super) ws: Option<[f64; 3]>,
     pub(super) rows: usize,
     pub(super) cap: usize,
     pub(super) row0: usize,
-    pub(super) dst: &'a mut [f64],
-    pub(super) da: &'a mut [f64],
-    pub(super) ds: Option<&'a mut [f64]>,
+    pub(super) du: &'a mut [f64],
+    pub(super) dv: Option<&'a mut [f64]>,
 }
 
 impl Push<'_> {
@@ -224,10 +237,9 @@ impl Push<'_> {
                 let x = if j < n { self.b[3 * j + r] } else { self.dp[r] };
                 q[r] += x * x;
                 let i = at(l, self.cap, self.row0 + r, j);
-                self.dst[i] = x;
-                self.da[i] = self.w2[r] * x;
-                if let (Some(ds), Some(s2)) = (self.ds.as_deref_mut(), self.s2) {
-                    ds[i] = s2[r] * x;
+                self.du[i] = self.w[r] * x;
+                if let (Some(dv), Some(ws)) = (self.dv.as_deref_mut(), self.ws) {
+                    dv[i] = ws[r] * x;
                 }
             }
         }
@@ -283,8 +295,8 @@ impl pulp::NullaryFnOnce for PushV4<'_, '_> {
             )
         };
         let perms = [perm(0), perm(1), perm(2)];
-        let k = push.w2.map(|k| v4.splat_f64s(k));
-        let ks = push.s2.map(|s| s.map(|k| v4.splat_f64s(k)));
+        let k = push.w.map(|k| v4.splat_f64s(k));
+        let ks = push.ws.map(|s| s.map(|k| v4.splat_f64s(k)));
         let mut q = [v4.splat_f64s(0.0); 3];
         let (src, _) = V4::as_simd_f64s(&push.b[..24 * full]);
         // The last chunk: the remaining columns (masked loads: zeros past
@@ -293,9 +305,8 @@ impl pulp::NullaryFnOnce for PushV4<'_, '_> {
         let part = |v: usize| v4.partial_load_f64s(rest.get(8 * v..).unwrap_or(&[]));
         let tail = [part(0), part(1), part(2)];
         let dp_lane = 1u8 << (n % 8);
-        let (dst, _) = V4::as_mut_simd_f64s(push.dst);
-        let (da, _) = V4::as_mut_simd_f64s(push.da);
-        let mut ds = push.ds.as_deref_mut().map(|ds| V4::as_mut_simd_f64s(ds).0);
+        let (du, _) = V4::as_mut_simd_f64s(push.du);
+        let mut dv = push.dv.as_deref_mut().map(|dv| V4::as_mut_simd_f64s(dv).0);
         let chunks = src.chunks_exact(3).map(|x| [x[0], x[1], x[2]]);
         for (chunk, x) in chunks.chain(core::iter::once(tail)).enumerate() {
             let x: [__m512d; 3] = x.map(pulp::cast);
@@ -309,10 +320,9 @@ impl pulp::NullaryFnOnce for PushV4<'_, '_> {
                 let y: pulp::f64x8 = pulp::cast(y);
                 let i = chunk * cap + row0 + r;
                 q[r] = v4.mul_add_f64s(y, y, q[r]);
-                dst[i] = y;
-                da[i] = v4.mul_f64s(k[r], y);
-                if let (Some(ds), Some(ks)) = (ds.as_deref_mut(), ks) {
-                    ds[i] = v4.mul_f64s(ks[r], y);
+                du[i] = v4.mul_f64s(k[r], y);
+                if let (Some(dv), Some(ks)) = (dv.as_deref_mut(), ks) {
+                    dv[i] = v4.mul_f64s(ks[r], y);
                 }
             }
         }
