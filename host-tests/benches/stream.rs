@@ -21,7 +21,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use host_tests::Rng;
 use nalgebra::{DVector, Dyn, OMatrix, Vector3, U3};
-use robcal::estimate::wide::WideAccumulator;
+use robcal::estimate::wide::{Instructions, WideAccumulator};
 use robcal::{Accumulator, Block};
 
 /// Distinct blocks the updates cycle through.
@@ -59,16 +59,20 @@ fn bench_n(c: &mut Criterion, n: usize) {
             black_box(&mut core).update(black_box(&ring[k])).unwrap();
         })
     });
-    let mut wide = WideAccumulator::new(n);
-    group.bench_function(
-        BenchmarkId::new(format!("wide-{}", wide.instructions()), n),
-        |b| {
+    // The detected instructions, and AVX2 + FMA where it is not what was
+    // detected (on an AVX-512 machine: what a machine without it gets).
+    let mut wides = vec![WideAccumulator::new(n)];
+    wides.extend(WideAccumulator::with_instructions(n, Instructions::Avx2Fma));
+    wides.dedup_by_key(|w| w.instructions());
+    for mut wide in wides {
+        let id = BenchmarkId::new(format!("wide-{}", wide.instructions()), n);
+        group.bench_function(id, |b| {
             b.iter(|| {
                 k = (k + 1) % RING;
                 black_box(&mut wide).update(black_box(&ring[k])).unwrap();
             })
-        },
-    );
+        });
+    }
     group.finish();
 
     let mut group = c.benchmark_group("stream-1e6");
@@ -95,16 +99,21 @@ fn bench_n(c: &mut Criterion, n: usize) {
     group.finish();
 }
 
-/// The peak probe, at the start and at the end (`when`) of the run.
+/// The peak probe, at the start and at the end (`when`) of the run, on the
+/// detected instructions and on AVX2 + FMA.
 fn peak(c: &mut Criterion, when: &str) {
-    let probe = WideAccumulator::new(1);
+    let mut probes = vec![WideAccumulator::new(1)];
+    probes.extend(WideAccumulator::with_instructions(1, Instructions::Avx2Fma));
+    probes.dedup_by_key(|w| w.instructions());
     let iterations = 1_000_000;
-    let (flops, _) = probe.fma_probe(iterations);
     let mut group = c.benchmark_group("fma-peak");
-    group.throughput(Throughput::Elements(flops as u64));
-    group.bench_function(BenchmarkId::new(probe.instructions(), when), |b| {
-        b.iter(|| black_box(probe.fma_probe(black_box(iterations))))
-    });
+    for probe in probes {
+        let (flops, _) = probe.fma_probe(iterations);
+        group.throughput(Throughput::Elements(flops as u64));
+        group.bench_function(BenchmarkId::new(probe.instructions(), when), |b| {
+            b.iter(|| black_box(probe.fma_probe(black_box(iterations))))
+        });
+    }
     group.finish();
 }
 

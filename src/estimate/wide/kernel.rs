@@ -91,10 +91,10 @@ impl WithSimd for RankK<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, s: S) {
         // Registers: NV·NC accumulators, NV loads, one broadcast. AVX-512
-        // (32 registers): 3 × 8; AVX2 (16): 2 × 4; scalar: 4 × 1.
+        // (32 registers): 3 × 8; AVX2 (16): 3 × 4; scalar: 4 × 1.
         match S::F64_LANES {
             8 => panels::<S, 3, 8>(s, self),
-            4 => panels::<S, 2, 4>(s, self),
+            4 => panels::<S, 3, 4>(s, self),
             _ => panels::<S, 4, 1>(s, self),
         }
     }
@@ -131,7 +131,14 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
 #[inline(always)]
 fn panel<S: Simd, const NV: usize, const NC: usize>(s: S, op: &mut RankK<'_>, j0: usize) {
     let nvec = (j0 + NC).div_ceil(S::F64_LANES);
-    let tall = if NC >= 8 { NV } else { (24 / NC).min(8) };
+    // Accumulators the registers hold besides the loads: 24 of AVX-512's
+    // 32, 12 of AVX2's 16.
+    let budget = if S::REGISTER_COUNT >= 32 { 24 } else { 12 };
+    let tall = if NV * NC >= budget || S::F64_LANES == 1 {
+        NV
+    } else {
+        (budget / NC).min(8)
+    };
     let mut iv = 0;
     while iv + tall <= nvec {
         tiles::<S, NC>(s, op, iv, j0, tall);
@@ -254,8 +261,40 @@ impl WithSimd for PushAny<'_, '_> {
     type Output = f64;
 
     #[inline(always)]
-    fn with_simd<S: Simd>(self, _s: S) -> f64 {
-        self.0.columns_from(S::F64_LANES, 0)
+    fn with_simd<S: Simd>(self, s: S) -> f64 {
+        let push = self.0;
+        if push.rows < 3 {
+            return push.columns_from(S::F64_LANES, 0);
+        }
+        // All three rows: the squares over the block as it lies (vectors,
+        // four partial sums), the copy without a chain of dependent adds.
+        let (head, tail) = S::as_simd_f64s(push.b);
+        let mut acc = [s.splat_f64s(0.0); 4];
+        let mut quads = head.chunks_exact(4);
+        for v in quads.by_ref() {
+            for (a, &x) in acc.iter_mut().zip(v) {
+                *a = s.mul_add_e_f64s(x, x, *a);
+            }
+        }
+        for (a, &x) in acc.iter_mut().zip(quads.remainder()) {
+            *a = s.mul_add_e_f64s(x, x, *a);
+        }
+        let t = s.add_f64s(s.add_f64s(acc[0], acc[1]), s.add_f64s(acc[2], acc[3]));
+        let mut q = s.reduce_sum_f64s(t);
+        for &x in tail.iter().chain(&push.dp) {
+            q += x * x;
+        }
+        let (l, cap, row0) = (S::F64_LANES, push.cap, push.row0);
+        for (j, x) in push.b.chunks_exact(3).chain([&push.dp[..]]).enumerate() {
+            for r in 0..3 {
+                let i = at(l, cap, row0 + r, j);
+                push.du[i] = push.w[r] * x[r];
+                if let (Some(dv), Some(ws)) = (push.dv.as_deref_mut(), push.ws) {
+                    dv[i] = ws[r] * x[r];
+                }
+            }
+        }
+        q
     }
 }
 
