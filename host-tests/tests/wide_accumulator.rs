@@ -1,9 +1,9 @@
 //! `estimate::wide::WideAccumulator` (issue 16, item 3) against the core's
 //! scalar `Accumulator<f64, Dyn>` on the same blocks: every statistic within
 //! `1e-12` relative, on every instruction set this processor has (the one
-//! detected, AVX2 + FMA, scalar), at N = 1, 2, 3, 7, 9, 30, 60, 61, with
-//! weights (some zero), σ on some blocks, blocks of one and two rows, and
-//! stream lengths that end on a full buffer, a partial one and a single
+//! detected, AVX2 + FMA, scalar), at N = 1, 2, 3, 7, 9, 30, 60, 61 (and 0,
+//! 8, 130), with weights (some zero), σ on some blocks, blocks of one and
+//! two rows, and stream lengths that end on a full buffer, a partial one and a single
 //! block; then every rejected input: the core's error, the statistics
 //! unchanged, and the stream going on as if the block had not come.
 //!
@@ -18,7 +18,9 @@ use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 use robcal::estimate::wide::{Instructions, WideAccumulator};
 use robcal::{Accumulator, Block, Error};
 
-const SIZES: [usize; 8] = [1, 2, 3, 7, 9, 30, 60, 61];
+/// The issue's sizes, the edges of the 8-column chunks, and one wider than
+/// a first-level-cache buffer's minimum (24 rows).
+const SIZES: [usize; 10] = [1, 2, 3, 7, 8, 9, 30, 60, 61, 130];
 
 /// Every instruction set this processor runs.
 fn instruction_sets(n: usize) -> Vec<WideAccumulator> {
@@ -324,6 +326,24 @@ fn a_million_blocks_renew_the_running_bound() {
         wide.update(&ring[k % ring.len()]).unwrap();
     }
     same_statistics(&wide.accumulator(), &core);
+}
+
+#[test]
+fn no_parameters_still_sums_the_measurements() {
+    // N = 0: only Σ Δpᵀ W² Δp and the counts.
+    let mut rng = Rng::new(3);
+    let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(0));
+    let mut wides = instruction_sets(0);
+    for k in 0..100 {
+        let blk = block(&mut rng, 0, k);
+        core.update(&blk).unwrap();
+        for wide in &mut wides {
+            wide.update(&blk).unwrap();
+        }
+    }
+    for wide in &mut wides {
+        same_statistics(&wide.accumulator(), &core);
+    }
 }
 
 #[test]
