@@ -40,9 +40,22 @@ statsmodels work on the stored 810 rows as a user of those libraries would:
 
 Before timing, the three results are compared with robcal's (x and the
 sandwich standard deviations, relative 1e-6, same number of iterations).
+
+With --stream (run.sh --stream), the streaming update of issue 16 instead:
+10^6 weighted blocks (3 rows x N, a ring of 1000 distinct blocks read 1000
+times over) into robcal's core Accumulator<f64, Dyn> (scalar), into
+robcal::estimate::wide::WideAccumulator (SIMD, dispatched at run time), and
+numpy's normal equations on the same rows in chunks of one ring
+(L += A.T @ (w2*A), eta += (w2*A).T @ dp, yy += dp @ (w2*dp)), with the
+machine's FMA peak measured through robcal's dispatch (independent FMA
+chains), interleaved core, wide, peak, numpy per round. numpy's sums are
+checked against robcal's before timing. Flops are counted as the useful
+work, 3 N(N+1)/2 * 2 per block for the upper triangle of Lambda plus 3 N * 2
+for eta (numpy computes the full N x N product: about twice that).
 """
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -211,10 +224,123 @@ def check(name, got, expected):
     return ok
 
 
+class Stream:
+    """robcal's stream timing program (host-tests/examples/stream_timing.rs)
+    for one N, driven over a pipe."""
+
+    def __init__(self, binary, n):
+        self.p = subprocess.Popen(
+            [binary, "serve", str(n)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+
+    def ask(self, line):
+        self.p.stdin.write(line + "\n")
+        self.p.stdin.flush()
+        return self.p.stdout.readline().split()
+
+    def close(self):
+        self.p.stdin.write("quit\n")
+        self.p.stdin.close()
+        self.p.wait()
+
+
+def numpy_stream(rows, n, chunks):
+    """Normal equations of the stream, chunk by chunk (one ring a chunk)."""
+    a, dp, w2 = rows[:, :n], rows[:, n], rows[:, n + 1] ** 2
+    lam = np.zeros((n, n))
+    eta = np.zeros(n)
+    yy = 0.0
+    for _ in range(chunks):
+        aw = a * w2[:, None]
+        lam += a.T @ aw
+        eta += aw.T @ dp
+        yy += dp @ (w2 * dp)
+    return lam, eta, yy
+
+
+def stream_main(args):
+    sizes = [int(v) for v in args.sizes.split(",")]
+    rounds = 3 if args.quick else args.stream_rounds
+    blocks, ring = 1_000_000, 1000
+    print(
+        f"streaming update: {blocks} blocks (3 rows x N, weighted), ring of {ring}; "
+        f"python {sys.version.split()[0]}, numpy {np.__version__}, "
+        f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS', 'default')}"
+    )
+    print("load average before: %.2f %.2f %.2f" % os.getloadavg())
+    results = []
+    for n in sizes:
+        rows = np.fromfile(f"{args.data}/stream_{n}.f64").reshape(3 * ring, n + 2)
+        ref = {}
+        with open(f"{args.data}/stream_{n}_sums.txt") as f:
+            for line in f:
+                if line.startswith("#") or not line.strip():
+                    continue
+                key, *vals = line.split()
+                ref[key] = np.array([float(v) for v in vals])
+        lam, eta, yy = numpy_stream(rows, n, blocks // ring)
+        # robcal writes the upper triangle column by column.
+        cols = [(i, j) for j in range(n) for i in range(j + 1)]
+        upper = np.array([lam[i, j] for i, j in cols])
+        scale = np.sqrt(np.array([lam[i, i] * lam[j, j] for i, j in cols]))
+        el = np.max(np.abs(upper - ref["upper"]) / scale)
+        ee = np.max(np.abs(eta - ref["eta"]) / np.sqrt(np.diag(lam) * yy))
+        ey = abs(yy - ref["yy"][0]) / yy
+        ok = max(el, ee, ey) < 1e-10
+        print(
+            f"  N = {n}: numpy vs robcal sums: Lambda {el:.1e}, eta {ee:.1e}, yy {ey:.1e} "
+            f"(relative to sqrt(Lii Ljj), sqrt(Lii yy), yy)  {'ok' if ok else 'MISMATCH'}"
+        )
+        if not ok:
+            sys.exit("numpy does not reproduce robcal's sums: not timing")
+        rc = Stream(args.stream, n)
+        isa = rc.ask("info")[0]
+        flops = (3 * n * (n + 1) + 3 * n * 2) * blocks  # Λ (upper) and η
+        times = {"core": [], "wide": [], "peak": [], "numpy": []}
+        peak_flops = float(rc.ask("peak 1")[0])
+        rc.ask("run 1 wide")
+        for _ in range(rounds):
+            times["core"] += [int(t) for t in rc.ask("run 1 core")]
+            times["wide"] += [int(t) for t in rc.ask("run 1 wide")]
+            times["peak"] += [int(t) for t in rc.ask("peak 5")[1:]]
+            times["numpy"] += timed(lambda: numpy_stream(rows, n, blocks // ring), 1)
+        rc.close()
+        med = {k: statistics.median(v) / 1e9 for k, v in times.items()}
+        peak = peak_flops / min(times["peak"])  # flops per ns: GFLOP/s
+        peak_med = peak_flops / med["peak"] / 1e9
+        results.append((n, isa, flops, med, peak, peak_med, times))
+    print(f"\n{rounds} rounds, interleaved core, wide, peak, numpy; median [best] of each:")
+    print(
+        "  N   core (scalar)            wide (SIMD)              numpy                    "
+        "peak GFLOP/s         wide % of peak       core/wide  numpy/wide"
+    )
+    for n, isa, flops, med, peak, peak_med, times in results:
+        best = {k: min(v) / 1e9 for k, v in times.items()}
+
+        def cell(k):
+            return f"{med[k] * 1e3:7.1f} [{best[k] * 1e3:7.1f}] ms"
+
+        print(
+            f"  {n:<3} {cell('core')}  {cell('wide')}  {cell('numpy')}  "
+            f"{peak_med:5.1f} [{peak:5.1f}] {isa}  "
+            f"{100 * flops / med['wide'] / 1e9 / peak_med:4.1f} [{100 * flops / best['wide'] / 1e9 / peak:4.1f}] %"
+            f"       {med['core'] / med['wide']:5.2f}x     {med['numpy'] / med['wide']:5.2f}x"
+        )
+    print("load average after: %.2f %.2f %.2f" % os.getloadavg())
+    for n, isa, flops, med, peak, peak_med, times in results:
+        print(
+            f"  N = {n} ranges (ms): "
+            + ", ".join(f"{k} [{min(v) / 1e6:.1f}, {max(v) / 1e6:.1f}]" for k, v in times.items() if k != "peak")
+        )
+
+
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--robcal", required=True)
+    ap.add_argument("--robcal")
     ap.add_argument("--data", required=True)
+    ap.add_argument("--stream", help="the stream timing program: the streaming mode")
+    ap.add_argument("--sizes", default="9,30,60", help="N of the streaming mode")
+    ap.add_argument("--stream-rounds", type=int, default=7)
     ap.add_argument(
         "--before",
         help="a second robcal timing program (e.g. built from another commit), timed beside",
@@ -222,6 +348,9 @@ def main():
     ap.add_argument("--rounds", type=int, default=100)
     ap.add_argument("--quick", action="store_true", help="5 rounds")
     args = ap.parse_args()
+    if args.stream:
+        stream_main(args)
+        return
     rounds = 5 if args.quick else args.rounds
 
     b, dp, cell, settings, expected = load(args.data)

@@ -6,6 +6,16 @@
 #
 #   bench/peers/run.sh [--rounds R] [--quick] [--before BIN]
 #
+# With --stream, the streaming update instead (issue 16, item 3): 10^6
+# weighted blocks at N = 9, 30, 60 into robcal's scalar core accumulator,
+# its SIMD WideAccumulator and numpy's normal equations, with the machine's
+# FMA peak through robcal's run-time dispatch, interleaved:
+#
+#   bench/peers/run.sh --stream [--sizes 9,30,60] [--stream-rounds R] [--quick]
+#
+# numpy runs on one BLAS thread (robcal's update is one thread), unless
+# PEERS_BLAS_THREADS says otherwise.
+#
 # Needs a Rust toolchain, python3 (with venv) and PyPI (numpy, statsmodels
 # are installed into a venv under target/, once). Nothing else from the
 # network. Environment: CARGO_TARGET_DIR as usual; PEERS_VENV to put the
@@ -21,6 +31,21 @@ if [ ! -x "$venv/bin/python" ]; then
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --upgrade pip
   "$venv/bin/pip" install --quiet numpy statsmodels
+fi
+
+if [ "${1:-}" = "--stream" ]; then
+  cargo build --release -p host-tests --example stream_timing
+  bin=$target/release/examples/stream_timing
+  sizes=9,30,60
+  args=("$@")
+  for ((i = 0; i < ${#args[@]}; i++)); do
+    [ "${args[i]}" = "--sizes" ] && sizes=${args[i + 1]}
+  done
+  for n in ${sizes//,/ }; do
+    "$bin" export "$data" "$n"
+  done
+  export OPENBLAS_NUM_THREADS=${PEERS_BLAS_THREADS:-1}
+  exec "$venv/bin/python" "$root/bench/peers/peers.py" --data "$data" --stream "$bin" "${@:2}"
 fi
 
 cargo build --release -p host-tests --example kr270_irls_timing

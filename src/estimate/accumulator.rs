@@ -375,6 +375,17 @@ where
         acc
     }
 
+    /// [`Self::from_sums`] with the sandwich's middle term `M` (upper
+    /// triangle) over `sigma_rows` rows: the host's
+    /// [`super::wide::WideAccumulator`] hands over its sums this way.
+    #[cfg(feature = "std")]
+    pub(crate) fn with_middle(mut self, middle: OMatrix<T, D, D>, sigma_rows: usize) -> Self {
+        self.middle = middle;
+        self.sigma_rows = sigma_rows;
+        self.refresh_bound();
+        self
+    }
+
     /// Adds the statistics of `other` (measurements taken elsewhere, e.g. on
     /// another core): the result equals feeding both streams to one
     /// accumulator, up to rounding.

@@ -38,6 +38,7 @@
 //! | [`decision`] | [`decision::PureError`], [`decision::LackOfFit`], [`decision::Rule`]: the host's decision rule, shared with the device |
 //! | [`distributions`] | χ² and F tail probabilities (no std) |
 //! | `fmt` | with `defmt`: matrices in defmt logs as plain nested lists |
+//! | `wide` | `std` only: `WideAccumulator`, the host's streaming update with run-time SIMD (blocked rank-`k` updates, AVX-512 / AVX2 + FMA / scalar), handing its sums to an [`Accumulator`] |
 
 use nalgebra::allocator::Allocator;
 use nalgebra::{DefaultAllocator, Dim, U3};
@@ -69,6 +70,8 @@ pub mod nested;
 pub mod rank;
 pub mod screen;
 pub mod weights;
+#[cfg(feature = "std")]
+pub mod wide;
 
 pub use accumulator::Accumulator;
 pub use block::Block;
