@@ -14,7 +14,7 @@
 //! ```
 //!
 //! `bench/peers/run.sh --stream` measures the same streams interleaved with
-//! numpy's normal equations; docs/simd-bench-draft.md has the numbers.
+//! numpy's normal equations; BENCHMARKS.md ("Streaming update on the host: SIMD") has the numbers.
 
 use std::hint::black_box;
 
