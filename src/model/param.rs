@@ -10,7 +10,7 @@
 //!
 //! | parameter | unit (revolute / prismatic joint) | `si` | eq. |
 //! |---|---|---|---|
-//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`] | `mrad` / `mm` | 1e-3 | 2 |
+//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`], [`Param::GravityCompliance`] | `mrad` / `mm` | 1e-3 | 2 |
 //! | [`Param::JointFrame`], [`Param::Base`], [`Param::Tool`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
 //! | [`Param::Marker`], [`Param::LoadCom`] | `mm` | 1e-3 | 2 |
 //! | [`Param::Compliance`], [`Param::ComplianceAt`] | `urad/(N*m)` / `um/N` | 1e-6 | 3 |
@@ -125,6 +125,23 @@ pub enum Param {
         /// `false`: the sine's amplitude `s`; `true`: the cosine's `c`.
         cos: bool,
     },
+    /// A joint bending under the robot's own weight, the masses unknown
+    /// (lumped gravity compliance): everything outboard of joint `j` as one
+    /// rigid body (mass `m`, centre of mass `u` fixed in joint `j`'s moved
+    /// frame), `τⱼ = m u · Rⱼᵀ(g × ẑⱼ)`, so `δqⱼ = kⱼ τⱼ` is linear in the
+    /// two components of `Rⱼᵀ ĝ` perpendicular to the joint's axis:
+    /// `δqⱼ = x_a (Rⱼᵀĝ · aⱼ) + x_b (Rⱼᵀĝ · bⱼ)` with `ĝ` the unit gravity
+    /// direction, `Rⱼ` joint `j`'s frame at the commanded pose (its own
+    /// rotation included) and `(aⱼ, bⱼ, ẑⱼ)` a right-handed basis of that
+    /// frame ([`super::gravity_basis`]). `x_a` is the deflection when
+    /// gravity points along `aⱼ`; `|x| = kⱼ m |g| |u⊥|` the largest the
+    /// weight can make (reported in mrad).
+    GravityCompliance {
+        /// Joint index.
+        joint: u8,
+        /// `false`: the coefficient `x_a` of `aⱼ`; `true`: `x_b` of `bⱼ`.
+        b: bool,
+    },
 }
 
 /// The unit a parameter is estimated and reported in, and its SI value.
@@ -157,7 +174,8 @@ impl Param {
             | Param::NonlinearStiffness { joint }
             | Param::Backlash { joint }
             | Param::LinkCompliance { joint }
-            | Param::GearCyclic { joint, .. } => Some(joint),
+            | Param::GearCyclic { joint, .. }
+            | Param::GravityCompliance { joint, .. } => Some(joint),
             Param::Base { .. }
             | Param::Tool { .. }
             | Param::Marker { .. }
@@ -191,7 +209,10 @@ impl Param {
     pub fn unit(&self, joint_kind: JointKind) -> Unit {
         let prismatic = joint_kind == JointKind::Prismatic && self.joint().is_some();
         match *self {
-            Param::JointOffset { .. } | Param::Backlash { .. } | Param::GearCyclic { .. } => {
+            Param::JointOffset { .. }
+            | Param::Backlash { .. }
+            | Param::GearCyclic { .. }
+            | Param::GravityCompliance { .. } => {
                 if prismatic {
                     MM
                 } else {
@@ -230,7 +251,8 @@ impl Param {
     }
 
     /// The component's name, the part of a parameter's name after its
-    /// joint, marker or effect: `offset`, `tx`…`rz`, `x`…`z`, `sin`, `cos`;
+    /// joint, marker or effect: `offset`, `tx`…`rz`, `x`…`z`, `sin`, `cos`,
+    /// `a`, `b`;
     /// empty for a one-parameter effect.
     pub fn component(&self) -> &'static str {
         let six = |a: u8| POSE_COMPONENTS.get(usize::from(a)).copied().unwrap_or("?");
@@ -248,6 +270,13 @@ impl Param {
                     "cos"
                 } else {
                     "sin"
+                }
+            }
+            Param::GravityCompliance { b, .. } => {
+                if b {
+                    "b"
+                } else {
+                    "a"
                 }
             }
             Param::Compliance { .. }
@@ -292,6 +321,9 @@ impl fmt::Display for Param {
             Param::LoadCom { .. } => write!(f, "load_com_{c}"),
             Param::Drift { .. } => write!(f, "drift_{c}"),
             Param::GearCyclic { joint, .. } => write!(f, "gear_cyclic_j{joint}.{c}"),
+            Param::GravityCompliance { joint, .. } => {
+                write!(f, "gravity_compliance_j{joint}.{c}")
+            }
         }
     }
 }
