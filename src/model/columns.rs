@@ -195,6 +195,7 @@ impl Param {
                 let qj = s.q(joint)?;
                 twist(joint)? * if cos { qj.cos() } else { qj.sin() }
             }
+            #[cfg(feature = "std")]
             Param::GravityCompliance { joint, b } => {
                 let g = match s.gravity_q.get(usize::from(joint)) {
                     Some(g) => *g,

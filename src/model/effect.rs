@@ -56,7 +56,9 @@ pub enum Effect {
     /// A joint has a periodic error over its angle (first harmonic).
     GearCyclic,
     /// A joint bends under the robot's own weight, the masses unknown
-    /// (lumped gravity compliance, [`Param::GravityCompliance`]).
+    /// (lumped gravity compliance, `Param::GravityCompliance`; host only,
+    /// `std`).
+    #[cfg(feature = "std")]
     GravityCompliance,
     /// A marker sits elsewhere than declared.
     Marker,
@@ -66,6 +68,7 @@ pub enum Effect {
 
 impl Effect {
     /// Every effect, in the contract's order.
+    #[cfg(feature = "std")]
     pub const ALL: [Effect; 13] = [
         Effect::Compensator,
         Effect::JointCompliance,
@@ -78,6 +81,24 @@ impl Effect {
         Effect::Geometry,
         Effect::GearCyclic,
         Effect::GravityCompliance,
+        Effect::Marker,
+        Effect::BaseFrame,
+    ];
+
+    /// Every effect, in the contract's order (without `std`, no gravity
+    /// compliance).
+    #[cfg(not(feature = "std"))]
+    pub const ALL: [Effect; 12] = [
+        Effect::Compensator,
+        Effect::JointCompliance,
+        Effect::NonlinearStiffness,
+        Effect::Backlash,
+        Effect::LinkCompliance,
+        Effect::LoadCom,
+        Effect::Drift,
+        Effect::JointOffset,
+        Effect::Geometry,
+        Effect::GearCyclic,
         Effect::Marker,
         Effect::BaseFrame,
     ];
@@ -95,6 +116,7 @@ impl Effect {
             Effect::JointOffset => "joint_offset",
             Effect::Geometry => "geometry",
             Effect::GearCyclic => "gear_cyclic",
+            #[cfg(feature = "std")]
             Effect::GravityCompliance => "gravity_compliance",
             Effect::Marker => "marker",
             Effect::BaseFrame => "base_frame",
@@ -104,13 +126,13 @@ impl Effect {
     /// Whether the effect is traced along a joint's angle (its plot's
     /// variable), rather than along a torque, the load or the time.
     pub fn follows_angle(self) -> bool {
+        #[cfg(feature = "std")]
+        if self == Effect::GravityCompliance {
+            return true;
+        }
         matches!(
             self,
-            Effect::Compensator
-                | Effect::JointOffset
-                | Effect::GearCyclic
-                | Effect::GravityCompliance
-                | Effect::Geometry
+            Effect::Compensator | Effect::JointOffset | Effect::GearCyclic | Effect::Geometry
         )
     }
 }
@@ -249,10 +271,11 @@ impl Candidate<'_> {
 ///    the first joint (whose frame error is, to first order, the base's:
 ///    `base_frame`);
 /// 8. `gear_cyclic` (sine, cosine), for a revolute joint;
-/// 9. `gravity_compliance` (`a`, `b`), for a revolute joint without a
-///    compliance (with one, the robot's weight already loads it through
-///    the URDF's masses): after `gear_cyclic`, which it equals on a
-///    horizontal joint whose gravity direction only its own angle turns;
+/// 9. `gravity_compliance` (`a`, `b`; host only, `std`), for a revolute
+///    joint without a compliance (with one, the robot's weight already
+///    loads it through the URDF's masses): after `gear_cyclic`, which it
+///    equals on a horizontal joint whose gravity direction only its own
+///    angle turns;
 ///
 /// then, for the model:
 /// 10. `load_com`, with deflection rows and a compliance in the model (the
@@ -333,6 +356,7 @@ pub fn candidates<'b, E>(
                 let ps = [false, true].map(|cos| Param::GearCyclic { joint, cos });
                 emit(one(Effect::GearCyclic, on, &ps))?;
             }
+            #[cfg(feature = "std")]
             if revolute(j) && !compliant && !has(&Param::GravityCompliance { joint, b: false }) {
                 let ps = [false, true].map(|b| Param::GravityCompliance { joint, b });
                 emit(one(Effect::GravityCompliance, on, &ps))?;

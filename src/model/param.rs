@@ -135,7 +135,10 @@ pub enum Param {
     /// rotation included) and `(aⱼ, bⱼ, ẑⱼ)` a right-handed basis of that
     /// frame ([`super::gravity_basis`]). `x_a` is the deflection when
     /// gravity points along `aⱼ`; `|x| = kⱼ m |g| |u⊥|` the largest the
-    /// weight can make (reported in mrad).
+    /// weight can make (reported in mrad). Host only (`std`): it needs
+    /// absolute rows and the host's Gauss–Newton, and a controller's image
+    /// has no room for it.
+    #[cfg(feature = "std")]
     GravityCompliance {
         /// Joint index.
         joint: u8,
@@ -174,8 +177,9 @@ impl Param {
             | Param::NonlinearStiffness { joint }
             | Param::Backlash { joint }
             | Param::LinkCompliance { joint }
-            | Param::GearCyclic { joint, .. }
-            | Param::GravityCompliance { joint, .. } => Some(joint),
+            | Param::GearCyclic { joint, .. } => Some(joint),
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { joint, .. } => Some(joint),
             Param::Base { .. }
             | Param::Tool { .. }
             | Param::Marker { .. }
@@ -209,10 +213,15 @@ impl Param {
     pub fn unit(&self, joint_kind: JointKind) -> Unit {
         let prismatic = joint_kind == JointKind::Prismatic && self.joint().is_some();
         match *self {
-            Param::JointOffset { .. }
-            | Param::Backlash { .. }
-            | Param::GearCyclic { .. }
-            | Param::GravityCompliance { .. } => {
+            Param::JointOffset { .. } | Param::Backlash { .. } | Param::GearCyclic { .. } => {
+                if prismatic {
+                    MM
+                } else {
+                    MRAD
+                }
+            }
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { .. } => {
                 if prismatic {
                     MM
                 } else {
@@ -272,6 +281,7 @@ impl Param {
                     "sin"
                 }
             }
+            #[cfg(feature = "std")]
             Param::GravityCompliance { b, .. } => {
                 if b {
                     "b"
@@ -321,6 +331,7 @@ impl fmt::Display for Param {
             Param::LoadCom { .. } => write!(f, "load_com_{c}"),
             Param::Drift { .. } => write!(f, "drift_{c}"),
             Param::GearCyclic { joint, .. } => write!(f, "gear_cyclic_j{joint}.{c}"),
+            #[cfg(feature = "std")]
             Param::GravityCompliance { joint, .. } => {
                 write!(f, "gravity_compliance_j{joint}.{c}")
             }
