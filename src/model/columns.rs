@@ -208,7 +208,7 @@ impl Param {
 }
 
 /// The basis `(aⱼ, bⱼ)` perpendicular to a joint's unit axis `ẑ` \[its own
-/// frame\] of [`Param::GravityCompliance`]: `aⱼ` the joint frame's x axis
+/// frame\] of `Param::GravityCompliance` (`std`): `aⱼ` the joint frame's x axis
 /// made perpendicular to `ẑ` (its y axis when `|ẑ · x| ≥ 0.9`), `bⱼ = ẑ × aⱼ`
 /// — for the usual axis `ẑ = z`, the frame's own x and y.
 pub fn gravity_basis<T: RealField + Copy>(z: &Vector3<T>) -> [Vector3<T>; 2] {
@@ -224,7 +224,7 @@ pub fn gravity_basis<T: RealField + Copy>(z: &Vector3<T>) -> [Vector3<T>; 2] {
 /// The components `(Rⱼᵀĝ · aⱼ, Rⱼᵀĝ · bⱼ)` of the gravity direction `ĝ`
 /// (unit, in the frame `jf` is in) on joint `j`'s basis ([`gravity_basis`])
 /// in its moved frame `Rⱼ` (its own rotation included): what joint `j`'s
-/// [`Param::GravityCompliance`] deflection is linear in. Zero for a zero
+/// `Param::GravityCompliance` deflection is linear in. Zero for a zero
 /// `ĝ`.
 pub fn gravity_components<T: RealField + Copy>(jf: &JointFrame<T>, g: &Vector3<T>) -> [T; 2] {
     let r = jf.frame.rotation;

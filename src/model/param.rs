@@ -10,7 +10,7 @@
 //!
 //! | parameter | unit (revolute / prismatic joint) | `si` | eq. |
 //! |---|---|---|---|
-//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`], [`Param::GravityCompliance`] | `mrad` / `mm` | 1e-3 | 2 |
+//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`], `Param::GravityCompliance` (`std`) | `mrad` / `mm` | 1e-3 | 2 |
 //! | [`Param::JointFrame`], [`Param::Base`], [`Param::Tool`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
 //! | [`Param::Marker`], [`Param::LoadCom`] | `mm` | 1e-3 | 2 |
 //! | [`Param::Compliance`], [`Param::ComplianceAt`] | `urad/(N*m)` / `um/N` | 1e-6 | 3 |
