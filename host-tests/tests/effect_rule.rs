@@ -68,7 +68,11 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
         j(JointOffset, 1),
         j(Geometry, 1),
         j(GearCyclic, 1),
-        // Prismatic, no compensator bins: no link compliance, no gear.
+        // Joint 0 has a compliance: its weight loads it through the masses;
+        // joint 1 has none.
+        j(GravityCompliance, 1),
+        // Prismatic, no compensator bins: no link compliance, no gear, no
+        // gravity compliance.
         j(JointCompliance, 2),
         j(Backlash, 2),
         j(JointOffset, 2),
@@ -96,6 +100,9 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
     assert_eq!(c[6].test, c[6].add);
     assert!(c[6].remove.is_empty());
     assert_eq!(c[11].add.len(), 6);
+    let gravity = [false, true].map(|b| Param::GravityCompliance { joint: 1, b });
+    assert_eq!(c[13].add, gravity);
+    assert_eq!(c[13].test, gravity);
 
     // Deflections only: no geometric candidate; no time: no drift; no
     // compliance in the model: no load centre of mass.

@@ -388,3 +388,65 @@ fn param_columns_are_the_free_functions_in_reported_units() {
     param_case::<6>(&c[0].0, &c[0].1);
     param_case::<7>(&c[1].0, &c[1].1);
 }
+
+/// The gravity compliance's column (`Param::GravityCompliance`, mrad) is the
+/// finite difference of the reference model's marker when joint `j` turns by
+/// `x` times the gravity direction's component on its basis, both computed
+/// here from the reference frames: `gₐ = (Rⱼᵀĝ)·a`, `a` the joint's x axis
+/// made perpendicular to its axis `ẑ` (its y axis when `|ẑ·x| ≥ 0.9`),
+/// `b = ẑ × a`. Zero on a deflection and without a gravity direction.
+fn gravity_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
+    use robcal::model::{Param, Sample};
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let zero = Perturb::zero(n);
+    let marker = [0.12, -0.07, 0.2];
+    let g = Vector3::new(0.0, 0.0, -1.0);
+    for q in poses {
+        let frames = chain.frames(q).unwrap();
+        let p = frames.point_m(&v(marker));
+        let tau = [0.0; J];
+        let mut abs = Sample::absolute(&frames, p, 0, &tau[..n]);
+        abs.gravity = g;
+        let mut def = Sample::deflection(&frames, p, 0, &tau[..n], None);
+        def.gravity = g;
+        let (reference, _) = robot.frames(q, &zero);
+        for (j, joint) in robot.joints.iter().enumerate() {
+            if joint.prismatic {
+                continue;
+            }
+            let r: Matrix3<f64> = reference[j].fixed_view::<3, 3>(0, 0).into_owned();
+            let z = v(joint.axis) / v(joint.axis).norm();
+            let seed = if z.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            let a = (seed - z * z.dot(&seed)).normalize();
+            let local = r.transpose() * g;
+            for (b, e) in [(false, a), (true, z.cross(&a))] {
+                let gc = local.dot(&e);
+                let want = fd(|h| {
+                    let mut qh = q.clone();
+                    qh[j] += h * gc;
+                    robot.point(&qh, &zero, marker)
+                }) * 1e-3;
+                let param = Param::GravityCompliance { joint: j as u8, b };
+                let got = param.column(&abs).unwrap();
+                assert!((got - want).norm() < TOL * 1e-3, "{param}: {got} vs {want}");
+                assert_eq!(param.column(&def).unwrap(), Vector3::zeros());
+            }
+        }
+        let mut no_g = Sample::absolute(&frames, p, 0, &tau[..n]);
+        no_g.gravity = Vector3::zeros();
+        let param = Param::GravityCompliance { joint: 1, b: false };
+        assert_eq!(param.column(&no_g).unwrap(), Vector3::zeros());
+    }
+}
+
+#[test]
+fn gravity_compliance_columns_match_finite_differences() {
+    let c = cases();
+    gravity_case::<6>(&c[0].0, &c[0].1);
+    gravity_case::<7>(&c[1].0, &c[1].1);
+}

@@ -179,6 +179,21 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
             .total_cmp(&b.1.p_value)
             .then(b.1.f.total_cmp(&a.1.f))
     });
+    // Tests equal but for rounding (two candidates whose columns span the
+    // same space: `gear_cyclic` and `gravity_compliance` on a horizontal
+    // joint whose gravity direction only its own angle turns) keep the
+    // rule's order, not the rounding's.
+    let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+    let mut i = 0;
+    while i < tested.len() {
+        let (p, f) = (tested[i].1.p_value, tested[i].1.f);
+        let tie = tested[i..]
+            .iter()
+            .take_while(|t| close(t.1.p_value, p) && close(t.1.f, f))
+            .count();
+        tested[i..i + tie].sort_by_key(|t| t.0);
+        i += tie;
+    }
     Ok((cands, tested))
 }
 

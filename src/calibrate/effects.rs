@@ -97,9 +97,11 @@ pub fn candidates(
 /// Why the estimate `x` of `params` is not physical for the effect
 /// parameters `added`, if it is not: the core's rule
 /// ([`effect::unphysical`]: a compliance or a backlash below zero, a drift
-/// above [`Policy::max_drift_mm_per_h`]), and a gear cyclic error above
+/// above [`Policy::max_drift_mm_per_h`]), a gear cyclic error above
 /// [`Policy::max_cyclic_mrad`] (a gear's transmission error is a fraction
-/// of a milliradian to a few; an effect only absolute data show).
+/// of a milliradian to a few) and a gravity compliance above
+/// [`Policy::max_gravity_deflection_mrad`] (a joint's sag under the
+/// robot's own weight); effects only absolute data show.
 pub fn inadmissible(
     names: &Names,
     policy: &Policy,
@@ -128,6 +130,17 @@ pub fn inadmissible(
                             "gear_cyclic_{} amplitude {amp:.3} mrad > {} mrad",
                             names.joint(joint),
                             policy.max_cyclic_mrad
+                        )
+                    })
+                }
+                (Param::GravityCompliance { joint, b: false }, Some(v)) => {
+                    let w = value(&Param::GravityCompliance { joint, b: true }).unwrap_or(0.0);
+                    let amp = v.hypot(w);
+                    (amp > policy.max_gravity_deflection_mrad).then(|| {
+                        format!(
+                            "gravity_compliance_{} |x| {amp:.3} mrad > {} mrad",
+                            names.joint(joint),
+                            policy.max_gravity_deflection_mrad
                         )
                     })
                 }

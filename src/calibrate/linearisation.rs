@@ -1,7 +1,16 @@
 //! Where the rows are evaluated: the current value of every parameter that
 //! acts through a joint value (compliances, their angle bins, nonlinear
-//! stiffness, backlash, the gear's cyclic error), and which deflection
-//! model the rows use.
+//! stiffness, backlash, the gear's cyclic error, the lumped gravity
+//! compliance), and which deflection model the rows use.
+//!
+//! The gravity compliance ([`Param::GravityCompliance`]) is a deflection
+//! `δqⱼ = x_a gₐ + x_b g_b` independent of the torque, like the gear's
+//! cyclic error, with `(gₐ, g_b)` the components of the unit gravity
+//! direction on joint `j`'s basis in its frame at the **commanded** pose
+//! ([`crate::model::gravity_components`]): the lumped body's torque is
+//! taken at the commanded pose, not at the deflected one (the difference
+//! is the product of two deflections, µrad for mrad). The caller computes
+//! them from the chain's frames at `q` ([`Linearisation::gravity_at`]).
 //!
 //! **Exact** (the default): each row is the robot at its equilibrium
 //! ([`crate::robot::equilibrium()`]) — a deflection is the marker at the
@@ -19,9 +28,12 @@
 
 use std::collections::BTreeMap;
 
+use nalgebra::Vector3;
+
+use super::geometry::J;
 use super::names::Names;
-use crate::model::{in_bin, Param};
-use crate::robot::JointLaw;
+use crate::model::{gravity_components, in_bin, Param};
+use crate::robot::{Frames, JointLaw};
 
 /// The deflection model of the rows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -48,8 +60,8 @@ pub struct Linearisation {
     /// The deflection model.
     pub model: DeflectionModel,
     /// SI value of every parameter that acts through a joint value
-    /// (compliances in rad/(N·m) or m/N, backlash and cyclic error in rad
-    /// or m, nonlinear stiffness in rad/(N·m)²).
+    /// (compliances in rad/(N·m) or m/N, backlash, cyclic error and gravity
+    /// compliance in rad or m, nonlinear stiffness in rad/(N·m)²).
     values: BTreeMap<Param, f64>,
 }
 
@@ -62,6 +74,7 @@ pub(crate) fn acts_on_joint(p: &Param) -> bool {
             | Param::NonlinearStiffness { .. }
             | Param::Backlash { .. }
             | Param::GearCyclic { .. }
+            | Param::GravityCompliance { .. }
     )
 }
 
@@ -205,15 +218,42 @@ impl Linearisation {
         (0..q.len()).filter(|&j| self.table(j, q[j]).1).collect()
     }
 
+    /// Whether the law has a gravity compliance: its deflection needs the
+    /// gravity's components at the pose ([`Self::gravity_at`]).
+    pub fn needs_gravity(&self) -> bool {
+        self.values
+            .keys()
+            .any(|p| matches!(p, Param::GravityCompliance { .. }))
+    }
+
+    /// The components of the gravity direction (`gravity` \[any length,
+    /// the frame of `frames`\], normalised here; zero: none) on every
+    /// joint's basis at `frames` ([`gravity_components`]), the commanded
+    /// pose's: what [`Self::joint_law`] takes. Empty when the law has no
+    /// gravity compliance ([`Self::needs_gravity`]).
+    pub fn gravity_at(&self, frames: &Frames<f64, J>, gravity: &Vector3<f64>) -> Vec<[f64; 2]> {
+        if !self.needs_gravity() {
+            return Vec::new();
+        }
+        let g = gravity.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
+        frames
+            .joints()
+            .iter()
+            .map(|jf| gravity_components(jf, &g))
+            .collect()
+    }
+
     /// The joint law at measured joint values `q`, for an absolute
-    /// position (the gear's cyclic error acts) or a deflection (it does
-    /// not: it is the same loaded and unloaded). `None` when every joint is
-    /// rigid (the rows are the first-order ones) or the model is linear.
-    pub fn law(&self, q: &[f64], absolute: bool) -> Option<Law> {
+    /// position (the gear's cyclic error and the gravity compliance act)
+    /// or a deflection (they do not: they are the same loaded and
+    /// unloaded). `gravity`: [`Self::gravity_at`] the frames at `q`. `None`
+    /// when every joint is rigid (the rows are the first-order ones) or the
+    /// model is linear.
+    pub fn law(&self, q: &[f64], absolute: bool, gravity: &[[f64; 2]]) -> Option<Law> {
         if self.model == DeflectionModel::Linear {
             return None;
         }
-        let law = self.joint_law(q, absolute);
+        let law = self.joint_law(q, absolute, gravity);
         let rigid = [&law.compliance, &law.quadratic, &law.backlash, &law.fixed]
             .iter()
             .all(|v| v.iter().all(|&x| x == 0.0));
@@ -222,9 +262,11 @@ impl Linearisation {
 
     /// The joint law at joint values `q` in either deflection model (a
     /// prediction or a compensation solves the exact equilibrium with the
-    /// calibrated values whichever model fitted them); `absolute` as
-    /// [`Self::law`].
-    pub fn joint_law(&self, q: &[f64], absolute: bool) -> Law {
+    /// calibrated values whichever model fitted them); `absolute` and
+    /// `gravity` as [`Self::law`] (a gravity compliance with no components
+    /// for its joint is NaN: the equilibrium fails rather than leave it
+    /// out).
+    pub fn joint_law(&self, q: &[f64], absolute: bool, gravity: &[[f64; 2]]) -> Law {
         let n = q.len();
         let mut law = Law {
             compliance: self.compliance_at(q),
@@ -239,6 +281,12 @@ impl Linearisation {
                 Param::GearCyclic { joint, cos } if absolute => {
                     let qj = q[usize::from(joint)];
                     law.fixed[usize::from(joint)] += v * if cos { qj.cos() } else { qj.sin() };
+                }
+                Param::GravityCompliance { joint, b } if absolute => {
+                    let g = gravity
+                        .get(usize::from(joint))
+                        .map_or(f64::NAN, |g| g[usize::from(b)]);
+                    law.fixed[usize::from(joint)] += v * g;
                 }
                 _ => {}
             }
@@ -256,7 +304,8 @@ pub struct Law {
     pub quadratic: Vec<f64>,
     /// `bⱼ` \[rad or m\]: backlash, in the direction of the torque.
     pub backlash: Vec<f64>,
-    /// `eⱼ` \[rad or m\]: independent of the torque (gear cyclic error).
+    /// `eⱼ` \[rad or m\]: independent of the torque (gear cyclic error,
+    /// gravity compliance).
     pub fixed: Vec<f64>,
 }
 

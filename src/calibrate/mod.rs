@@ -341,6 +341,11 @@ mod tests {
         ];
         assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.0], &cyc).is_none()); // 10 mrad
         assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.1], &cyc).is_some());
+        let grav = [false, true].map(|b| Param::GravityCompliance { joint: 1, b });
+        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.0], &grav).is_none()); // 50 mrad
+        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.1], &grav)
+            .unwrap()
+            .contains("gravity_compliance_a2"));
         let drift: Vec<Param> = (0..3).map(|axis| Param::Drift { axis }).collect();
         // 1 µm/s = 3.6 mm/h.
         assert!(inadmissible(&n, &p, &drift, &[1.0, 0.0, 0.0], &drift).is_none());

@@ -21,7 +21,8 @@
 //!   "joint_law": [{"joint": "a2", "units": {..}, "compliance": k,
 //!                  "compliance_table": [{"angle_rad": a, "compliance": k}, ..],
 //!                  "nonlinear_stiffness": c, "backlash": b,
-//!                  "gear_cyclic_sin": s, "gear_cyclic_cos": c}, ..],
+//!                  "gear_cyclic_sin": s, "gear_cyclic_cos": c,
+//!                  "gravity_compliance_a": x_a, "gravity_compliance_b": x_b}, ..],
 //!   "link_compliance": [{"joint": "a3", "value": k, "unit": "rad/(N*m)"}]
 //! }
 //! ```
@@ -30,9 +31,13 @@
 //! it folded in, the first one placed in the measurement frame: forward
 //! kinematics is `T = Π originⱼ · motionⱼ(qⱼ) · tip` (a revolute joint turns
 //! about `axis`, a prismatic one slides along it). The joint law is
-//! `δⱼ = kⱼ(qⱼ) τⱼ + cⱼ τⱼ|τⱼ| + bⱼ sign τⱼ + sⱼ sin qⱼ + c'ⱼ cos qⱼ`, with
-//! `kⱼ(qⱼ)` the constant compliance plus the compensator table at `qⱼ`
-//! (linear between its angles, held at its ends).
+//! `δⱼ = kⱼ(qⱼ) τⱼ + cⱼ τⱼ|τⱼ| + bⱼ sign τⱼ + sⱼ sin qⱼ + c'ⱼ cos qⱼ +
+//! x_a gₐ + x_b g_b`, with `kⱼ(qⱼ)` the constant compliance plus the
+//! compensator table at `qⱼ` (linear between its angles, held at its ends)
+//! and `(gₐ, g_b)` the components of the unit gravity direction
+//! (`gravity_mps2` normalised) on the joint's basis in its frame at the
+//! commanded pose ([`crate::model::gravity_components`]; the gravity
+//! compliance, written only when not zero).
 
 use std::collections::BTreeMap;
 
@@ -133,6 +138,17 @@ pub struct LawRecord {
     /// Gear cyclic error: the cosine's amplitude.
     #[serde(default)]
     pub gear_cyclic_cos: f64,
+    /// Gravity compliance: the deflection with gravity along the joint
+    /// frame's `a` axis ([`crate::model::gravity_basis`]).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub gravity_compliance_a: f64,
+    /// Gravity compliance: the deflection with gravity along `b`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub gravity_compliance_b: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// A link's bending under the payload (first order).
@@ -244,6 +260,8 @@ impl ModelFile {
                 backlash: 0.0,
                 gear_cyclic_sin: 0.0,
                 gear_cyclic_cos: 0.0,
+                gravity_compliance_a: 0.0,
+                gravity_compliance_b: 0.0,
             });
             match *param {
                 Param::Compliance { .. } => r.compliance += v,
@@ -255,6 +273,15 @@ impl ModelFile {
                 Param::Backlash { .. } => r.backlash += v,
                 Param::GearCyclic { cos: false, .. } => r.gear_cyclic_sin += v,
                 Param::GearCyclic { cos: true, .. } => r.gear_cyclic_cos += v,
+                Param::GravityCompliance { b, .. } => {
+                    let unit = r.units["gear_cyclic"].clone();
+                    r.units.insert("gravity_compliance".into(), unit);
+                    *if b {
+                        &mut r.gravity_compliance_b
+                    } else {
+                        &mut r.gravity_compliance_a
+                    } += v;
+                }
                 _ => {}
             }
         }
@@ -486,8 +513,17 @@ impl ModelFile {
                     r.backlash,
                     r.gear_cyclic_sin,
                     r.gear_cyclic_cos,
+                    r.gravity_compliance_a,
+                    r.gravity_compliance_b,
                 ],
             )?;
+            if (r.gravity_compliance_a, r.gravity_compliance_b) != (0.0, 0.0)
+                && self.gravity_mps2 == [0.0; 3]
+            {
+                return Err(format!(
+                    "{what}: a gravity compliance with zero gravity_mps2"
+                ));
+            }
             let mut put = |p: Param, v: f64| {
                 if v != 0.0 {
                     *values.entry(p).or_insert(0.0) += v;
@@ -513,6 +549,12 @@ impl ModelFile {
                 },
                 r.gear_cyclic_cos,
             );
+            for (b, v) in [
+                (false, r.gravity_compliance_a),
+                (true, r.gravity_compliance_b),
+            ] {
+                put(Param::GravityCompliance { joint: j, b }, v);
+            }
             for e in &r.compliance_table {
                 finite(&what, &[e.angle_rad, e.compliance])?;
                 if e.angle_rad.abs() > 1e3 {

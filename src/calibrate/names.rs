@@ -59,7 +59,8 @@ impl Names {
     /// The parameter's name (data contract §5): `k_<joint>`,
     /// `k_<joint>@<angle as written>`, `<joint>.offset`, `<joint>.tx`…,
     /// `base.tx`…, `tool.tx`…, `marker<id>.x`…, `<effect>_<joint>`, `load_com_x`…,
-    /// `drift_x`…, `gear_cyclic_<joint>.sin`/`.cos`.
+    /// `drift_x`…, `gear_cyclic_<joint>.sin`/`.cos`,
+    /// `gravity_compliance_<joint>.a`/`.b`.
     pub fn name(&self, p: &Param) -> String {
         let c = p.component();
         match *p {
@@ -86,6 +87,9 @@ impl Names {
             Param::Tool { .. } => format!("tool.{c}"),
             Param::Marker { marker, .. } => format!("marker{}.{c}", self.marker_id(marker)),
             Param::GearCyclic { joint, .. } => format!("gear_cyclic_{}.{c}", self.joint(joint)),
+            Param::GravityCompliance { joint, .. } => {
+                format!("gravity_compliance_{}.{c}", self.joint(joint))
+            }
         }
     }
 }

@@ -10,7 +10,8 @@
 //! the payload, whichever deflection model fitted the compliances, with
 //! every joint-law term the calibration found (compliances, compensator
 //! tables interpolated between their angles, nonlinear stiffness,
-//! backlash, the gear's cyclic error) and, to first order as it was
+//! backlash, the gear's cyclic error, the gravity compliance at the
+//! commanded pose) and, to first order as it was
 //! fitted, a link's bending under the payload
 //! ([`crate::model::Param::LinkCompliance`]). Not applied: the drift of the
 //! measurement system and the calibration tool's centre-of-mass estimate
@@ -427,10 +428,25 @@ impl Predictor {
         if !own_weight {
             loading.own_weight_mps2 = None;
         }
-        let law = self.lin.joint_law(q, true);
-        let eq = equilibrium(chain, q, q, &loading, &law, &EQUILIBRIUM)?;
+        let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
         let p = eq.frames.point_m(tool_m);
         Ok(p + self.bending_m(&eq.frames, &p, &loading)?)
+    }
+
+    /// The calibrated joint law at command `q`, the gravity compliance's
+    /// deflection at the commanded pose (as fitted; NaN, so that the
+    /// equilibrium fails, if the pose has no frames).
+    fn law_at(&self, q: &[f64]) -> super::linearisation::Law {
+        let gravity = if self.lin.needs_gravity() {
+            let frames = self.chain.frames(q);
+            frames.map_or_else(
+                |_| Vec::new(),
+                |f| self.lin.gravity_at(&f, &self.gravity_mps2),
+            )
+        } else {
+            Vec::new()
+        };
+        self.lin.joint_law(q, true, &gravity)
     }
 
     /// The links' bending under the payload at `frames` (first order, the
@@ -509,7 +525,6 @@ impl Predictor {
     ) -> Result<Compensation<f64, J>, Error> {
         self.check_q(q_start)?;
         let loading = self.loading(payload)?;
-        let lin = &self.lin;
         let solve = |target: &Vector3<f64>, start: &[f64]| {
             compensate(
                 &self.chain,
@@ -517,7 +532,7 @@ impl Predictor {
                 target,
                 start,
                 &loading,
-                |q: &[f64]| lin.joint_law(q, true),
+                |q: &[f64]| self.law_at(q),
                 settings,
             )
         };
@@ -572,7 +587,6 @@ impl Predictor {
             });
         }
         let loading = self.loading(payload)?;
-        let lin = &self.lin;
         compensate_pose(
             &self.chain,
             tool_m,
@@ -580,7 +594,7 @@ impl Predictor {
             target_rotation,
             q_start,
             &loading,
-            |q: &[f64]| lin.joint_law(q, true),
+            |q: &[f64]| self.law_at(q),
             settings,
         )
     }

@@ -87,6 +87,15 @@ pub struct Row {
     /// equilibrium ([`crate::robot::Equilibrium::twist_column`]); empty for
     /// the first-order columns at `frames`.
     pub twists: Vec<Vector3<f64>>,
+    /// The unit direction of gravity \[measurement frame\] behind an
+    /// absolute row (zero for a deflection: the robot's weight is the same
+    /// loaded and unloaded).
+    pub gravity: Vector3<f64>,
+    /// Per joint, the components of the gravity direction on its basis at
+    /// the commanded pose `q` ([`Linearisation::gravity_at`]): an absolute
+    /// row's, when the exact model's law has a gravity compliance (`frames`
+    /// are then at the equilibrium, not at `q`); else empty.
+    pub gravity_q: Vec<[f64; 2]>,
     /// The row's left-hand side \[m\], linearised at the current model
     /// ([`super::linearisation`]): measured minus predicted plus the
     /// linearised joint-law part, `measured − f(x₀) + B(x₀) x₀`. With the
@@ -138,6 +147,8 @@ impl Row {
             absolute: self.kind == RowKind::Absolute,
             dt_s: self.dt.unwrap_or(0.0),
             compliance,
+            gravity: self.gravity,
+            gravity_q: &self.gravity_q,
         }
     }
 }
@@ -293,6 +304,8 @@ impl Rows {
                 tau: vec![0.0; dof],
                 load: None,
                 twists: Vec::new(),
+                gravity: Vector3::zeros(),
+                gravity_q: Vec::new(),
                 y: Vector3::from(measured),
             });
         };
@@ -389,6 +402,7 @@ impl Rows {
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
+        let g_unit = gravity.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
         let com = self.com;
         let file = &self.file;
         // With several threads, a run after the first row that fails may
@@ -434,7 +448,14 @@ impl Rows {
                     e => CalibrationError::Core(what, e),
                 }
             };
-            match lin.law(&row.q, absolute) {
+            row.gravity = if absolute { g_unit } else { Vector3::zeros() };
+            row.gravity_q.clear();
+            if absolute && lin.model == super::DeflectionModel::Exact && lin.needs_gravity() {
+                // The gravity compliance's deflection at the commanded pose.
+                let at_q = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+                row.gravity_q = lin.gravity_at(&at_q, &g_unit);
+            }
+            match lin.law(&row.q, absolute, &row.gravity_q) {
                 None => {
                     let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
                     let p_rigid = rigid.point_m(&m);

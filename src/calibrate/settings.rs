@@ -124,6 +124,15 @@ pub struct Policy {
     /// \[mrad\]: a gear's transmission error is a fraction of a milliradian
     /// to a few; 10 mrad (0.6°) would be a broken gear.
     pub max_cyclic_mrad: f64,
+    /// Largest admissible gravity compliance `|x| = (x_a² + x_b²)^½`
+    /// \[mrad\] ([`crate::model::Param::GravityCompliance`]): a joint's sag
+    /// under the robot's own weight with gravity across it in the worst
+    /// direction. Stiff industrial joints sag a fraction of a milliradian to
+    /// a few, torque-controlled lightweight arms ~10 to 20 (DLR's Justin:
+    /// 10 to 19 mrad on its shoulders and torso); 50 mrad (2.9°, 50 mm at
+    /// a metre's reach) would be a joint that does not hold its position,
+    /// or an error of another kind that this effect's columns absorb.
+    pub max_gravity_deflection_mrad: f64,
     /// Largest admissible measurement drift \[mm/h\] (norm over x, y, z): a
     /// thermal drift of a tracker or of the robot's base is a fraction of a
     /// millimetre per hour; 5 mm/h is not a drift but a moving base.
@@ -177,6 +186,7 @@ impl Default for Policy {
             compensator_bins: crate::model::bins::COMPENSATOR_BINS,
             compensator_min_configs: crate::model::bins::COMPENSATOR_MIN_CONFIGS,
             max_cyclic_mrad: 10.0,
+            max_gravity_deflection_mrad: 50.0,
             max_drift_mm_per_h: 5.0,
             min_torque_nm: 1e-3,
             max_scale_ratio: 2.0,

@@ -39,7 +39,9 @@
 //! **Effects** of the library (data contract §6) follow the same pattern: a
 //! joint-value change `δqⱼ = x · f(sample)` has the column
 //! `f · (zⱼ × (p − oⱼ))` — `f = τ|τ|` (nonlinear stiffness), `sign τ`
-//! (backlash), `sin qⱼ`, `cos qⱼ` (gear cyclic error).
+//! (backlash), `sin qⱼ`, `cos qⱼ` (gear cyclic error), `Rⱼᵀĝ · aⱼ`,
+//! `Rⱼᵀĝ · bⱼ` (gravity compliance: [`gravity_basis`],
+//! [`gravity_components`]).
 //!
 //! ```
 //! use nalgebra::Vector3;
@@ -65,7 +67,7 @@ use super::layout::in_bin;
 use super::param::Param;
 use super::sample::Sample;
 use crate::robot::load::check_len;
-use crate::robot::{Frames, JointKind};
+use crate::robot::{Frames, JointFrame, JointKind};
 use crate::Error;
 
 impl Param {
@@ -193,8 +195,42 @@ impl Param {
                 let qj = s.q(joint)?;
                 twist(joint)? * if cos { qj.cos() } else { qj.sin() }
             }
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { joint, b } => {
+                let g = match s.gravity_q.get(usize::from(joint)) {
+                    Some(g) => *g,
+                    None => gravity_components(s.frames.joint(usize::from(joint))?, &s.gravity),
+                };
+                twist(joint)? * g[usize::from(b)]
+            }
         })
     }
+}
+
+/// The basis `(aⱼ, bⱼ)` perpendicular to a joint's unit axis `ẑ` \[its own
+/// frame\] of `Param::GravityCompliance` (`std`): `aⱼ` the joint frame's x axis
+/// made perpendicular to `ẑ` (its y axis when `|ẑ · x| ≥ 0.9`), `bⱼ = ẑ × aⱼ`
+/// — for the usual axis `ẑ = z`, the frame's own x and y.
+pub fn gravity_basis<T: RealField + Copy>(z: &Vector3<T>) -> [Vector3<T>; 2] {
+    let seed = if z.x.abs() < nalgebra::convert(0.9) {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let a = (seed - z * z.dot(&seed)).normalize();
+    [a, z.cross(&a)]
+}
+
+/// The components `(Rⱼᵀĝ · aⱼ, Rⱼᵀĝ · bⱼ)` of the gravity direction `ĝ`
+/// (unit, in the frame `jf` is in) on joint `j`'s basis ([`gravity_basis`])
+/// in its moved frame `Rⱼ` (its own rotation included): what joint `j`'s
+/// `Param::GravityCompliance` deflection is linear in. Zero for a zero
+/// `ĝ`.
+pub fn gravity_components<T: RealField + Copy>(jf: &JointFrame<T>, g: &Vector3<T>) -> [T; 2] {
+    let r = jf.frame.rotation;
+    let local = r.inverse_transform_vector(g);
+    let [a, b] = gravity_basis(&r.inverse_transform_vector(&jf.axis));
+    [local.dot(&a), local.dot(&b)]
 }
 
 /// Joint-offset column of joint `j` at a point `p_m` [m, base frame]:

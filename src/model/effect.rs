@@ -13,7 +13,8 @@
 //! columns of every effect that acts on a deflection — compensator
 //! (per-angle compliance), joint compliance, nonlinear stiffness, backlash,
 //! link compliance, load centre of mass, drift. The geometric effects
-//! (joint offset, joint frame, gear cyclic, marker, base) act on absolute
+//! (joint offset, joint frame, gear cyclic, marker, base) and the bending
+//! under the robot's own weight (gravity compliance) act on absolute
 //! positions only (their deflection columns are zero) and need the host's
 //! Gauss–Newton on the geometry: with no absolute rows the rule lists none
 //! of them. [`stream_candidates`] gives the rule's candidates as bit masks
@@ -54,6 +55,11 @@ pub enum Effect {
     Geometry,
     /// A joint has a periodic error over its angle (first harmonic).
     GearCyclic,
+    /// A joint bends under the robot's own weight, the masses unknown
+    /// (lumped gravity compliance, `Param::GravityCompliance`; host only,
+    /// `std`).
+    #[cfg(feature = "std")]
+    GravityCompliance,
     /// A marker sits elsewhere than declared.
     Marker,
     /// The base is placed or turned elsewhere than declared.
@@ -62,6 +68,26 @@ pub enum Effect {
 
 impl Effect {
     /// Every effect, in the contract's order.
+    #[cfg(feature = "std")]
+    pub const ALL: [Effect; 13] = [
+        Effect::Compensator,
+        Effect::JointCompliance,
+        Effect::NonlinearStiffness,
+        Effect::Backlash,
+        Effect::LinkCompliance,
+        Effect::LoadCom,
+        Effect::Drift,
+        Effect::JointOffset,
+        Effect::Geometry,
+        Effect::GearCyclic,
+        Effect::GravityCompliance,
+        Effect::Marker,
+        Effect::BaseFrame,
+    ];
+
+    /// Every effect, in the contract's order (without `std`, no gravity
+    /// compliance).
+    #[cfg(not(feature = "std"))]
     pub const ALL: [Effect; 12] = [
         Effect::Compensator,
         Effect::JointCompliance,
@@ -90,6 +116,8 @@ impl Effect {
             Effect::JointOffset => "joint_offset",
             Effect::Geometry => "geometry",
             Effect::GearCyclic => "gear_cyclic",
+            #[cfg(feature = "std")]
+            Effect::GravityCompliance => "gravity_compliance",
             Effect::Marker => "marker",
             Effect::BaseFrame => "base_frame",
         }
@@ -98,6 +126,10 @@ impl Effect {
     /// Whether the effect is traced along a joint's angle (its plot's
     /// variable), rather than along a torque, the load or the time.
     pub fn follows_angle(self) -> bool {
+        #[cfg(feature = "std")]
+        if self == Effect::GravityCompliance {
+            return true;
+        }
         matches!(
             self,
             Effect::Compensator | Effect::JointOffset | Effect::GearCyclic | Effect::Geometry
@@ -239,13 +271,18 @@ impl Candidate<'_> {
 ///    the first joint (whose frame error is, to first order, the base's:
 ///    `base_frame`);
 /// 8. `gear_cyclic` (sine, cosine), for a revolute joint;
+/// 9. `gravity_compliance` (`a`, `b`; host only, `std`), for a revolute
+///    joint without a compliance (with one, the robot's weight already
+///    loads it through the URDF's masses): after `gear_cyclic`, which it
+///    equals on a horizontal joint whose gravity direction only its own
+///    angle turns;
 ///
 /// then, for the model:
-/// 9. `load_com`, with deflection rows and a compliance in the model (the
+/// 10. `load_com`, with deflection rows and a compliance in the model (the
 ///    load's position only moves a deflection through a compliance);
-/// 10. `drift`, with a time column;
-/// 11. `marker` for each of the `markers` markers, with absolute rows;
-/// 12. `base_frame`, with absolute rows.
+/// 11. `drift`, with a time column;
+/// 12. `marker` for each of the `markers` markers, with absolute rows;
+/// 13. `base_frame`, with absolute rows.
 ///
 /// An effect already in the model (any of its parameters) is not a
 /// candidate. `emit`'s first error ends the list and is returned.
@@ -318,6 +355,11 @@ pub fn candidates<'b, E>(
             if revolute(j) && !has(&Param::GearCyclic { joint, cos: false }) {
                 let ps = [false, true].map(|cos| Param::GearCyclic { joint, cos });
                 emit(one(Effect::GearCyclic, on, &ps))?;
+            }
+            #[cfg(feature = "std")]
+            if revolute(j) && !compliant && !has(&Param::GravityCompliance { joint, b: false }) {
+                let ps = [false, true].map(|b| Param::GravityCompliance { joint, b });
+                emit(one(Effect::GravityCompliance, on, &ps))?;
             }
         }
     }

@@ -10,7 +10,7 @@
 //!
 //! | parameter | unit (revolute / prismatic joint) | `si` | eq. |
 //! |---|---|---|---|
-//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`] | `mrad` / `mm` | 1e-3 | 2 |
+//! | [`Param::JointOffset`], [`Param::Backlash`], [`Param::GearCyclic`], `Param::GravityCompliance` (`std`) | `mrad` / `mm` | 1e-3 | 2 |
 //! | [`Param::JointFrame`], [`Param::Base`], [`Param::Tool`]: translation / rotation | `mm` / `mrad` | 1e-3 | 2 |
 //! | [`Param::Marker`], [`Param::LoadCom`] | `mm` | 1e-3 | 2 |
 //! | [`Param::Compliance`], [`Param::ComplianceAt`] | `urad/(N*m)` / `um/N` | 1e-6 | 3 |
@@ -125,6 +125,26 @@ pub enum Param {
         /// `false`: the sine's amplitude `s`; `true`: the cosine's `c`.
         cos: bool,
     },
+    /// A joint bending under the robot's own weight, the masses unknown
+    /// (lumped gravity compliance): everything outboard of joint `j` as one
+    /// rigid body (mass `m`, centre of mass `u` fixed in joint `j`'s moved
+    /// frame), `τⱼ = m u · Rⱼᵀ(g × ẑⱼ)`, so `δqⱼ = kⱼ τⱼ` is linear in the
+    /// two components of `Rⱼᵀ ĝ` perpendicular to the joint's axis:
+    /// `δqⱼ = x_a (Rⱼᵀĝ · aⱼ) + x_b (Rⱼᵀĝ · bⱼ)` with `ĝ` the unit gravity
+    /// direction, `Rⱼ` joint `j`'s frame at the commanded pose (its own
+    /// rotation included) and `(aⱼ, bⱼ, ẑⱼ)` a right-handed basis of that
+    /// frame ([`super::gravity_basis`]). `x_a` is the deflection when
+    /// gravity points along `aⱼ`; `|x| = kⱼ m |g| |u⊥|` the largest the
+    /// weight can make (reported in mrad). Host only (`std`): it needs
+    /// absolute rows and the host's Gauss–Newton, and a controller's image
+    /// has no room for it.
+    #[cfg(feature = "std")]
+    GravityCompliance {
+        /// Joint index.
+        joint: u8,
+        /// `false`: the coefficient `x_a` of `aⱼ`; `true`: `x_b` of `bⱼ`.
+        b: bool,
+    },
 }
 
 /// The unit a parameter is estimated and reported in, and its SI value.
@@ -158,6 +178,8 @@ impl Param {
             | Param::Backlash { joint }
             | Param::LinkCompliance { joint }
             | Param::GearCyclic { joint, .. } => Some(joint),
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { joint, .. } => Some(joint),
             Param::Base { .. }
             | Param::Tool { .. }
             | Param::Marker { .. }
@@ -198,6 +220,14 @@ impl Param {
                     MRAD
                 }
             }
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { .. } => {
+                if prismatic {
+                    MM
+                } else {
+                    MRAD
+                }
+            }
             Param::JointFrame { axis, .. } | Param::Base { axis } | Param::Tool { axis } => {
                 if axis < 3 {
                     MM
@@ -230,7 +260,8 @@ impl Param {
     }
 
     /// The component's name, the part of a parameter's name after its
-    /// joint, marker or effect: `offset`, `tx`…`rz`, `x`…`z`, `sin`, `cos`;
+    /// joint, marker or effect: `offset`, `tx`…`rz`, `x`…`z`, `sin`, `cos`,
+    /// `a`, `b`;
     /// empty for a one-parameter effect.
     pub fn component(&self) -> &'static str {
         let six = |a: u8| POSE_COMPONENTS.get(usize::from(a)).copied().unwrap_or("?");
@@ -248,6 +279,14 @@ impl Param {
                     "cos"
                 } else {
                     "sin"
+                }
+            }
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { b, .. } => {
+                if b {
+                    "b"
+                } else {
+                    "a"
                 }
             }
             Param::Compliance { .. }
@@ -292,6 +331,10 @@ impl fmt::Display for Param {
             Param::LoadCom { .. } => write!(f, "load_com_{c}"),
             Param::Drift { .. } => write!(f, "drift_{c}"),
             Param::GearCyclic { joint, .. } => write!(f, "gear_cyclic_j{joint}.{c}"),
+            #[cfg(feature = "std")]
+            Param::GravityCompliance { joint, .. } => {
+                write!(f, "gravity_compliance_j{joint}.{c}")
+            }
         }
     }
 }

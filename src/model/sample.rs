@@ -46,6 +46,17 @@ pub struct Sample<'a, T: RealField + Copy, const J: usize> {
     /// sample, about which the linearised `load_com` column is taken; may be
     /// empty (then that column is zero).
     pub compliance: &'a [T],
+    /// The unit direction of gravity `ĝ` in the frame of `frames` (absolute
+    /// rows; zero: none, and the `gravity_compliance` columns are zero).
+    /// Host only (`std`), as [`super::Param`]'s gravity compliance.
+    #[cfg(feature = "std")]
+    pub gravity: Vector3<T>,
+    /// Per joint, the components of `ĝ` on the joint's basis `(aⱼ, bⱼ)` at
+    /// the commanded pose `q` ([`super::gravity_components`]), when
+    /// `frames` are elsewhere (the exact deflection model's equilibrium);
+    /// empty: computed at `frames`. Host only (`std`).
+    #[cfg(feature = "std")]
+    pub gravity_q: &'a [[T; 2]],
 }
 
 impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
@@ -69,6 +80,10 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
             absolute: false,
             dt_s: T::zero(),
             compliance: &[],
+            #[cfg(feature = "std")]
+            gravity: Vector3::zeros(),
+            #[cfg(feature = "std")]
+            gravity_q: &[],
         }
     }
 
