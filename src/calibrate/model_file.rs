@@ -292,7 +292,7 @@ impl ModelFile {
             joints,
             tip_xyz_m: chain.tip().translation.vector.into(),
             tip_quaternion_xyzw: quat(&chain.tip().rotation),
-            tip_joint: (chain.tip_joint().map_or(true, |t| t + 1 != chain.dof()))
+            tip_joint: (chain.tip_joint().is_none_or(|t| t + 1 != chain.dof()))
                 .then(|| name_of(chain.tip_joint())),
             markers: {
                 let (ends, marker_ends) = p.ends();

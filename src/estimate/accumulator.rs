@@ -451,9 +451,7 @@ where
             && (0..p).all(|i| {
                 (self.info[(i, i)] + w2 * s_upper[(i, i)]).is_finite()
                     && (self.eta[i] + w2 * u[i]).is_finite()
-                    && m2.map_or(true, |m2| {
-                        (self.middle[(i, i)] + m2 * s_upper[(i, i)]).is_finite()
-                    })
+                    && m2.is_none_or(|m2| (self.middle[(i, i)] + m2 * s_upper[(i, i)]).is_finite())
             });
         if !ok {
             return Err(Error::NonFinite { what: "overflow" });

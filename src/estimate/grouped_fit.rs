@@ -343,7 +343,7 @@ where
     let finite = |v: &T| *v * zero == zero;
     let n = m.nrows();
     let diag = m.as_slice().iter().step_by(n + 1).all(finite);
-    diag && finite(&yy) && eta.map_or(true, |e| e.as_slice().iter().all(finite))
+    diag && finite(&yy) && eta.is_none_or(|e| e.as_slice().iter().all(finite))
 }
 
 /// The error of a bad weight met after the sums so far, or the overflow

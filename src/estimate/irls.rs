@@ -400,7 +400,7 @@ impl<'a, T: RealField + Copy> Noise<'a, T> {
 
     /// Whether `σ` (and `ν`) have one entry for each of `groups`.
     pub fn fits(&self, groups: usize) -> bool {
-        self.sigma.len() == groups && self.estimated_from.map_or(true, |d| d.len() == groups)
+        self.sigma.len() == groups && self.estimated_from.is_none_or(|d| d.len() == groups)
     }
 
     /// The middle term's σ of group `g` whose rows carry the weights `w`:

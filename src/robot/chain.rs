@@ -197,9 +197,9 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
             .all(|v| v.is_finite())
             && joint.origin.rotation.coords.iter().all(|v| v.is_finite())
             && joint.axis.iter().all(|v| v.is_finite())
-            && joint.link.map_or(true, |l| {
-                l.mass_kg.is_finite() && l.com_m.iter().all(|v| v.is_finite())
-            });
+            && joint
+                .link
+                .is_none_or(|l| l.mass_kg.is_finite() && l.com_m.iter().all(|v| v.is_finite()));
         if !finite {
             return Err(crate::Error::NonFinite { what: "joint" });
         }
