@@ -311,7 +311,8 @@ fn protocol_pins_the_validation_run() {
     let other = calibrate_ols(&full, &d30, None);
     let loo = |v: &Value| v["heldout_rms_um"].as_f64().unwrap() / 1e3;
     assert!(near(loo(&chosen), 2.352), "{}", loo(&chosen));
-    assert!(near(loo(&other), 2.597), "{}", loo(&other));
+    // 2.597 before `gravity_compliance` (docs/tiago.md).
+    assert!(near(loo(&other), 2.383), "{}", loo(&other));
     assert_eq!(
         effects(&chosen),
         [
