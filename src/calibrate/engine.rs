@@ -66,6 +66,10 @@ pub struct Engine<'a> {
     pub heldout: bool,
     /// Progress messages.
     pub progress: Progress<'a>,
+    /// Whether to abandon a fit ([`Engine::fit`] checks it before each
+    /// Gauss–Newton step): a candidate's trial on a worker thread once an
+    /// earlier candidate was admissible ([`super::trial`]).
+    pub cancel: Option<&'a (dyn Fn() -> bool + Sync)>,
     /// The last design [`Engine::design`] built: its parameters, the rows'
     /// linearisation it was built at ([`Rows::at`]), the design. A fit's
     /// last design is asked for again by its held-out error and its
@@ -145,7 +149,8 @@ impl Engine<'_> {
     /// # Errors
     /// [`CalibrationError::Dependent`] when at some linearisation a
     /// parameter is a combination of the others (the engine stays there);
-    /// [`CalibrationError::Core`] from the estimator.
+    /// [`CalibrationError::Core`] from the estimator;
+    /// [`CalibrationError::Cancelled`] when [`Engine::cancel`] says so.
     pub fn fit(&mut self, params: &[Param]) -> Result<Fitted, CalibrationError> {
         let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
         let iterates = self.lin.iterates(params);
@@ -153,6 +158,9 @@ impl Engine<'_> {
         let mut settled = true;
         let cols: Vec<usize> = (0..params.len()).collect();
         loop {
+            if self.cancel.is_some_and(|c| c()) {
+                return Err(CalibrationError::Cancelled);
+            }
             let d = self.design(params)?;
             // The one independence test at every linearisation: a step can
             // turn a kept parameter into a combination of the others (the

@@ -142,6 +142,7 @@ pub fn calibrate(
     let weighting = weighting(setup, &rows, &data.file)?;
     let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut e = engine::Engine {
+        cancel: None,
         geometry: Geometry::nominal_tree(
             &job.robot.chain,
             &job.robot.ends,

@@ -227,6 +227,9 @@ pub enum CalibrationError {
     /// them out (a declared parameter) or rejects the model (a candidate).
     /// The engine is left at that linearisation.
     Dependent(Vec<usize>),
+    /// A candidate's trial abandoned because an earlier candidate of the
+    /// same step was admissible ([`super::trial`]): never the run's error.
+    Cancelled,
 }
 
 impl core::fmt::Display for CalibrationError {
@@ -237,6 +240,7 @@ impl core::fmt::Display for CalibrationError {
             CalibrationError::Dependent(i) => {
                 write!(f, "parameters {i:?} are combinations of the others")
             }
+            CalibrationError::Cancelled => write!(f, "trial abandoned"),
         }
     }
 }

@@ -12,8 +12,11 @@
 //! inside one relinearisation (at most [`super::parallel::for_rows`]' one
 //! thread), the candidates are fitted on copies of the engine's state on
 //! worker threads, in order, up to the first whose estimate is admissible;
-//! the engine takes over that one's state.
+//! the engine takes over that one's state. A trial after an admissible one
+//! stops at its next Gauss–Newton step ([`Engine::cancel`]): it would be
+//! dropped.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use super::effects::{inadmissible, Candidate};
@@ -81,10 +84,20 @@ pub fn first_admissible(
         policy: e.policy,
         heldout: e.heldout,
     };
+    // The first admissible index so far: a trial after it is abandoned at
+    // its next Gauss–Newton step (its result would be dropped anyway).
+    let first = AtomicUsize::new(usize::MAX);
     let tried = parallel::map_until(
         cands.len(),
         threads,
-        |i| seed.try_one(&current.params, cands[i]),
+        |i| {
+            let cancel = || first.load(Ordering::Relaxed) < i;
+            let r = seed.try_one(&current.params, cands[i], &cancel);
+            if matches!(r, Ok((Outcome::Admissible(_), _))) {
+                first.fetch_min(i, Ordering::Relaxed);
+            }
+            r
+        },
         |r| !matches!(r, Ok((Outcome::Rejected(_), _))),
     );
     let mut out = Vec::with_capacity(tried.len());
@@ -127,9 +140,11 @@ impl Seed<'_> {
         &self,
         params: &[Param],
         c: &Candidate,
+        cancel: &(dyn Fn() -> bool + Sync),
     ) -> Result<(Outcome, State), CalibrationError> {
         let mut quiet = |_: &str| {};
         let mut e = Engine {
+            cancel: Some(cancel),
             rows: self.rows.clone(),
             names: self.names.clone(),
             geometry: self.geometry.clone(),
