@@ -87,10 +87,6 @@ pub struct Row {
     /// equilibrium ([`crate::robot::Equilibrium::twist_column`]); empty for
     /// the first-order columns at `frames`.
     pub twists: Vec<Vector3<f64>>,
-    /// The unit direction of gravity \[measurement frame\] behind an
-    /// absolute row (zero for a deflection: the robot's weight is the same
-    /// loaded and unloaded).
-    pub gravity: Vector3<f64>,
     /// Per joint, the components of the gravity direction on its basis at
     /// the commanded pose `q` ([`Linearisation::gravity_at`]): an absolute
     /// row's, when the exact model's law has a gravity compliance (`frames`
@@ -130,12 +126,16 @@ impl RowFrames {
 impl Row {
     /// The row as a [`Sample`] for the columns at `frames` (the row's own,
     /// [`Rows::frames`]), with the effective compliance of each joint
-    /// (may be empty).
+    /// (may be empty) and the unit direction of gravity \[measurement
+    /// frame\] ([`Rows::gravity_unit`]; an absolute row's only: for a
+    /// deflection the robot's weight is the same loaded and unloaded).
     pub fn sample<'a>(
         &'a self,
         frames: &'a Frames<f64, J>,
         compliance: &'a [f64],
+        gravity_unit: Vector3<f64>,
     ) -> Sample<'a, f64, J> {
+        let absolute = self.kind == RowKind::Absolute;
         Sample {
             frames,
             q: &self.q,
@@ -144,10 +144,14 @@ impl Row {
             marker: self.marker,
             tau: &self.tau,
             load: self.load,
-            absolute: self.kind == RowKind::Absolute,
+            absolute,
             dt_s: self.dt.unwrap_or(0.0),
             compliance,
-            gravity: self.gravity,
+            gravity: if absolute {
+                gravity_unit
+            } else {
+                Vector3::zeros()
+            },
             gravity_q: &self.gravity_q,
         }
     }
@@ -177,6 +181,10 @@ pub struct Rows {
     /// The chains of the markers' links placed at the geometry of the last
     /// [`Rows::relinearise`] ([`Geometry::placed_chains`]); empty before.
     pub chains: Vec<Chain<f64, J>>,
+    /// The unit direction of gravity \[measurement frame\] at the geometry
+    /// of the last [`Rows::relinearise`] (zero before, and without
+    /// gravity).
+    pub gravity_unit: Vector3<f64>,
     /// The geometry and joint law of the last [`Rows::relinearise`], when
     /// it completed (`None` before, and after one that failed part way).
     pub at: Option<(Geometry, Linearisation)>,
@@ -304,7 +312,6 @@ impl Rows {
                 tau: vec![0.0; dof],
                 load: None,
                 twists: Vec::new(),
-                gravity: Vector3::zeros(),
                 gravity_q: Vec::new(),
                 y: Vector3::from(measured),
             });
@@ -364,6 +371,7 @@ impl Rows {
             com,
             file: data.file.display().to_string(),
             chains: Vec::new(),
+            gravity_unit: Vector3::zeros(),
             at: None,
         })
     }
@@ -403,6 +411,7 @@ impl Rows {
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
         let g_unit = gravity.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
+        self.gravity_unit = g_unit;
         let com = self.com;
         let file = &self.file;
         // With several threads, a run after the first row that fails may
@@ -448,7 +457,6 @@ impl Rows {
                     e => CalibrationError::Core(what, e),
                 }
             };
-            row.gravity = if absolute { g_unit } else { Vector3::zeros() };
             row.gravity_q.clear();
             if absolute && lin.model == super::DeflectionModel::Exact && lin.needs_gravity() {
                 // The gravity compliance's deflection at the commanded pose.

@@ -52,7 +52,7 @@ pub(super) struct View<'a> {
 }
 
 /// Rows a view copies at a time ([`View`]).
-const BLOCK_ROWS: usize = 4096;
+pub(super) const BLOCK_ROWS: usize = 4096;
 
 impl<'a> View<'a> {
     /// The rows of `d` on the columns `cols`, without group `skip_group`.
