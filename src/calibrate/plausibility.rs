@@ -17,6 +17,7 @@
 //! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
 //! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
+//! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`super::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
@@ -226,7 +227,8 @@ pub fn check_units(
 }
 
 /// The final model's findings: negative compliances and backlash
-/// ([`Policy::negative_sigmas`]) and a fit that did not converge.
+/// ([`Policy::negative_sigmas`]), effects past the bound they were
+/// admitted under, and a fit that did not converge.
 ///
 /// # Errors
 /// [`CalibrationError::Data`] for a compliance or backlash below zero by
@@ -269,6 +271,23 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
                  parameters reproduce it only to first order; declare fewer parameters \
                  if the residuals exceed the noise",
                 l.name, a.name, a.coefficient, a.unit
+            ));
+        }
+    }
+    // The bounds an effect was admitted under, on the final estimate.
+    let m = &report.model;
+    for p in &m.params {
+        let bounded = matches!(
+            p,
+            Param::GearCyclic { .. } | Param::GravityCompliance { .. } | Param::Drift { .. }
+        );
+        if let Some(why) = bounded
+            .then(|| super::effects::inadmissible(&m.names, policy, &m.params, &m.x, &[*p]))
+            .flatten()
+        {
+            warnings.push(format!(
+                "{why} in the final model: within the bound when the loop added it, moved \
+                 past it by the later steps; more likely another error absorbed than the effect"
             ));
         }
     }
