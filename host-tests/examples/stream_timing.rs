@@ -29,8 +29,7 @@ use std::hint::black_box;
 use std::io::{BufRead, Write};
 use std::time::Instant;
 
-use host_tests::Rng;
-use nalgebra::{DVector, Dyn, OMatrix, Vector3, U3};
+use nalgebra::Dyn;
 use robcal::estimate::wide::WideAccumulator;
 use robcal::{Accumulator, Block};
 
@@ -42,16 +41,7 @@ const BLOCKS: usize = 1_000_000;
 const PROBE: usize = 10_000_000;
 
 fn ring(n: usize) -> Vec<Block<f64, Dyn>> {
-    let mut rng = Rng::new(0x5EED_5000 + n as u64);
-    let x = DVector::from_fn(n, |_, _| 1e-3 * rng.range(-1.0, 1.0));
-    (0..RING)
-        .map(|_| {
-            let b = OMatrix::<f64, U3, Dyn>::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-            let dp = &b * &x + Vector3::from_fn(|_, _| 1e-5 * rng.normal());
-            let w = Vector3::from_fn(|_, _| rng.range(0.5, 1.5));
-            Block::new(b, dp).with_weights(w)
-        })
-        .collect()
+    host_tests::stream_ring(n, RING)
 }
 
 fn stream_core(n: usize, ring: &[Block<f64, Dyn>]) -> Accumulator<f64, Dyn> {

@@ -399,6 +399,46 @@ pub fn random_blocks<const N: usize>(
     (out, x_true)
 }
 
+/// A closed loop's report in one line, for assertion messages: the effects
+/// added with their p, what is left unexplained, and the next three
+/// candidates of the last round.
+pub fn loop_summary(r: &robcal::calibrate::Report) -> String {
+    let mut s: Vec<String> = r
+        .effects
+        .iter()
+        .map(|e| format!("{}:{:?} p={:.1e}", e.effect, e.joint, e.p_value))
+        .collect();
+    if let Some(u) = &r.unexplained {
+        s.push(format!("unexplained {} p={:.1e}", u.variable, u.p_value));
+    }
+    s.extend(
+        r.last_round
+            .iter()
+            .take(3)
+            .map(|t| format!("[next {}:{:?} p={:.1e}]", t.effect, t.about, t.p_value)),
+    );
+    s.join("; ")
+}
+
+/// The streaming benchmarks' blocks at `n` parameters (`benches/stream.rs`,
+/// `examples/stream_timing.rs`): `len` blocks, `B` uniform in (−1, 1),
+/// `Δp = B x + 10 µm` noise, weights uniform in (0.5, 1.5); the same
+/// blocks for the same `n`.
+pub fn stream_ring(n: usize, len: usize) -> Vec<Block<f64, Dyn>> {
+    let mut rng = Rng::new(0x5EED_5000 + n as u64);
+    let x = DVector::from_fn(n, |_, _| 1e-3 * rng.range(-1.0, 1.0));
+    (0..len)
+        .map(|_| {
+            let b = nalgebra::OMatrix::<f64, nalgebra::U3, Dyn>::from_fn(n, |_, _| {
+                rng.range(-1.0, 1.0)
+            });
+            let dp = &b * &x + Vector3::from_fn(|_, _| 1e-5 * rng.normal());
+            let w = Vector3::from_fn(|_, _| rng.range(0.5, 1.5));
+            Block::new(b, dp).with_weights(w)
+        })
+        .collect()
+}
+
 /// A block rounded to another scalar type (`f64 → f32` rounds; values
 /// beyond `f32::MAX` become ±∞).
 pub fn convert_block<T: ToF64, const N: usize>(b: &Block<f64, Const<N>>) -> Block<T, Const<N>> {

@@ -296,29 +296,15 @@ fn run(spec: &Spec, heldout: bool) -> Report {
     calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration")
 }
 
-fn summary(r: &Report) -> String {
-    let mut s: Vec<String> = r
-        .effects
-        .iter()
-        .map(|e| format!("{}:{:?} p={:.1e}", e.effect, e.joint, e.p_value))
-        .collect();
-    if let Some(u) = &r.unexplained {
-        s.push(format!("unexplained {} p={:.1e}", u.variable, u.p_value));
-    }
-    s.extend(
-        r.last_round
-            .iter()
-            .take(3)
-            .map(|t| format!("[next {}:{:?} p={:.1e}]", t.effect, t.about, t.p_value)),
-    );
-    s.join("; ")
-}
-
 /// Asserts that the first effect added is `effect` on `joint` (name) and
 /// that both errors drop.
 fn expect_first(spec: &Spec, effect: &str, joint: Option<&str>) {
     let r = run(spec, true);
-    let what = format!("{:?} {effect} {joint:?}: {}", spec.arm, summary(&r));
+    let what = format!(
+        "{:?} {effect} {joint:?}: {}",
+        spec.arm,
+        host_tests::loop_summary(&r)
+    );
     let first = r
         .effects
         .first()
@@ -514,7 +500,7 @@ fn marker_is_found() {
             ..Truth::default()
         };
         let r = run(&spec(a, true, 21, t), true);
-        let what = summary(&r);
+        let what = host_tests::loop_summary(&r);
         let first = r
             .effects
             .first()
@@ -549,7 +535,7 @@ fn two_effects_are_both_found() {
             ..Truth::default()
         };
         let r = run(&spec(a, false, 23, t), false);
-        let what = summary(&r);
+        let what = host_tests::loop_summary(&r);
         let found: Vec<(&str, Option<&str>)> = r
             .effects
             .iter()
@@ -572,7 +558,7 @@ fn outside_the_library_is_unexplained() {
             ..Truth::default()
         };
         let r = run(&spec(a, false, 24, t), false);
-        let what = summary(&r);
+        let what = host_tests::loop_summary(&r);
         let u = r.unexplained.as_ref().unwrap_or_else(|| panic!("{what}"));
         assert!(u.p_value < 1e-6, "{what}");
         // ... and it names the variable the structure follows.
@@ -596,7 +582,7 @@ fn no_false_alarms() {
         runs += 1;
         if !r.effects.is_empty() {
             added += 1;
-            notes.push(format!("seed {seed}: {}", summary(&r)));
+            notes.push(format!("seed {seed}: {}", host_tests::loop_summary(&r)));
         }
     }
     eprintln!("false alarms: {added} of {runs} runs; {notes:?}");
@@ -608,7 +594,7 @@ fn geometric_model_on_clean_data_adds_nothing() {
     let (mut job, data) = simulate(&spec(Arm::UrLike, true, 99, Truth::default()));
     job.setup.model.geometry = GeometryModel::JointOffsets;
     let r = calibrate::calibrate(&job, &data, &Settings::default(), &mut |_| {}).unwrap();
-    assert!(r.effects.is_empty(), "{}", summary(&r));
+    assert!(r.effects.is_empty(), "{}", host_tests::loop_summary(&r));
     let a1 = r
         .left_out
         .iter()
@@ -632,7 +618,7 @@ fn full_geometry_model_on_clean_data() {
     let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).unwrap();
     assert!(r.parameters.len() > 32, "{}", r.parameters.len());
     assert!(!r.left_out.is_empty());
-    assert!(r.effects.is_empty(), "{}", summary(&r));
+    assert!(r.effects.is_empty(), "{}", host_tests::loop_summary(&r));
     // Clean data: the residuals are the noise (σ 10..30 µm per axis, half
     // in each position: norm RMS ≈ √3 · 20/√2 ≈ 25 µm, less the fitted dof).
     assert!(r.rms_um < 40.0, "{}", r.rms_um);

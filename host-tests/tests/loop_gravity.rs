@@ -106,21 +106,6 @@ fn run(v: Vector3<f64>, configs: usize, seed: u64, heldout: bool) -> Report {
     calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration")
 }
 
-fn summary(r: &Report) -> String {
-    let mut s: Vec<String> = r
-        .effects
-        .iter()
-        .map(|e| format!("{}:{:?} p={:.1e}", e.effect, e.joint, e.p_value))
-        .collect();
-    s.extend(
-        r.last_round
-            .iter()
-            .take(3)
-            .map(|t| format!("[next {}:{:?} p={:.1e}]", t.effect, t.about, t.p_value)),
-    );
-    s.join("; ")
-}
-
 /// The loop names the elbow's gravity compliance first, both errors drop
 /// to the noise, and the estimate is the truth within 3 σ (the sandwich σ
 /// of the final model).
@@ -131,7 +116,7 @@ fn gravity_compliance_is_found_and_recovered() {
     let truth = [("a", v.z * 1e3), ("b", v.x * 1e3)];
     for seed in [31, 32, 33] {
         let r = run(v, 30, seed, true);
-        let what = summary(&r);
+        let what = host_tests::loop_summary(&r);
         let first = r
             .effects
             .first()
@@ -181,10 +166,10 @@ fn rigid_robot_gets_no_gravity_compliance() {
                 .iter()
                 .all(|e| e.effect.name() != "gravity_compliance"),
             "seed {seed}: {}",
-            summary(&r)
+            host_tests::loop_summary(&r)
         );
         if !r.effects.is_empty() {
-            added.push(format!("seed {seed}: {}", summary(&r)));
+            added.push(format!("seed {seed}: {}", host_tests::loop_summary(&r)));
         }
     }
     eprintln!("false alarms: {} of 20: {added:?}", added.len());
@@ -207,7 +192,7 @@ fn the_prediction_applies_the_gravity_compliance() {
             .iter()
             .any(|p| p.name == "gravity_compliance_elbow.a"),
         "{}",
-        summary(&r)
+        host_tests::loop_summary(&r)
     );
     let (_, other) = simulate(v, 30, 42);
     let val = calibrate::validate(&r.model, &job, &other).unwrap();
