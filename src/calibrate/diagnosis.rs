@@ -294,12 +294,17 @@ pub fn run(
                         Outcome::Admissible(next) => {
                             let next = e.with_heldout(*next)?;
                             match (current.heldout_rms_um, next.heldout_rms_um) {
-                                (Some(before), Some(after)) if after >= before => Some(format!(
-                                    "not added: significant (p = {:.1e}) but the \
-                                 leave-one-configuration-out RMS does not drop \
-                                 ({before:.1} -> {after:.1} um)",
-                                    t.p_value
-                                )),
+                                (Some(before), Some(after)) if after >= before => {
+                                    // Back to the current model (a rejected
+                                    // trial left the engine there).
+                                    e.restore_from(&current, &start)?;
+                                    Some(format!(
+                                        "not added: significant (p = {:.1e}) but the \
+                                         leave-one-configuration-out RMS does not drop \
+                                         ({before:.1} -> {after:.1} um)",
+                                        t.p_value
+                                    ))
+                                }
                                 _ => {
                                     accepted = Some((*ci, t.clone(), next));
                                     None
@@ -320,7 +325,6 @@ pub fn run(
                             notes.push(note);
                             rejected.push(key);
                         }
-                        e.restore_from(&current, &start)?;
                     }
                 }
             }

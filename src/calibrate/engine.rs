@@ -245,8 +245,7 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn restore(&mut self, f: &Fitted) -> Result<(), CalibrationError> {
-        let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
-        let there = self.rows.at.as_ref().is_some_and(at);
+        let there = self.rows_at(f);
         self.lin = f.linearisation.clone();
         self.geometry = f.geometry.clone();
         if there {
@@ -264,11 +263,17 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn restore_from(&mut self, f: &Fitted, start: &[Vec<f64>]) -> Result<(), CalibrationError> {
-        let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
-        if !self.rows.at.as_ref().is_some_and(at) {
+        if !self.rows_at(f) {
             self.rows.start_from(start);
         }
         self.restore(f)
+    }
+
+    /// Whether the rows are at `f`'s linearisation (its joint law and
+    /// geometry).
+    fn rows_at(&self, f: &Fitted) -> bool {
+        let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
+        self.rows.at.as_ref().is_some_and(at)
     }
 
     /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each

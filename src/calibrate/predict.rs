@@ -437,14 +437,9 @@ impl Predictor {
     /// deflection at the commanded pose (as fitted; NaN, so that the
     /// equilibrium fails, if the pose has no frames).
     fn law_at(&self, q: &[f64]) -> super::linearisation::Law {
-        let gravity = if self.lin.needs_gravity() {
-            let frames = self.chain.frames(q);
-            frames.map_or_else(
-                |_| Vec::new(),
-                |f| self.lin.gravity_at(&f, &self.gravity_mps2),
-            )
-        } else {
-            Vec::new()
+        let gravity = match self.lin.needs_gravity().then(|| self.chain.frames(q)) {
+            Some(Ok(f)) => self.lin.gravity_at(&f, &self.gravity_mps2),
+            _ => Vec::new(),
         };
         self.lin.joint_law(q, true, &gravity)
     }

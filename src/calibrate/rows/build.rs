@@ -1,0 +1,199 @@
+//! Building the rows from a job's measurements ([`Rows::new`]): one row
+//! per measured point, grouped by configuration, with the joints' angle
+//! bins; [`Rows::relinearise`] then evaluates them.
+
+use nalgebra::Vector3;
+
+use super::{DataKinds, Row, RowFrames, RowKind, Rows};
+use crate::calibrate::names::Names;
+use crate::calibrate::settings::{CalibrationError, Policy};
+use crate::io::{Job, Measurements};
+use crate::model::bins::{by_first_appearance, clusters};
+use crate::model::{angle_urad, BIN_TOLERANCE_RAD};
+
+impl Rows {
+    /// The rows of `data`: its deflections, and its absolute positions when
+    /// `absolute` (or when there is no deflection). Frames, torques and the
+    /// absolute rows' `Δp` are computed by [`Rows::relinearise`].
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when there is no row;
+    /// [`CalibrationError::Core`] when the forward kinematics fails.
+    pub fn new(
+        job: &Job,
+        data: &Measurements,
+        absolute: bool,
+        names: &mut Names,
+        policy: &Policy,
+    ) -> Result<Self, CalibrationError> {
+        let setup = &job.setup;
+        let dof = job.robot.dof();
+        let use_absolute = absolute || data.deflections.is_empty();
+        let gravity = setup.load.map_or(Vector3::new(0.0, 0.0, -9.80665), |l| {
+            Vector3::from(l.gravity)
+        });
+        let com = setup
+            .load
+            .map_or(Vector3::zeros(), |l| Vector3::from(l.com));
+        let mut configs: Vec<i64> = data.observations.iter().map(|o| o.config).collect();
+        configs.sort_unstable();
+        configs.dedup();
+        let group_of = |c: i64| configs.binary_search(&c).unwrap_or(0);
+        let times: Vec<f64> = data.observations.iter().filter_map(|o| o.t_s).collect();
+        let t_mean = if times.is_empty() {
+            0.0
+        } else {
+            times.iter().sum::<f64>() / times.len() as f64
+        };
+
+        // Angle bins per joint, from the rows that enter the problem, in
+        // order of first appearance in the file (k21, k22, … of the paper).
+        let mut bins = Vec::with_capacity(dof);
+        let mut compensator_ok = Vec::with_capacity(dof);
+        for j in 0..dof {
+            let qs: Vec<(f64, Option<&str>, i64)> = if use_absolute {
+                data.unloaded()
+                    .map(|o| (o.q[j], o.q_written.get(j), o.config))
+                    .collect()
+            } else {
+                data.deflections
+                    .iter()
+                    .map(|d| {
+                        let o = &data.observations[d.rows[1]];
+                        (o.q[j], o.q_written.get(j), o.config)
+                    })
+                    .collect()
+            };
+            let values: Vec<f64> = qs.iter().map(|v| v.0).collect();
+            let mut sorted = values.clone();
+            // (Equal under `total_cmp` is the same bits: unstable is the
+            // same order, and faster on a million values.)
+            sorted.sort_unstable_by(f64::total_cmp);
+            let mut centres = Vec::new();
+            clusters(&sorted, |c| centres.push(c));
+            let mut jb = Vec::new();
+            let mut counts = Vec::new();
+            if centres.len() <= policy.max_bins {
+                // (Only here: with many distinct values, e.g. random poses,
+                // the key's scan of every value made this sort quadratic
+                // for bins that are then not used.)
+                by_first_appearance(&mut centres, &values);
+                for c in &centres {
+                    let near = |v: &&(f64, Option<&str>, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
+                    let written = qs
+                        .iter()
+                        .find(near)
+                        .and_then(|v| v.1)
+                        .map_or_else(|| format!("{c}"), |w| w.trim().to_string());
+                    let mut cfgs: Vec<i64> = qs.iter().filter(near).map(|v| v.2).collect();
+                    cfgs.sort_unstable();
+                    cfgs.dedup();
+                    counts.push(cfgs.len());
+                    let a = angle_urad(*c);
+                    names.bins.insert((j as u8, a), written);
+                    jb.push(a);
+                }
+            }
+            compensator_ok.push(policy.compensator_eligible(&counts));
+            bins.push(jb);
+        }
+
+        let index_of = |id: u32| names.marker_index(id).unwrap_or(0);
+        let mut rows = Vec::with_capacity(
+            data.deflections.len()
+                + if use_absolute {
+                    data.observations.len()
+                } else {
+                    0
+                },
+        );
+        let mut row = |kind,
+                       config,
+                       marker,
+                       load_kg,
+                       q: &[f64],
+                       dt,
+                       measured: [f64; 3],
+                       line,
+                       sigma: Option<[f64; 3]>| {
+            let m = index_of(marker);
+            rows.push(Row {
+                kind,
+                group: group_of(config),
+                config,
+                marker: m,
+                load_kg,
+                q: q.to_vec(),
+                dt,
+                measured: Vector3::from(measured),
+                line,
+                sigma: sigma.map(Vector3::from),
+                frames: RowFrames::default(),
+                p: Vector3::zeros(),
+                tau: vec![0.0; dof],
+                load: None,
+                twists: Vec::new(),
+                gravity_q: Vec::new(),
+                y: Vector3::from(measured),
+            });
+        };
+        for d in &data.deflections {
+            let (loaded, unloaded) = (&data.observations[d.rows[0]], &data.observations[d.rows[1]]);
+            let dt = loaded.t_s.zip(unloaded.t_s).map(|(a, b)| a - b);
+            row(
+                RowKind::Deflection,
+                d.config,
+                d.marker,
+                d.load_kg,
+                &d.q,
+                dt,
+                d.dp_m,
+                d.lines[0],
+                loaded
+                    .sigma_m
+                    .zip(unloaded.sigma_m)
+                    .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
+            );
+        }
+        if use_absolute {
+            for o in data.unloaded() {
+                let dt = o.t_s.map(|t| t - t_mean);
+                row(
+                    RowKind::Absolute,
+                    o.config,
+                    o.marker,
+                    0.0,
+                    &o.q,
+                    dt,
+                    o.p_m,
+                    o.line,
+                    o.sigma_m,
+                );
+            }
+        }
+        if rows.is_empty() {
+            return Err(CalibrationError::Data(format!(
+                "{}: no rows to calibrate from",
+                data.file.display()
+            )));
+        }
+        let kinds = DataKinds {
+            deflections: rows.iter().any(|r| r.kind == RowKind::Deflection),
+            absolute: rows.iter().any(|r| r.kind == RowKind::Absolute),
+            time: data.has_time,
+        };
+        Ok(Self {
+            rows,
+            configs,
+            kinds,
+            bins,
+            compensator_ok,
+            gravity,
+            com,
+            file: data.file.display().to_string(),
+            chains: Vec::new(),
+            gravity_unit: Vector3::zeros(),
+            at: None,
+        })
+    }
+}
