@@ -30,6 +30,67 @@ pub struct Design {
     pub instrument_sigma: Option<Vec<Vector3<f64>>>,
 }
 
+/// The rows of every group, in row order, in two flat vectors (a vector
+/// per group was 10⁶ allocations for a million configurations).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GroupRows {
+    /// Group `g`'s rows are `rows[start[g]..start[g + 1]]`.
+    start: Vec<usize>,
+    /// Row indices, by group, ascending within a group.
+    rows: Vec<usize>,
+}
+
+impl GroupRows {
+    /// The rows of `groups` groups from every row's group; `None` when a
+    /// group is not below `groups`.
+    pub fn new(group: &[usize], groups: usize) -> Option<Self> {
+        let mut start = vec![0_usize; groups + 1];
+        for &g in group {
+            *start.get_mut(g.checked_add(1)?)? += 1;
+        }
+        for g in 0..groups {
+            start[g + 1] += start[g];
+        }
+        let mut next = start.clone();
+        let mut rows = vec![0; group.len()];
+        for (i, &g) in group.iter().enumerate() {
+            rows[next[g]] = i;
+            next[g] += 1;
+        }
+        Some(Self { start, rows })
+    }
+
+    /// Number of groups.
+    pub fn groups(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// The positions of group `g`'s rows in [`GroupRows::all`] (empty past
+    /// the last group).
+    pub fn range(&self, g: usize) -> std::ops::Range<usize> {
+        match (self.start.get(g), self.start.get(g + 1)) {
+            (Some(&a), Some(&b)) => a..b,
+            _ => 0..0,
+        }
+    }
+
+    /// The position in [`GroupRows::all`] of group `g`'s first row (the
+    /// number of rows for `g` past the last group).
+    pub fn offset(&self, g: usize) -> usize {
+        self.start.get(g).copied().unwrap_or(self.rows.len())
+    }
+
+    /// Group `g`'s rows, ascending (none past the last group).
+    pub fn of(&self, g: usize) -> &[usize] {
+        &self.rows[self.range(g)]
+    }
+
+    /// Every row, group by group.
+    pub fn all(&self) -> &[usize] {
+        &self.rows
+    }
+}
+
 impl Design {
     /// Columns of `params` at `rows` (at their last relinearisation, each
     /// row's frames recomputed there); `load_com` about the compliances of
@@ -117,6 +178,12 @@ impl Design {
             groups,
             instrument_sigma,
         })
+    }
+
+    /// The rows of each group, in row order ([`GroupRows`]); `None` when a
+    /// row's group is not below [`Design::groups`].
+    pub fn group_rows(&self) -> Option<GroupRows> {
+        GroupRows::new(&self.group, self.groups)
     }
 
     /// Number of rows.

@@ -297,8 +297,11 @@ impl Engine<'_> {
         ));
         // OLS: the closed form of `heldout` (exact at one linearisation);
         // a group no other can replace, and weighted fits, are refitted.
+        let Some(by) = d.group_rows() else {
+            return Ok(None);
+        };
         let fast = if self.fit_settings.method == Method::Ols {
-            ols_heldout(&d, &cols)
+            ols_heldout(&d, &cols, &by)
         } else {
             None
         };
@@ -307,12 +310,6 @@ impl Engine<'_> {
         // unidentified is refitted from the rows below.
         let moments =
             (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
-        let mut rows_of = vec![Vec::new(); self.rows.configs.len()];
-        for (i, &g) in d.group.iter().enumerate() {
-            if let Some(r) = rows_of.get_mut(g) {
-                r.push(i);
-            }
-        }
         // The folds from the moments are independent: on worker threads
         // (`parallel`; bit for bit the serial loop's), unless the problem
         // is too small for threads to pay.
@@ -328,7 +325,7 @@ impl Engine<'_> {
                     // error).
                     let out = fit_moments(m, &d, &cols, Some(g), &settings).ok()?;
                     Some(
-                        rows_of[g]
+                        by.of(g)
                             .iter()
                             .map(|&i| d.residual(&cols, &out.x, i))
                             .collect(),
@@ -338,12 +335,8 @@ impl Engine<'_> {
             None => Vec::new(),
         };
         for g in 0..groups {
-            if let Some(r) = fast
-                .as_ref()
-                .and_then(|f| f.get(g))
-                .and_then(Option::as_ref)
-            {
-                res.extend_from_slice(r);
+            if let Some(f) = fast.as_ref().filter(|f| f.ok.get(g) == Some(&true)) {
+                res.extend_from_slice(&f.res[by.range(g)]);
                 continue;
             }
             if let Some(r) = folds.get(g).and_then(Option::as_ref) {
@@ -362,7 +355,7 @@ impl Engine<'_> {
                 }
             };
             let Some(out) = out else { return Ok(None) };
-            for &i in &rows_of[g] {
+            for &i in by.of(g) {
                 res.push(d.residual(&use_cols, &out.x, i));
             }
         }

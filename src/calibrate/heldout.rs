@@ -19,18 +19,36 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
-use super::design::Design;
+use super::design::{Design, GroupRows};
 
 /// Below this eigenvalue of `I − H_gg` the group carries information no
 /// other group has (removing it leaves a parameter unidentified): the
 /// caller refits that group.
 const MIN_EIGENVALUE: f64 = 1e-9;
 
-/// The held-out residuals \[m\] of every group of `d` under the OLS fit on
-/// the columns `cols`, by row of the group in row order; `None` for a group
-/// whose removal leaves the fit singular (the caller refits it). `None`
-/// overall when `Λ` itself is not positive definite.
-pub fn ols_heldout(d: &Design, cols: &[usize]) -> Option<Vec<Option<Vec<Vector3<f64>>>>> {
+/// The held-out residuals of [`ols_heldout`], in the order of its
+/// [`GroupRows`].
+#[derive(Debug, Clone)]
+pub struct HeldOut {
+    /// The held-out residual \[m\] of every row, group by group as in
+    /// [`GroupRows::all`] (zero in a group that is not `ok`).
+    pub res: Vec<Vector3<f64>>,
+    /// Per group, whether its residuals were computed: `false` when its
+    /// removal leaves the fit singular (the caller refits it).
+    pub ok: Vec<bool>,
+}
+
+/// The held-out residuals of every group of `d` under the OLS fit on the
+/// columns `cols` (`by`: `d`'s rows by group); `None` overall when `Λ`
+/// itself is not positive definite. The groups on worker threads
+/// ([`super::parallel`]), each independent of the others: the same bits
+/// on any number of threads.
+pub fn ols_heldout(d: &Design, cols: &[usize], by: &GroupRows) -> Option<HeldOut> {
+    ols_heldout_on(d, cols, by, super::parallel::for_rows(d.rows()))
+}
+
+/// [`ols_heldout`] on `threads` threads.
+fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) -> Option<HeldOut> {
     // All columns in order (the engine's case): the design itself, not a
     // copy of it (with many rows the copy is the largest allocation).
     let selected;
@@ -40,23 +58,18 @@ pub fn ols_heldout(d: &Design, cols: &[usize]) -> Option<Vec<Option<Vec<Vector3<
         selected = d.b.select_columns(cols);
         &selected
     };
-    let y = DVector::from_column_slice(&d.y);
+    let y = &d.y;
     let chol = (b.tr_mul(b)).cholesky()?;
-    let x = chol.solve(&b.tr_mul(&y));
+    let x = chol.solve(&b.tr_mul(&DVector::from_column_slice(y)));
     if !x.iter().all(|v| v.is_finite()) {
         return None;
-    }
-    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); d.groups];
-    for (i, &g) in d.group.iter().enumerate() {
-        rows.get_mut(g)?.push(i);
     }
     let n = cols.len();
     // A group of one row (one point per configuration: the case with the
     // most groups) in fixed-size arithmetic without an allocation per
     // group: `w_a = Λ⁻¹ b_aᵀ` from the inverse, `H_ab = b_b · w_a`.
     let inv = chol.inverse();
-    let mut w = vec![0.0; 3 * n];
-    let one = |i: usize, w: &mut [f64]| {
+    let one = |i: usize, w: &mut [f64], out: &mut Vec<Vector3<f64>>| {
         let bg = |a: usize, c: usize| b[(3 * i + a, c)];
         let mut e = Vector3::from_fn(|a, _| y[3 * i + a]);
         for (c, xc) in x.iter().enumerate() {
@@ -81,40 +94,61 @@ pub fn ols_heldout(d: &Design, cols: &[usize]) -> Option<Vec<Option<Vec<Vector3<
             .iter()
             .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
         {
-            return None;
+            return false;
         }
         let t = eig.eigenvectors.tr_mul(&e).component_div(&eig.eigenvalues);
-        Some(vec![eig.eigenvectors * t])
+        out.push(eig.eigenvectors * t);
+        true
     };
-    let out = rows
-        .iter()
-        .map(|rs| {
-            if let [i] = rs[..] {
-                return one(i, &mut w);
+    let many = |rs: &[usize], out: &mut Vec<Vector3<f64>>| {
+        let m = 3 * rs.len();
+        let bg = DMatrix::from_fn(m, n, |r, c| b[(3 * rs[r / 3] + r % 3, c)]);
+        let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &x;
+        // I − H_gg, symmetric positive semidefinite.
+        let ih = DMatrix::identity(m, m) - &bg * chol.solve(&bg.transpose());
+        let eig = ih.symmetric_eigen();
+        if eig
+            .eigenvalues
+            .iter()
+            .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
+        {
+            return false;
+        }
+        let e = eig.eigenvectors.tr_mul(&eg);
+        let e = DVector::from_fn(m, |r, _| e[r] / eig.eigenvalues[r]);
+        let e = &eig.eigenvectors * e;
+        out.extend((0..rs.len()).map(|k| Vector3::new(e[3 * k], e[3 * k + 1], e[3 * k + 2])));
+        true
+    };
+    // Contiguous runs of groups, one per thread.
+    let groups = by.groups();
+    let threads = threads.clamp(1, groups.max(1));
+    let runs = super::parallel::map(threads, threads, |k| {
+        let (lo, hi) = (k * groups / threads, (k + 1) * groups / threads);
+        let mut w = vec![0.0; 3 * n];
+        let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
+        let mut ok = Vec::with_capacity(hi - lo);
+        for g in lo..hi {
+            let rs = by.of(g);
+            let done = match rs {
+                [i] => one(*i, &mut w, &mut res),
+                _ => many(rs, &mut res),
+            };
+            if !done {
+                res.extend(rs.iter().map(|_| Vector3::zeros()));
             }
-            let m = 3 * rs.len();
-            let bg = DMatrix::from_fn(m, cols.len(), |r, c| b[(3 * rs[r / 3] + r % 3, c)]);
-            let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &x;
-            // I − H_gg, symmetric positive semidefinite.
-            let ih = DMatrix::identity(m, m) - &bg * chol.solve(&bg.transpose());
-            let eig = ih.clone().symmetric_eigen();
-            if eig
-                .eigenvalues
-                .iter()
-                .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
-            {
-                return None;
-            }
-            let e = eig.eigenvectors.tr_mul(&eg);
-            let e = DVector::from_fn(m, |r, _| e[r] / eig.eigenvalues[r]);
-            let e = &eig.eigenvectors * e;
-            Some(
-                (0..rs.len())
-                    .map(|k| Vector3::new(e[3 * k], e[3 * k + 1], e[3 * k + 2]))
-                    .collect(),
-            )
-        })
-        .collect();
+            ok.push(done);
+        }
+        (res, ok)
+    });
+    let mut out = HeldOut {
+        res: Vec::with_capacity(d.rows()),
+        ok: Vec::with_capacity(groups),
+    };
+    for (res, ok) in runs {
+        out.res.extend(res);
+        out.ok.extend(ok);
+    }
     Some(out)
 }
 
@@ -161,9 +195,11 @@ mod tests {
         for (groups, per, n, seed) in [(12, 1, 5, 1), (8, 3, 7, 2), (30, 2, 13, 3)] {
             let d = design(groups, per, n, seed);
             let cols: Vec<usize> = (0..n).collect();
-            let fast = ols_heldout(&d, &cols).expect("positive definite");
-            for (g, res) in fast.iter().enumerate() {
-                let res = res.as_ref().expect("identifiable without the group");
+            let by = d.group_rows().expect("groups in range");
+            let fast = ols_heldout(&d, &cols, &by).expect("positive definite");
+            for g in 0..groups {
+                assert!(fast.ok[g], "identifiable without the group");
+                let res = &fast.res[by.range(g)];
                 let f = fit(&d, &cols, Some(g), &ols()).expect("refit");
                 let refit: Vec<_> = (0..d.rows())
                     .filter(|&i| d.group[i] == g)
@@ -177,14 +213,58 @@ mod tests {
     }
 
     #[test]
+    fn the_same_bits_on_any_number_of_threads() {
+        // Groups of one, two and three rows, one singular (column 0 only in
+        // group 0).
+        let mut d = design(40, 1, 6, 5);
+        d.group = (0..40)
+            .map(|i| [0, 1, 1, 2, 3, 3, 3][i % 7] + 4 * (i / 7))
+            .collect();
+        d.groups = 4 * 6;
+        for r in 3..d.b.nrows() {
+            d.b[(r, 0)] = 0.0;
+        }
+        let by = d.group_rows().expect("groups in range");
+        let cols: Vec<usize> = (0..6).collect();
+        let one = ols_heldout_on(&d, &cols, &by, 1).expect("positive definite");
+        assert!(!one.ok[0] && one.ok[1..].iter().all(|&ok| ok));
+        for threads in [2, 3, 7, 100] {
+            let many = ols_heldout_on(&d, &cols, &by, threads).expect("positive definite");
+            assert_eq!(many.ok, one.ok);
+            let bits = |h: &HeldOut| -> Vec<u64> {
+                h.res
+                    .iter()
+                    .flat_map(|r| r.iter().map(|v| v.to_bits()))
+                    .collect()
+            };
+            assert_eq!(bits(&many), bits(&one), "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn group_rows_are_in_row_order_and_checked() {
+        let by = GroupRows::new(&[2, 0, 2, 1, 0], 4).expect("in range");
+        assert_eq!(by.groups(), 4);
+        assert_eq!(
+            (by.of(0), by.of(1), by.of(2), by.of(3)),
+            (&[1, 4][..], &[3][..], &[0, 2][..], &[][..])
+        );
+        assert_eq!(by.all(), &[1, 4, 3, 0, 2]);
+        assert_eq!((by.range(2), by.offset(4), by.of(9)), (3..5, 5, &[][..]));
+        assert!(GroupRows::new(&[0, 3], 3).is_none());
+        assert!(GroupRows::new(&[usize::MAX], 3).is_none());
+    }
+
+    #[test]
     fn a_group_no_other_can_replace_is_left_to_the_refit() {
         // Column 0 is non-zero in group 0 only.
         let mut d = design(6, 1, 3, 4);
         for r in 3..d.b.nrows() {
             d.b[(r, 0)] = 0.0;
         }
-        let fast = ols_heldout(&d, &[0, 1, 2]).expect("positive definite");
-        assert!(fast[0].is_none());
-        assert!(fast[1..].iter().all(Option::is_some));
+        let by = d.group_rows().expect("groups in range");
+        let fast = ols_heldout(&d, &[0, 1, 2], &by).expect("positive definite");
+        assert!(!fast.ok[0]);
+        assert!(fast.ok[1..].iter().all(|&ok| ok));
     }
 }
