@@ -157,10 +157,10 @@ struct CalibrateArgs {
     max_data_mib: u64,
 }
 
-thread_local! {
-    /// The message of the last panic (see `main`).
-    static LAST_PANIC: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
-}
+/// The message of the first panic (see `main`), on whichever thread it
+/// was: a panic on one of the engine's worker threads is carried to the
+/// main thread by `resume_unwind`, which does not call the hook again.
+static FIRST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -189,7 +189,10 @@ fn main() -> ExitCode {
     // catches and turns into an error (urdf-rs's XML parser) prints nothing.
     std::panic::set_hook(Box::new(|info| {
         let message = info.to_string().replace('\n', " ");
-        LAST_PANIC.with(|p| *p.borrow_mut() = Some(message));
+        let mut first = FIRST_PANIC
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        first.get_or_insert(message);
     }));
     let command = cli.command;
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match command {
@@ -239,8 +242,10 @@ fn main() -> ExitCode {
     .unwrap_or_else(|_| {
         Err(format!(
             "internal error: {}",
-            LAST_PANIC
-                .with(|p| p.borrow_mut().take())
+            FIRST_PANIC
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .take()
                 .unwrap_or_default()
         ))
     });
