@@ -112,7 +112,34 @@ pub fn calibrate(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
-    let policy = settings.policy;
+    let (rows, names, warnings) = prepare(job, data, &settings.policy)?;
+    calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)
+}
+
+/// [`calibrate`], taking the measurements: they are dropped as soon as the
+/// rows are built from them (a million rows parsed are ~300 MB of the
+/// peak memory that the rows and the design need after them).
+///
+/// # Errors
+/// As [`calibrate`].
+pub fn calibrate_owned(
+    job: &crate::io::Job,
+    data: crate::io::Measurements,
+    settings: &Settings,
+    progress: Progress<'_>,
+) -> Result<Report, CalibrationError> {
+    let (rows, names, warnings) = prepare(job, &data, &settings.policy)?;
+    let file = data.file.clone();
+    drop(data);
+    calibrate_rows(job, &file, rows, names, warnings, settings, progress)
+}
+
+/// The rows of `data`, the names they use, and the input's warnings.
+fn prepare(
+    job: &crate::io::Job,
+    data: &crate::io::Measurements,
+    policy: &Policy,
+) -> Result<(Rows, Names, Vec<String>), CalibrationError> {
     let setup = &job.setup;
     let mut names = Names {
         joints: job.robot.joint_names.clone(),
@@ -124,22 +151,31 @@ pub fn calibrate(
             .collect(),
         bins: Default::default(),
     };
-    let rows = Rows::new(
-        job,
-        data,
-        declared::needs_absolute(job),
-        &mut names,
-        &policy,
-    )?;
+    let rows = Rows::new(job, data, declared::needs_absolute(job), &mut names, policy)?;
     let mut warnings: Vec<String> = data.warnings.iter().map(ToString::to_string).collect();
-    warnings.extend(plausibility::check_units(job, data, &policy)?);
-    let model = declared::declared(job, &data.file, &rows, &names)?;
+    warnings.extend(plausibility::check_units(job, data, policy)?);
+    Ok((rows, names, warnings))
+}
+
+/// [`calibrate`] from the rows of the measurements in `file`.
+fn calibrate_rows(
+    job: &crate::io::Job,
+    file: &std::path::Path,
+    rows: Rows,
+    names: Names,
+    mut warnings: Vec<String>,
+    settings: &Settings,
+    progress: Progress<'_>,
+) -> Result<Report, CalibrationError> {
+    let policy = settings.policy;
+    let setup = &job.setup;
+    let model = declared::declared(job, file, &rows, &names)?;
     let weight = RobustWeight::new(
         setup.noise.sigma0_um * 1e-6,
         settings.lambda.unwrap_or(setup.noise.lambda),
     )
     .map_err(|e| CalibrationError::Core("noise settings", e))?;
-    let weighting = weighting(setup, &rows, &data.file)?;
+    let weighting = weighting(setup, &rows, file)?;
     let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut e = engine::Engine {
         cancel: None,
@@ -165,7 +201,7 @@ pub fn calibrate(
         last_design: Default::default(),
     };
     e.relinearise()?;
-    plausibility::check_torques(&model, &e.rows, &e.names, &policy, &data.file)?;
+    plausibility::check_torques(&model, &e.rows, &e.names, &policy, file)?;
 
     // The declared model reduced to what the data can identify, at the
     // nominal robot (its dependences are structural, and read in the robot's
@@ -209,7 +245,7 @@ pub fn calibrate(
              from {} configuration(s) and {} deflection(s) ({} equations for {} declared \
              parameters); measure more configurations (or markers), or remove them from \
              [model]",
-            data.file.display(),
+            file.display(),
             missing.join(", "),
             e.rows.configs.len(),
             deflections,

@@ -326,7 +326,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
             eprintln!("robcal: [{:7.2} s] {m}", start.elapsed().as_secs_f64());
         }
     };
-    let result = calibrate::calibrate(&job, &data, &settings, &mut progress);
+    let result = calibrate::calibrate_owned(&job, data, &settings, &mut progress);
     if let Some(bar) = &spinner {
         bar.finish_and_clear();
     }
