@@ -187,6 +187,26 @@ fn bad_values_are_rejected() {
             ErrorKind::Duplicate,
             "'a' listed twice",
         ),
+        (
+            "assumed_link_mass_kg = 0\n",
+            ErrorKind::InvalidValue,
+            "assumed_link_mass_kg",
+        ),
+        (
+            "assumed_link_mass_kg = -2\n",
+            ErrorKind::InvalidValue,
+            "assumed_link_mass_kg",
+        ),
+        (
+            "assumed_link_mass_kg = 1e5\n",
+            ErrorKind::InvalidValue,
+            "assumed_link_mass_kg",
+        ),
+        (
+            "assumed_link_mass_kg = nan\n",
+            ErrorKind::NonFinite,
+            "assumed_link_mass_kg",
+        ),
     ];
     for (tail, kind, needle) in cases {
         let e = parse(&format!("robot = \"r.urdf\"\n{tail}")).unwrap_err();

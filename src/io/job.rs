@@ -30,12 +30,15 @@ impl Job {
     pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
         let setup_path = setup_path.as_ref();
         let setup = Setup::load(setup_path)?;
-        let robot = Robot::load_tree(
+        let mut robot = Robot::load_tree(
             setup.robot_path(setup_path),
             setup.base_link.as_deref(),
             setup.tip(),
             &setup.marker_links(),
         )?;
+        if let Some(m) = setup.assumed_link_mass_kg {
+            robot.assume_link_mass(m);
+        }
         setup.check_robot(&robot, setup_path)?;
         Ok(Self {
             setup_path: setup_path.to_owned(),

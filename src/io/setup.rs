@@ -9,6 +9,7 @@
 //! | `base_link` | the URDF's root link (error if there are several) |
 //! | `tip_link` | the first marker's `link` when every marker names one; else the one leaf link below `base_link` (error if the tree branches) |
 //! | `ignore_columns` | `[]`: measurement CSV columns to skip (data contract 7.2) |
+//! | `assumed_link_mass_kg` | absent: the URDF's `<inertial>` masses only; a value `m` in (0, 10⁴] kg: a joint whose moving body has no mass in the URDF carries `m` at its frame's origin (docs/formats.md) |
 //! | `[units] angle` | `"rad"` (`"deg"` \| `"rad"`) |
 //! | `[units] length` | `"m"` (`"mm"` \| `"m"`) |
 //! | `[[marker]]` | one marker, `id = 1`, at the origin of `tip_link` |
@@ -291,7 +292,17 @@ pub struct Setup {
     /// is neither a fixed column nor a joint is an error.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ignore_columns: Vec<String>,
+    /// An assumed mass model for a URDF without one (extension of the
+    /// contract): every joint whose moving body (its child link and the
+    /// links fixed to it) has no `<inertial>` mass carries this mass \[kg\]
+    /// at the joint frame's origin. The robot's own weight then loads its
+    /// joints (absolute positions with compliances) like a URDF's masses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub assumed_link_mass_kg: Option<f64>,
 }
+
+/// The largest [`Setup::assumed_link_mass_kg`] \[kg\].
+pub const MAX_ASSUMED_LINK_MASS_KG: f64 = 1e4;
 
 fn default_markers() -> Vec<Marker> {
     vec![Marker {
@@ -314,6 +325,7 @@ impl Setup {
             noise: Noise::default(),
             model: Model::default(),
             ignore_columns: Vec::new(),
+            assumed_link_mass_kg: None,
         }
     }
 
@@ -431,6 +443,19 @@ impl Setup {
                          [{MIN_GRAVITY_MPS2}, {MAX_GRAVITY_MPS2}] (a load needs gravity to \
                          deflect the robot; Earth's is 9.81)",
                         load.gravity
+                    ),
+                );
+            }
+        }
+        if let Some(m) = self.assumed_link_mass_kg {
+            if !m.is_finite() {
+                return err(ErrorKind::NonFinite, format!("assumed_link_mass_kg: {m}"));
+            }
+            if m <= 0.0 || m > MAX_ASSUMED_LINK_MASS_KG {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "assumed_link_mass_kg: must be in (0, {MAX_ASSUMED_LINK_MASS_KG}] kg, got {m}"
                     ),
                 );
             }

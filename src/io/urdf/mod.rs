@@ -242,6 +242,21 @@ pub struct Robot {
 }
 
 impl Robot {
+    /// Gives every joint whose moving body has no mass (no `<inertial>` on
+    /// its child link or the links fixed to it) `mass_kg` at the origin of
+    /// its frame: an assumed mass model (setup `assumed_link_mass_kg`) for
+    /// a URDF without one. Joints with a mass keep theirs.
+    pub fn assume_link_mass(&mut self, mass_kg: f64) {
+        for j in self.chain.joints_mut() {
+            if j.link.is_none() {
+                j.link = Some(crate::robot::LinkInertia {
+                    mass_kg,
+                    com_m: nalgebra::Vector3::zeros(),
+                });
+            }
+        }
+    }
+
     /// Reads `path` and extracts the chain from `base_link` to `tip_link`.
     ///
     /// `base_link = None` means the URDF's root link (the one link that is
@@ -417,6 +432,56 @@ use tree::Tree;
 
 #[cfg(test)]
 mod tests {
+    const INERTIA: &str = "<inertia ixx=\"0\" ixy=\"0\" ixz=\"0\" iyy=\"0\" iyz=\"0\" izz=\"0\"/>";
+
+    /// Three revolute joints; the middle one's child link has a mass of
+    /// 3 kg, and a fixed tool link (no inertial) hangs off the last.
+    fn arm(inertial: &str) -> String {
+        let joint = |name: &str, parent: &str, child: &str| {
+            format!(
+                "<joint name=\"{name}\" type=\"continuous\"><parent link=\"{parent}\"/>\
+                 <child link=\"{child}\"/><origin xyz=\"0 0 0.5\" rpy=\"0.3 0 0\"/>\
+                 <axis xyz=\"0 1 0\"/></joint>"
+            )
+        };
+        format!(
+            "<robot name=\"r\"><link name=\"base\"/><link name=\"a\"{inertial}\
+             <link name=\"b\"><inertial><mass value=\"3\"/>\
+             <origin xyz=\"0.1 0 0.2\"/>{INERTIA}</inertial></link><link name=\"c\"/>\
+             <link name=\"tool\"/>{}{}{}<joint name=\"t\" type=\"fixed\">\
+             <parent link=\"c\"/><child link=\"tool\"/></joint></robot>",
+            joint("j1", "base", "a"),
+            joint("j2", "a", "b"),
+            joint("j3", "b", "c"),
+        )
+    }
+
+    /// An assumed mass is the URDF's `<inertial>` of that mass at the
+    /// joint frame's origin, on every moving body without a mass; a body
+    /// with a mass keeps it.
+    #[test]
+    fn an_assumed_link_mass_is_an_inertial_at_the_joint_origin() {
+        let parse = |inertial: &str| {
+            super::Robot::parse(&arm(inertial), "arm.urdf", Some("base"), Some("tool"))
+                .expect("a valid URDF")
+        };
+        let mut assumed = parse("/>");
+        assumed.assume_link_mass(2.0);
+        let mut explicit = parse(&format!(
+            "><inertial><mass value=\"2\"/>{INERTIA}</inertial></link>"
+        ));
+        let j = explicit.chain.joints_mut();
+        assert!(j[2].link.is_none(), "c and tool have no mass");
+        j[2].link = Some(crate::robot::LinkInertia {
+            mass_kg: 2.0,
+            com_m: nalgebra::Vector3::zeros(),
+        });
+        assert_eq!(assumed.chain, explicit.chain);
+        let b = assumed.chain.joints()[1].link.expect("b's own mass");
+        assert_eq!(b.mass_kg, 3.0);
+        assert!((b.com_m - nalgebra::Vector3::new(0.1, 0.0, 0.2)).norm() < 1e-15);
+    }
+
     /// The parser's panic on an empty prefix (which the pre-scan refuses
     /// before it gets here) is an error, not an abort.
     #[test]
