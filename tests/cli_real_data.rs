@@ -502,26 +502,23 @@ fn motoman_protocol_on_the_test_poses() {
     }
 }
 
-/// The protocol of docs/real-data.md for DLR's Justin, pinned: a tree (a
-/// marker on each hand, the torso shared, data contract 7.1) calibrated
-/// with the closed loop on the 300 training poses, validated on the 200
-/// test poses.
-#[test]
-fn justin_protocol_on_the_test_poses() {
-    let Some(data) = datasets("justin_protocol_on_the_test_poses") else {
-        return;
-    };
-    let d = dir("justin");
+/// DLR's Justin with `data/dlr_justin/<setup>`: a tree (a marker on each
+/// hand, the torso shared, data contract 7.1) calibrated with the closed
+/// loop on the 300 training poses, validated on the 200 test poses. The
+/// effects added, in order, and the JSON; `None` without ../shared.
+fn justin(test: &str, setup: &str) -> Option<(Vec<(String, String)>, Value)> {
+    let data = datasets(test)?;
+    let d = dir(test);
     let (train, _) = import(&data, &d, "dlr_justin", "train");
     let (test, _) = import(&data, &d, "dlr_justin", "test");
     let urdf = data.join("dlr_justin/dlr_justin.urdf");
-    let text = std::fs::read_to_string(root().join("data/dlr_justin/setup.toml"))
+    let text = std::fs::read_to_string(root().join("data/dlr_justin").join(setup))
         .unwrap()
         .replace(
             "../../../shared/datasets/dlr_justin/dlr_justin.urdf",
             &urdf.to_string_lossy(),
         );
-    let setup = d.join("setup.toml");
+    let setup = d.join(setup);
     std::fs::write(&setup, text).unwrap();
     let o = robcal(&[
         "calibrate",
@@ -535,54 +532,92 @@ fn justin_protocol_on_the_test_poses() {
     ]);
     ok(&o);
     let v: Value = serde_json::from_slice(&o.stdout).unwrap();
-    // The loop adds the lumped sag under the robot's weight of both
-    // shoulders and the torso tilt, in this order (docs/real-data.md).
-    let added: Vec<(&str, &str)> = v["effects"]
+    let added = v["effects"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|e| (e["effect"].as_str().unwrap(), e["joint"].as_str().unwrap()))
+        .map(|e| {
+            let s = |k: &str| e[k].as_str().unwrap().to_owned();
+            (s("effect"), s("joint"))
+        })
         .collect();
+    assert_eq!(v["validation"]["points"].as_u64(), Some(400));
+    Some((added, v))
+}
+
+/// `v`'s training RMS and test RMS, mean and max per marker \[mm\] against
+/// `want` in that order.
+fn assert_justin_numbers(v: &Value, want: [f64; 6]) {
+    let val = &v["validation"];
+    let got = [
+        v["rms_um"].as_f64().unwrap() / 1e3,
+        val["rms_mm"].as_f64().unwrap(),
+        val["per_marker_mean_mm"]["1"].as_f64().unwrap(),
+        val["per_marker_mean_mm"]["2"].as_f64().unwrap(),
+        val["per_marker_max_mm"]["1"].as_f64().unwrap(),
+        val["per_marker_max_mm"]["2"].as_f64().unwrap(),
+    ];
+    let what = ["train rms", "rms", "mean 1", "mean 2", "max 1", "max 2"];
+    for ((what, got), want) in what.iter().zip(got).zip(want) {
+        assert!((got - want).abs() < 1e-4, "{what}: {got}, want {want}");
+    }
+}
+
+/// The protocol of docs/real-data.md for DLR's Justin, pinned (evaluation
+/// 4): `setup.toml`, the URDF without masses.
+#[test]
+fn justin_protocol_on_the_test_poses() {
+    let Some((added, v)) = justin("justin_protocol_on_the_test_poses", "setup.toml") else {
+        return;
+    };
+    // The loop adds the lumped sag under the robot's weight of both
+    // shoulders and the torso tilt, in this order (docs/real-data.md).
+    let s = |e: &str, j: &str| (e.to_owned(), j.to_owned());
     assert_eq!(
         added,
         [
-            ("gravity_compliance", "right_1"),
-            ("gravity_compliance", "left_1"),
-            ("gravity_compliance", "torso_2"),
-            ("gravity_compliance", "torso_1")
+            s("gravity_compliance", "right_1"),
+            s("gravity_compliance", "left_1"),
+            s("gravity_compliance", "torso_2"),
+            s("gravity_compliance", "torso_1")
         ]
     );
-    let val = &v["validation"];
-    assert_eq!(val["points"].as_u64(), Some(400));
-    // (what, got, want): docs/real-data.md, evaluation 4.
-    for (what, got, want) in [
-        (
-            "train rms um",
-            v["rms_um"].as_f64().unwrap() / 1e3,
-            9.582442,
-        ),
-        ("rms", val["rms_mm"].as_f64().unwrap(), 10.391965),
-        (
-            "mean 1",
-            val["per_marker_mean_mm"]["1"].as_f64().unwrap(),
-            9.398570,
-        ),
-        (
-            "mean 2",
-            val["per_marker_mean_mm"]["2"].as_f64().unwrap(),
-            8.698781,
-        ),
-        (
-            "max 1",
-            val["per_marker_max_mm"]["1"].as_f64().unwrap(),
-            29.942461,
-        ),
-        (
-            "max 2",
-            val["per_marker_max_mm"]["2"].as_f64().unwrap(),
-            33.038176,
-        ),
-    ] {
-        assert!((got - want).abs() < 1e-4, "{what}: {got}, want {want}");
-    }
+    // docs/real-data.md, evaluation 4.
+    assert_justin_numbers(
+        &v,
+        [
+            9.582442, 10.391965, 9.398570, 8.698781, 29.942461, 33.038176,
+        ],
+    );
+}
+
+/// Evaluation 5 of docs/real-data.md, pinned: `setup-masses.toml`, an
+/// assumed mass model (`assumed_link_mass_kg`), under which the loop adds
+/// the joints' compliances.
+#[test]
+fn justin_with_an_assumed_mass_model_on_the_test_poses() {
+    let Some((added, v)) = justin(
+        "justin_with_an_assumed_mass_model_on_the_test_poses",
+        "setup-masses.toml",
+    ) else {
+        return;
+    };
+    let s = |e: &str, j: &str| (e.to_owned(), j.to_owned());
+    assert_eq!(
+        added,
+        [
+            s("joint_compliance", "torso_1"),
+            s("joint_compliance", "right_1"),
+            s("joint_compliance", "left_1"),
+            s("joint_compliance", "torso_3"),
+            s("joint_compliance", "left_0"),
+            s("joint_compliance", "right_0"),
+            s("gravity_compliance", "torso_2"),
+            s("backlash", "right_3")
+        ]
+    );
+    assert_justin_numbers(
+        &v,
+        [5.006665, 5.158139, 4.779144, 4.479140, 13.697709, 11.797937],
+    );
 }
