@@ -206,7 +206,7 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
 ///   at least `min_share` of the lack-of-fit sum of squares above its noise
 ///   expectation: an effect that only nibbles at a structure it does not
 ///   describe is not named;
-/// - and only if its estimate is physical ([`inadmissible`]) and the
+/// - and only if its estimate is physical ([`super::effects::inadmissible`]) and the
 ///   leave-one-configuration-out RMS drops with it (when it is computed):
 ///   a significant effect that predicts unseen configurations worse is
 ///   fitting this data set, not the robot. The candidates are tried in

@@ -168,7 +168,7 @@ pub struct Rows {
     /// What kinds of rows there are.
     pub kinds: DataKinds,
     /// Distinct angles \[µrad\] of each joint, in order of first appearance
-    /// (empty when the joint takes more than [`Policy::max_bins`]).
+    /// (empty when the joint takes more than [`super::Policy::max_bins`]).
     pub bins: Vec<Vec<i32>>,
     /// Whether each joint's bins make a compensator candidate.
     pub compensator_ok: Vec<bool>,
