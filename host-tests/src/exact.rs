@@ -10,7 +10,7 @@
 //! deflection is `p(θ) − p(q)`. The robot's own weight is not modelled: it
 //! is the same loaded and unloaded.
 //!
-//! [`kr270_csv`] makes one measurement file of the paper's KR-270
+//! [`Kr270::csv`] makes one measurement file of the paper's KR-270
 //! experiment (section 5) in the units of `data/kr270/setup.toml`: Table 2's
 //! configurations, Table 3's compliances, a mass of 250–280 kg per
 //! configuration, three markers, six repetitions, Gaussian noise with
@@ -184,7 +184,7 @@ impl Fk {
     }
 }
 
-/// The paper's experiment as [`kr270_csv`] builds it: the chain of
+/// The paper's experiment as [`Kr270::csv`] builds it: the chain of
 /// `data/kr270/kr270.urdf`, its markers and load centre of mass.
 pub struct Kr270 {
     fk: Fk,

@@ -346,7 +346,7 @@ pub struct Spec {
     pub blocks: usize,
     /// Weights log-uniform in `[10^-w, 10^w]` (0 = unit weights).
     pub weight_decades: f64,
-    /// σ per row log-uniform in `[σ_lo, σ_hi]` [m], and noise of that σ.
+    /// σ per row log-uniform in `[σ_lo, σ_hi]` \[m\], and noise of that σ.
     pub sigma: (f64, f64),
     /// Attach σ to every block (for the sandwich).
     pub with_sigma: bool,
