@@ -116,3 +116,19 @@ pub(super) fn quadratics3_sparse<T: RealField + Copy>(
     }
     q
 }
+
+/// `Xᵀu` of three vectors `u` over the parameters `idx` only, each with
+/// the arithmetic of `dot` (the products in index order from +0): a `uⱼ`
+/// outside them is +0 (its every term `bⱼ y` was a zero), its product
+/// with `Xⱼ` a zero, and a sum from +0 is never −0, so leaving it out
+/// changes no bit.
+pub(super) fn dots3_sparse<T: RealField + Copy>(u: [&[T]; 3], x: &[T], idx: &[u8]) -> [T; 3] {
+    let mut d = [T::zero(); 3];
+    for &j in idx {
+        let j = usize::from(j);
+        for a in 0..3 {
+            d[a] += x[j] * u[a][j];
+        }
+    }
+    d
+}
