@@ -377,3 +377,77 @@ fn update_is_the_definitions_sums_bit_for_bit() {
     s.update(0, &SMatrix::<f64, 3, 2>::identity(), &Vector3::zeros())
         .unwrap();
 }
+
+/// Rows with zero columns of `B` (on all three axes, as a configuration
+/// that does not move some parameters, or on one axis only), negative
+/// values among the rest (products `−x · 0 = −0`): the update leaves a
+/// zero column out, and the moments are still the definition's sums bit
+/// for bit, at the sizes of its one-block path and above.
+#[test]
+fn update_with_zero_columns_is_the_definitions_sums_bit_for_bit() {
+    let mut rng = StdRng::seed_from_u64(17);
+    for p in [1usize, 3, 9, 12, 13, 30] {
+        let rows: Vec<(i32, Vec<f64>, [f64; 3])> = (0..120)
+            .map(|k| {
+                let g = [2, 2, 5, 2, 5, 8][k % 6];
+                // Per group a fixed set of zero columns, and now and then
+                // one more zero column or one zero value.
+                let mut b: Vec<f64> = (0..3 * p).map(|_| rng.random_range(-1.0..1.0)).collect();
+                for j in 0..p {
+                    let (per_group, extra) = (
+                        (j + g as usize).is_multiple_of(3),
+                        rng.random_range(0..5) == 0,
+                    );
+                    if per_group || extra {
+                        b[3 * j..3 * j + 3].fill(0.0);
+                    } else if rng.random_range(0..7) == 0 {
+                        b[3 * j + rng.random_range(0..3)] = 0.0;
+                    }
+                }
+                (g, b, [0.0; 3].map(|_: f64| rng.random_range(-1.0..1.0)))
+            })
+            .collect();
+        let want = naive(p, &rows);
+        let mut s = GroupedStats::<f64, nalgebra::Dyn, 4>::with_dim(nalgebra::Dyn(p));
+        for (g, b, y) in &rows {
+            let b = nalgebra::OMatrix::<f64, nalgebra::U3, nalgebra::Dyn>::from_column_slice(b);
+            s.update(*g, &b, &Vector3::from(*y)).unwrap();
+        }
+        assert_bitwise(&s, &want);
+    }
+}
+
+/// A value that is not finite is refused with what it is in (`B` before
+/// `Δp`), and finite values whose squares overflow as an overflow, the
+/// statistics unchanged each time.
+#[test]
+fn update_names_the_non_finite_input() {
+    use robcal::Error::NonFinite;
+    let mut s = GroupedStats::<f64, U2, 2>::new();
+    let b = SMatrix::<f64, 3, 2>::new(1.0, -2.0, 0.5, 0.0, 3.0, -1.0);
+    s.update(0, &b, &Vector3::new(1.0, 2.0, 3.0)).unwrap();
+    let before = s.clone();
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let mut bb = b;
+        bb[(1, 1)] = bad;
+        let dp = Vector3::new(0.0, bad, 1.0);
+        assert_eq!(
+            s.update(0, &bb, &Vector3::zeros()),
+            Err(NonFinite { what: "row" })
+        );
+        assert_eq!(s.update(1, &b, &dp), Err(NonFinite { what: "dp" }));
+        assert_eq!(s.update(0, &bb, &dp), Err(NonFinite { what: "row" }));
+        assert_eq!(s, before);
+    }
+    let huge = SMatrix::<f64, 3, 2>::from_element(1e200);
+    assert_eq!(
+        s.update(0, &huge, &Vector3::zeros()),
+        Err(NonFinite { what: "overflow" })
+    );
+    assert_eq!(
+        s.update(1, &b, &Vector3::repeat(-1e200)),
+        Err(NonFinite { what: "overflow" })
+    );
+    assert_eq!(s, before);
+    s.update(1, &b, &Vector3::repeat(1e100)).unwrap();
+}

@@ -178,7 +178,13 @@ where
             add_group(&mut info, g, k, &idx[..m]);
             for (ax, &w2) in g.axes.iter().zip(&k) {
                 if w2 != T::zero() {
-                    eta.zip_apply(&ax.u, |a, v| *a += v * w2);
+                    // `η` on the support: `u` is +0 elsewhere (its terms
+                    // `bⱼ y` all zeros), and `η` never −0.
+                    let (e, u) = (eta.as_mut_slice(), ax.u.as_slice());
+                    for &j in &idx[..m] {
+                        let j = usize::from(j);
+                        e[j] += u[j] * w2;
+                    }
                     yy += w2 * ax.yy;
                     equations += ax.n;
                 }

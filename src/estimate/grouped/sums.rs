@@ -64,55 +64,55 @@ pub(crate) fn support_indices(mask: u64, p: usize, idx: &mut [u8; 64]) -> Option
     Some(m)
 }
 
-/// [`traces3`] over the parameters `idx` only (increasing; every element
-/// of `S` outside them is zero): the same sums, in the same order, without
-/// the terms that are exact zeros (adding one changes no sum).
-pub(super) fn traces3_sparse<T: RealField + Copy>(
+/// [`traces3`], [`quadratics3`] and the three `Xᵀu` (with the arithmetic
+/// of `dot`: the products in index order from +0) over the parameters
+/// `idx` only (increasing; every element of `S` and `u` outside them is
+/// zero, `u`'s +0): the same sums in the same order without the terms
+/// that are exact zeros (adding one changes no sum; none of these sums is
+/// ever −0), in one pass over the support. Each sum gets its terms in its
+/// own order (the trace of column `i`: its diagonal, then rows `r < i`;
+/// `(SX)ᵢ`: `k < i` from the same column, `k = i`, then `k > i` from row
+/// `i` of the later columns; a row `i` outside `idx` has `(SX)ᵢ = 0`), and
+/// column `i`'s elements above the diagonal are read once for both.
+pub(super) fn residual_sums3_sparse<T: RealField + Copy>(
     inv: &[T],
     n: usize,
     s: [&[T]; 3],
-    idx: &[u8],
-) -> [T; 3] {
-    let mut t = [T::zero(); 3];
-    for (ci, &c) in idx.iter().enumerate() {
-        let c = usize::from(c);
-        let d = inv[c * n + c];
-        for a in 0..3 {
-            t[a] += d * s[a][c * n + c];
-        }
-        for &r in &idx[..ci] {
-            let r = usize::from(r);
-            let v = inv[c * n + r] + inv[c * n + r];
-            for a in 0..3 {
-                t[a] += v * s[a][c * n + r];
-            }
-        }
-    }
-    t
-}
-
-/// [`quadratics3`] over the parameters `idx` only, likewise: a row `i`
-/// outside them has `(SX)ᵢ = 0` and adds an exact zero.
-pub(super) fn quadratics3_sparse<T: RealField + Copy>(
-    s: [&[T]; 3],
-    n: usize,
+    u: [&[T]; 3],
     x: &[T],
     idx: &[u8],
-) -> [T; 3] {
-    let mut q = [T::zero(); 3];
-    for &i in idx {
+) -> [[T; 3]; 3] {
+    let (mut t, mut q, mut d) = ([T::zero(); 3], [T::zero(); 3], [T::zero(); 3]);
+    for (ii, &i) in idx.iter().enumerate() {
         let i = usize::from(i);
+        let (col, xi) = (i * n, x[i]);
+        let di = inv[col + i];
+        for a in 0..3 {
+            t[a] += di * s[a][col + i];
+        }
         let mut y = [T::zero(); 3];
-        for &k in idx {
-            let k = usize::from(k);
-            let at = if k < i { i * n + k } else { k * n + i };
+        for &r in &idx[..ii] {
+            let r = usize::from(r);
+            let v = inv[col + r] + inv[col + r];
             for a in 0..3 {
-                y[a] += s[a][at] * x[k];
+                let sv = s[a][col + r];
+                t[a] += v * sv;
+                y[a] += sv * x[r];
             }
         }
         for a in 0..3 {
-            q[a] += y[a] * x[i];
+            y[a] += s[a][col + i] * xi;
+        }
+        for &k in &idx[ii + 1..] {
+            let k = usize::from(k);
+            for a in 0..3 {
+                y[a] += s[a][k * n + i] * x[k];
+            }
+        }
+        for a in 0..3 {
+            q[a] += y[a] * xi;
+            d[a] += xi * u[a][i];
         }
     }
-    q
+    [t, q, d]
 }
