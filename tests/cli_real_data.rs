@@ -620,4 +620,10 @@ fn justin_with_an_assumed_mass_model_on_the_test_poses() {
         &v,
         [5.006665, 5.158139, 4.779144, 4.479140, 13.697709, 11.797937],
     );
+    // The compliances are per the assumed torques: the report says so.
+    let note = v["notes"][0].as_str().unwrap();
+    assert!(
+        note.starts_with("assumed mass model") && note.contains("2 kg"),
+        "{note}"
+    );
 }

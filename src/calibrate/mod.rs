@@ -261,6 +261,14 @@ fn calibrate_rows(
     }
     let mut settings = *settings;
     let mut notes = Vec::new();
+    if let Some(m) = setup.assumed_link_mass_kg {
+        // The compliances are per the assumed torques: the reader must know.
+        notes.push(format!(
+            "assumed mass model (setup assumed_link_mass_kg): every joint whose moving body \
+             has no mass in the URDF carries {m} kg at its frame's origin; compliances are \
+             per the torques of these masses"
+        ));
+    }
     // Weights known in advance (the instrument's σ) need no scatter per
     // configuration; estimated ones (`estimated`, `both`) fall back to OLS.
     if e.fit_settings.weighting != fit::Weighting::Instrument {
