@@ -133,10 +133,13 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
 #[inline(always)]
 fn panel<S: Simd, const NC: usize>(s: S, op: &mut RankK<'_>, j0: usize, nv_max: usize) {
     let nvec = (j0 + NC).div_ceil(S::F64_LANES);
+    // `nv_max` is a constant where this is inlined: one division a panel.
     let count = nvec.div_ceil(nv_max);
+    let base = nvec / count;
+    let taller = count - (nvec - base * count);
     let mut iv = 0;
     for t in 0..count {
-        let nv = (nvec - iv) / (count - t);
+        let nv = base + usize::from(t >= taller);
         tiles::<S, NC>(s, op, iv, j0, nv);
         iv += nv;
     }
