@@ -2,7 +2,8 @@
 //! scalar `Accumulator<f64, Dyn>` on the same blocks: every statistic within
 //! `1e-12` relative, on every instruction set this processor has (the one
 //! detected, AVX2 + FMA, scalar), at N = 1, 2, 3, 7, 9, 30, 60, 61 (and 0,
-//! 8, 130), with weights (some zero), σ on some blocks, blocks of one and
+//! 8, 11, 16, 23, 130: every width of the kernel's last column panel and of
+//! the copy's last chunk), with weights (some zero), σ on some blocks, blocks of one and
 //! two rows, and stream lengths that end on a full buffer, a partial one and a single
 //! block; then every rejected input: the core's error, the statistics
 //! unchanged, and the stream going on as if the block had not come.
@@ -19,8 +20,12 @@ use robcal::estimate::wide::{Instructions, WideAccumulator};
 use robcal::{Accumulator, Block, Error};
 
 /// The sizes, the edges of the 8-column chunks, and one wider than
-/// a first-level-cache buffer's minimum (24 rows).
-const SIZES: [usize; 10] = [1, 2, 3, 7, 8, 9, 30, 60, 61, 130];
+/// a first-level-cache buffer's minimum (24 rows). `(N + 1) mod 8`, the
+/// width of the kernel's last column panel: 2, 3, 4, 0, 1, 2, 4, 1, 0, 7,
+/// 5, 6, 3; `N mod 8`, the columns of AVX-512's last chunk before `Δp`
+/// (taken from `B`'s last 24 values when `N ≥ 8`): 1, 2, 3, 7, 0, 1, 3, 0,
+/// 7, 6, 4, 5, 2.
+const SIZES: [usize; 13] = [1, 2, 3, 7, 8, 9, 11, 16, 23, 30, 60, 61, 130];
 
 /// Every instruction set this processor runs.
 fn instruction_sets(n: usize) -> Vec<WideAccumulator> {

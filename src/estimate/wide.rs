@@ -103,6 +103,9 @@ pub struct WideAccumulator {
     /// rows included (the core's overflow check, see
     /// [`Accumulator::update`]).
     bound: f64,
+    /// The permutes of the last chunk of a block's copy (AVX-512):
+    /// [`kernel::row_permutes`]`(n mod 8)`.
+    tail: [[[i64; 8]; 2]; 3],
 }
 
 /// The bytes of `U` the buffer is sized to (half of a 48 KiB first-level
@@ -183,6 +186,7 @@ impl WideAccumulator {
             equations: 0,
             sigma_rows: 0,
             bound: 0.0,
+            tail: kernel::row_permutes(n % 8),
         }
     }
 
@@ -278,6 +282,7 @@ impl WideAccumulator {
             row0: self.rows,
             du: aligned_mut(&mut self.u, len),
             dv: ws.map(|_| aligned_mut(&mut self.v, len)),
+            tail: &self.tail,
         }
         .run(self.arch);
         // The core's running bound: `(Σ w² + Σ w⁴σ²) q` bounds the change of

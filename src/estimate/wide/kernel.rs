@@ -18,12 +18,14 @@
 //!   `M = Vᵀ V`).
 //!
 //! The rank-`k` update ([`rank_k`]) walks `C` in column panels of `NC = L`
-//! columns (narrower at the end: 4, 2, 1); in a panel `j0 .. j0 + NC`, the
-//! rows `0 .. j0 + NC` (the upper triangle and the panel's diagonal block,
-//! rounded up to whole vectors) in register tiles of `NV` vectors, kept in
-//! registers while the buffered rows stream by: per row, `NV` vector loads
-//! of `B`, `NC` broadcasts of `A` and `NV · NC` fused multiply-adds, summed
-//! over the rows in order (the scalar update's order, each product fused).
+//! columns (the last one exactly as wide as the columns left); in a panel
+//! `j0 .. j0 + NC`, the rows `0 .. j0 + NC` (the upper triangle and the
+//! panel's diagonal block, rounded up to whole vectors) in register tiles
+//! of up to `NV` vectors (as even as they go; taller in the last, narrower
+//! panel), kept in registers while the buffered rows stream by: per row,
+//! `NV` vector loads of `B`, `NC` broadcasts of `A` and `NV · NC` fused
+//! multiply-adds, summed over the rows in order (the scalar update's
+//! order, each product fused).
 
 use pulp::{Arch, Simd, WithSimd};
 
@@ -105,47 +107,41 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
     let m = op.m;
     let mut j0 = 0;
     while j0 + NC <= m {
-        panel::<S, NV, NC>(s, &mut op, j0);
+        panel::<S, NC>(s, &mut op, j0, NV);
         j0 += NC;
     }
-    // The last columns (fewer than NC): panels of 4, 2 and 1.
-    let w = m - j0;
-    if NC > 4 && w & 4 != 0 {
-        panel::<S, NV, 4>(s, &mut op, j0);
-        j0 += 4;
-    }
-    if NC > 2 && w & 2 != 0 {
-        panel::<S, NV, 2>(s, &mut op, j0);
-        j0 += 2;
-    }
-    if NC > 1 && w & 1 != 0 {
-        panel::<S, NV, 1>(s, &mut op, j0);
+    // The last `w < NC` columns: one panel exactly that wide, its tiles
+    // taller (see `panel`).
+    let budget = if S::REGISTER_COUNT >= 32 { 24 } else { 12 };
+    let tall = |w: usize| (budget / w).min(8);
+    match m - j0 {
+        0 => {}
+        1 => panel::<S, 1>(s, &mut op, j0, tall(1)),
+        2 => panel::<S, 2>(s, &mut op, j0, tall(2)),
+        3 => panel::<S, 3>(s, &mut op, j0, tall(3)),
+        4 => panel::<S, 4>(s, &mut op, j0, tall(4)),
+        5 => panel::<S, 5>(s, &mut op, j0, tall(5)),
+        6 => panel::<S, 6>(s, &mut op, j0, tall(6)),
+        _ => panel::<S, 7>(s, &mut op, j0, tall(7)),
     }
 }
 
-/// Columns `j0 .. j0 + NC`, rows `0 .. j0 + NC` in whole vectors: tiles of
-/// `NV` vectors where `NC` is the full panel width, taller ones (up to 24
-/// accumulators, 8 vectors) in the narrow panels, then one tile of what is
-/// left — so that no tile but the smallest panels' has fewer accumulators
-/// than cover the multiply-add latency.
+/// Columns `j0 .. j0 + NC`, rows `0 .. j0 + NC` in whole vectors, in tiles
+/// of at most `nv_max` vectors, as even as they go (`4 = 2 + 2`, not
+/// `3 + 1`: a one-vector tile of eight columns needs more loads than
+/// multiply-adds, and has fewer accumulators than cover their latency).
 #[inline(always)]
-fn panel<S: Simd, const NV: usize, const NC: usize>(s: S, op: &mut RankK<'_>, j0: usize) {
+fn panel<S: Simd, const NC: usize>(s: S, op: &mut RankK<'_>, j0: usize, nv_max: usize) {
     let nvec = (j0 + NC).div_ceil(S::F64_LANES);
-    // Accumulators the registers hold besides the loads: 24 of AVX-512's
-    // 32, 12 of AVX2's 16.
-    let budget = if S::REGISTER_COUNT >= 32 { 24 } else { 12 };
-    let tall = if NV * NC >= budget || S::F64_LANES == 1 {
-        NV
-    } else {
-        (budget / NC).min(8)
-    };
+    // `nv_max` is a constant where this is inlined: one division a panel.
+    let count = nvec.div_ceil(nv_max);
+    let base = nvec / count;
+    let taller = count - (nvec - base * count);
     let mut iv = 0;
-    while iv + tall <= nvec {
-        tiles::<S, NC>(s, op, iv, j0, tall);
-        iv += tall;
-    }
-    if iv < nvec {
-        tiles::<S, NC>(s, op, iv, j0, nvec - iv);
+    for t in 0..count {
+        let nv = base + usize::from(t >= taller);
+        tiles::<S, NC>(s, op, iv, j0, nv);
+        iv += nv;
     }
 }
 
@@ -213,6 +209,8 @@ pub(super) struct Push<'a> {
     pub(super) row0: usize,
     pub(super) du: &'a mut [f64],
     pub(super) dv: Option<&'a mut [f64]>,
+    /// [`row_permutes`]`(n mod 8)` (AVX-512's last chunk).
+    pub(super) tail: &'a [[[i64; 8]; 2]; 3],
 }
 
 impl Push<'_> {
@@ -298,10 +296,43 @@ impl WithSimd for PushAny<'_, '_> {
     }
 }
 
+/// The permutes of [`Push`] with AVX-512 that take row `r` of `t` columns
+/// (1 ..= 8; 0: none) out of 24 values `x` (three vectors: `t` columns,
+/// column-major 3 × 8, ending at the 24th value; the first `8 − t` columns
+/// before them are not used): lane `c < t` of the result is `x[3(c + 8 − t) + r]`, the
+/// first permute taking what the first two vectors hold, the second the
+/// rest from the third (other lanes: anything). `[first, second]` per row.
+pub(super) const fn row_permutes(t: usize) -> [[[i64; 8]; 2]; 3] {
+    let mut p = [[[0i64; 8]; 2]; 3];
+    let mut r = 0;
+    while r < 3 {
+        let mut c = 0;
+        while c < 8 {
+            p[r][1][c] = c as i64;
+            if c < t {
+                let i = 3 * (c + 8 - t) + r;
+                if i < 16 {
+                    p[r][0][c] = i as i64;
+                } else {
+                    p[r][1][c] = (i - 8) as i64;
+                }
+            }
+            c += 1;
+        }
+        r += 1;
+    }
+    p
+}
+
+/// [`row_permutes`] of a whole chunk (eight columns).
+const BODY: [[[i64; 8]; 2]; 3] = row_permutes(8);
+
 /// [`Push`] of a three-row block with AVX-512: eight columns (24 values,
 /// three vectors) at a time, split into the three rows by two permutes
-/// each; the last chunk (the remaining columns, then `Δp` as one more
-/// column, then zeros: the buffer's padding) from a copy on the stack.
+/// each. The last chunk (the remaining `t = n mod 8` columns, then `Δp` as
+/// one more column, then zeros: the buffer's padding) from the last 24
+/// values of `B` (permutes of their own, `tail`), or, when `B` has fewer
+/// (`n < 8`), from masked loads.
 #[cfg(target_arch = "x86_64")]
 struct PushV4<'a, 'b> {
     push: &'b mut Push<'a>,
@@ -320,43 +351,18 @@ impl pulp::NullaryFnOnce for PushV4<'_, '_> {
         let avx = v4.avx512f;
         let (cap, row0) = (push.cap, push.row0);
         let n = push.b.len() / 3;
-        let full = n / 8;
-        // Row r of a chunk is its values 3c + r (c = 0..8) of 24: the first
-        // permute takes those the first two vectors hold, the second the
-        // rest from the third.
-        let perm = |r: i64| {
-            let lo = if r == 0 { 6 } else { 5 };
-            let i = |c: i64| if c < lo { 3 * c + r } else { 0 };
-            let k = |c: i64| if c < lo { c } else { 3 * c + r - 8 };
-            (
-                avx._mm512_setr_epi64(i(0), i(1), i(2), i(3), i(4), i(5), i(6), i(7)),
-                avx._mm512_setr_epi64(k(0), k(1), k(2), k(3), k(4), k(5), k(6), k(7)),
-            )
-        };
-        let perms = [perm(0), perm(1), perm(2)];
+        let (full, t) = (n / 8, n % 8);
+        let perms = v4_permutes(&BODY);
         let k = push.w.map(|k| v4.splat_f64s(k));
         let ks = push.ws.map(|s| s.map(|k| v4.splat_f64s(k)));
         let mut q = [v4.splat_f64s(0.0); 3];
-        let (src, _) = V4::as_simd_f64s(&push.b[..24 * full]);
-        // The last chunk: the remaining columns (masked loads: zeros past
-        // them), then Δp put in as one more column.
-        let rest = &push.b[24 * full..];
-        let part = |v: usize| v4.partial_load_f64s(rest.get(8 * v..).unwrap_or(&[]));
-        let tail = [part(0), part(1), part(2)];
-        let dp_lane = 1u8 << (n % 8);
         let (du, _) = V4::as_mut_simd_f64s(push.du);
         let mut dv = push.dv.as_deref_mut().map(|dv| V4::as_mut_simd_f64s(dv).0);
-        let chunks = src.chunks_exact(3).map(|x| [x[0], x[1], x[2]]);
-        for (chunk, x) in chunks.chain(core::iter::once(tail)).enumerate() {
-            let x: [__m512d; 3] = x.map(pulp::cast);
-            for (r, (p1, p2)) in perms.iter().enumerate() {
-                let t = avx._mm512_permutex2var_pd(x[0], *p1, x[1]);
-                let mut y = avx._mm512_permutex2var_pd(t, *p2, x[2]);
-                if chunk == full {
-                    let dp = avx._mm512_set1_pd(push.dp[r]);
-                    y = avx._mm512_mask_mov_pd(y, dp_lane, dp);
-                }
-                let y: pulp::f64x8 = pulp::cast(y);
+        let (src, _) = V4::as_simd_f64s(&push.b[..24 * full]);
+        for (chunk, x) in src.chunks_exact(3).enumerate() {
+            let x: [__m512d; 3] = [x[0], x[1], x[2]].map(pulp::cast);
+            for r in 0..3 {
+                let y = v4_split(v4, x, perms[r]);
                 let i = chunk * cap + row0 + r;
                 q[r] = v4.mul_add_f64s(y, y, q[r]);
                 du[i] = v4.mul_f64s(k[r], y);
@@ -365,9 +371,59 @@ impl pulp::NullaryFnOnce for PushV4<'_, '_> {
                 }
             }
         }
-        let q: [f64; 8] = pulp::cast(v4.add_f64s(v4.add_f64s(q[0], q[1]), q[2]));
-        q.iter().sum()
+        // The last chunk: lane t is Δp, the lanes past it zero.
+        let x: [__m512d; 3] = if t == 0 {
+            [avx._mm512_setzero_pd(); 3]
+        } else if n >= 8 {
+            let (src, _) = V4::as_simd_f64s(&push.b[3 * n - 24..]);
+            [src[0], src[1], src[2]].map(pulp::cast)
+        } else {
+            let b = push.b;
+            [0, 8, 16].map(|v| pulp::cast(v4.partial_load_f64s(b.get(v..).unwrap_or(&[]))))
+        };
+        let tail = if n >= 8 {
+            v4_permutes(push.tail)
+        } else {
+            perms
+        };
+        let (low, dp_lane) = ((1u8 << t) - 1, 1u8 << t);
+        for r in 0..3 {
+            let dp = avx._mm512_maskz_mov_pd(dp_lane, avx._mm512_set1_pd(push.dp[r]));
+            let y = avx._mm512_mask_mov_pd(dp, low, pulp::cast(v4_split(v4, x, tail[r])));
+            let y: pulp::f64x8 = pulp::cast(y);
+            let i = full * cap + row0 + r;
+            q[r] = v4.mul_add_f64s(y, y, q[r]);
+            du[i] = v4.mul_f64s(k[r], y);
+            if let (Some(dv), Some(ks)) = (dv.as_deref_mut(), ks) {
+                dv[i] = v4.mul_f64s(ks[r], y);
+            }
+        }
+        v4.reduce_sum_f64s(v4.add_f64s(v4.add_f64s(q[0], q[1]), q[2]))
     }
+}
+
+/// [`row_permutes`] as AVX-512 index vectors.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn v4_permutes(p: &[[[i64; 8]; 2]; 3]) -> [[core::arch::x86_64::__m512i; 2]; 3] {
+    [
+        [pulp::cast(p[0][0]), pulp::cast(p[0][1])],
+        [pulp::cast(p[1][0]), pulp::cast(p[1][1])],
+        [pulp::cast(p[2][0]), pulp::cast(p[2][1])],
+    ]
+}
+
+/// One row out of three vectors (see [`row_permutes`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn v4_split(
+    v4: pulp::x86::V4,
+    x: [core::arch::x86_64::__m512d; 3],
+    p: [core::arch::x86_64::__m512i; 2],
+) -> pulp::f64x8 {
+    let avx = v4.avx512f;
+    let y = avx._mm512_permutex2var_pd(x[0], p[0], x[1]);
+    pulp::cast(avx._mm512_permutex2var_pd(y, p[1], x[2]))
 }
 
 /// The machine's fused multiply-add peak through the same dispatch as
