@@ -278,6 +278,17 @@ fn irls_at_dyn_equals_const_bitwise() {
     assert_eq!(bits(&flat(&b.sigma[0])), bits(&flat(&b.sigma[1])));
 }
 
+/// `rows` (group, `B` column-major `3 × p`, `Δp`) streamed in order into
+/// grouped statistics of `p` parameters.
+fn dyn_stats(p: usize, rows: &[(i32, Vec<f64>, [f64; 3])]) -> GroupedStats<f64, nalgebra::Dyn, 4> {
+    let mut s = GroupedStats::<f64, nalgebra::Dyn, 4>::with_dim(nalgebra::Dyn(p));
+    for (g, b, y) in rows {
+        let b = nalgebra::OMatrix::<f64, nalgebra::U3, nalgebra::Dyn>::from_column_slice(b);
+        s.update(*g, &b, &Vector3::from(*y)).unwrap();
+    }
+    s
+}
+
 /// One axis's moments: `S` (column-major, upper triangle), `u`, `yy`, rows.
 type Moments = (Vec<f64>, Vec<f64>, f64, usize);
 /// A group's id and its three axes' moments.
@@ -348,12 +359,7 @@ fn update_is_the_definitions_sums_bit_for_bit() {
             })
             .collect();
         let want = naive(p, &rows);
-        let mut s = GroupedStats::<f64, nalgebra::Dyn, 4>::with_dim(nalgebra::Dyn(p));
-        for (g, b, y) in &rows {
-            let b = nalgebra::OMatrix::<f64, nalgebra::U3, nalgebra::Dyn>::from_column_slice(b);
-            s.update(*g, &b, &Vector3::from(*y)).unwrap();
-        }
-        assert_bitwise(&s, &want);
+        assert_bitwise(&dyn_stats(p, &rows), &want);
     }
     // Near the threshold: 1e153² = 1e306, a few of them still fit.
     let mut s = GroupedStats::<f64, U2, 2>::new();
@@ -408,12 +414,7 @@ fn update_with_zero_columns_is_the_definitions_sums_bit_for_bit() {
             })
             .collect();
         let want = naive(p, &rows);
-        let mut s = GroupedStats::<f64, nalgebra::Dyn, 4>::with_dim(nalgebra::Dyn(p));
-        for (g, b, y) in &rows {
-            let b = nalgebra::OMatrix::<f64, nalgebra::U3, nalgebra::Dyn>::from_column_slice(b);
-            s.update(*g, &b, &Vector3::from(*y)).unwrap();
-        }
-        assert_bitwise(&s, &want);
+        assert_bitwise(&dyn_stats(p, &rows), &want);
     }
 }
 

@@ -68,10 +68,7 @@ impl GroupRows {
     /// The positions of group `g`'s rows in [`GroupRows::all`] (empty past
     /// the last group).
     pub fn range(&self, g: usize) -> std::ops::Range<usize> {
-        match (self.start.get(g), self.start.get(g + 1)) {
-            (Some(&a), Some(&b)) => a..b,
-            _ => 0..0,
-        }
+        self.offset(g)..self.offset(g.saturating_add(1))
     }
 
     /// The position in [`GroupRows::all`] of group `g`'s first row (the

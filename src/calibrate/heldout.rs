@@ -26,6 +26,14 @@ use super::design::{Design, GroupRows};
 /// caller refits that group.
 const MIN_EIGENVALUE: f64 = 1e-9;
 
+/// Whether `I − H_gg` with these eigenvalues leaves the fit without the
+/// group identified (every eigenvalue above [`MIN_EIGENVALUE`]).
+fn invertible(eigenvalues: &[f64]) -> bool {
+    !eigenvalues
+        .iter()
+        .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
+}
+
 /// The held-out residuals of [`ols_heldout`], in the order of its
 /// [`GroupRows`].
 #[derive(Debug, Clone)]
@@ -89,11 +97,7 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         // Symmetric by construction; its rounding is not.
         let ih = (ih + ih.transpose()) * 0.5;
         let eig = ih.symmetric_eigen();
-        if eig
-            .eigenvalues
-            .iter()
-            .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
-        {
+        if !invertible(eig.eigenvalues.as_slice()) {
             return false;
         }
         let t = eig.eigenvectors.tr_mul(&e).component_div(&eig.eigenvalues);
@@ -107,11 +111,7 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         // I − H_gg, symmetric positive semidefinite.
         let ih = DMatrix::identity(m, m) - &bg * chol.solve(&bg.transpose());
         let eig = ih.symmetric_eigen();
-        if eig
-            .eigenvalues
-            .iter()
-            .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
-        {
+        if !invertible(eig.eigenvalues.as_slice()) {
             return false;
         }
         let e = eig.eigenvectors.tr_mul(&eg);
