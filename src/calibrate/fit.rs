@@ -10,7 +10,8 @@ use super::moments::DesignMoments;
 pub use super::settings::Method;
 use super::view::View;
 use crate::estimate::{
-    nested_test, robust_weights, Fit, IrlsSettings, NestedTest, Reweightable, RobustWeight,
+    nested_test, robust_weights, Accumulator, Fit, IrlsSettings, NestedTest, Reweightable,
+    RobustWeight,
 };
 pub use crate::io::Weighting;
 use crate::Error;
@@ -87,6 +88,16 @@ pub fn fit(
     let floor = instrument.filter(|_| s.weighting == Weighting::Both);
     let view = View::new(d, cols, skip_group, floor);
     fit_source(&view, cols, instrument, s)
+}
+
+/// `Λ = Σ BᵀB` and `η = Σ BᵀΔp` of the columns `cols` of `d` at unit
+/// weights: the sums the OLS [`fit`] solves, bit for bit (and the
+/// information of the independence test, [`Design::identifiability`]).
+///
+/// # Errors
+/// As [`fit`] (a sum that is not finite).
+pub fn information(d: &Design, cols: &[usize]) -> Result<Accumulator<f64, Dyn>, Error> {
+    View::new(d, cols, None, None).weighted(&vec![Vector3::repeat(1.0); d.groups], None)
 }
 
 /// [`fit`] of all the columns of `m` (the moments of the columns `cols` of
