@@ -48,23 +48,20 @@ impl Rows {
 
         // Angle bins per joint, from the rows that enter the problem, in
         // order of first appearance in the file (k21, k22, … of the paper).
-        let mut bins = Vec::with_capacity(dof);
-        let mut compensator_ok = Vec::with_capacity(dof);
-        for j in 0..dof {
-            let qs: Vec<(f64, Option<&str>, i64)> = if use_absolute {
-                data.unloaded()
-                    .map(|o| (o.q[j], o.q_written.get(j), o.config))
-                    .collect()
-            } else {
-                data.deflections
-                    .iter()
-                    .map(|d| {
-                        let o = &data.observations[d.rows[1]];
-                        (o.q[j], o.q_written.get(j), o.config)
-                    })
-                    .collect()
-            };
-            let values: Vec<f64> = qs.iter().map(|v| v.0).collect();
+        // The joints are independent (each sorts every value: on worker
+        // threads with many rows); a joint's cells as written are read only
+        // for its bins' centres.
+        let entering: Vec<&crate::io::Observation> = if use_absolute {
+            data.unloaded().collect()
+        } else {
+            data.deflections
+                .iter()
+                .map(|d| &data.observations[d.rows[1]])
+                .collect()
+        };
+        let threads = crate::calibrate::parallel::for_rows(entering.len()).min(dof);
+        let per_joint = crate::calibrate::parallel::map(dof, threads, |j| {
+            let values: Vec<f64> = entering.iter().map(|o| o.q[j]).collect();
             let mut sorted = values.clone();
             // (Equal under `total_cmp` is the same bits: unstable is the
             // same order, and faster on a million values.)
@@ -73,28 +70,40 @@ impl Rows {
             clusters(&sorted, |c| centres.push(c));
             let mut jb = Vec::new();
             let mut counts = Vec::new();
+            let mut written_bins = Vec::new();
             if centres.len() <= policy.max_bins {
                 // (Only here: with many distinct values, e.g. random poses,
                 // the key's scan of every value made this sort quadratic
                 // for bins that are then not used.)
                 by_first_appearance(&mut centres, &values);
                 for c in &centres {
-                    let near = |v: &&(f64, Option<&str>, i64)| (v.0 - c).abs() <= BIN_TOLERANCE_RAD;
-                    let written = qs
+                    let near = |v: f64| (v - c).abs() <= BIN_TOLERANCE_RAD;
+                    let written = entering
                         .iter()
-                        .find(near)
-                        .and_then(|v| v.1)
+                        .find(|o| near(o.q[j]))
+                        .and_then(|o| o.q_written.get(j))
                         .map_or_else(|| format!("{c}"), |w| w.trim().to_string());
-                    let mut cfgs: Vec<i64> = qs.iter().filter(near).map(|v| v.2).collect();
+                    let mut cfgs: Vec<i64> = entering
+                        .iter()
+                        .filter(|o| near(o.q[j]))
+                        .map(|o| o.config)
+                        .collect();
                     cfgs.sort_unstable();
                     cfgs.dedup();
                     counts.push(cfgs.len());
                     let a = angle_urad(*c);
-                    names.bins.insert((j as u8, a), written);
+                    written_bins.push(((j as u8, a), written));
                     jb.push(a);
                 }
             }
-            compensator_ok.push(policy.compensator_eligible(&counts));
+            (jb, policy.compensator_eligible(&counts), written_bins)
+        });
+        drop(entering);
+        let mut bins = Vec::with_capacity(dof);
+        let mut compensator_ok = Vec::with_capacity(dof);
+        for (jb, ok, written_bins) in per_joint {
+            names.bins.extend(written_bins);
+            compensator_ok.push(ok);
             bins.push(jb);
         }
 
