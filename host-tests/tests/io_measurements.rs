@@ -676,3 +676,79 @@ fn instrument_sigma_columns() {
     let back = read_measurements(&path, &job.robot, &job.setup).unwrap();
     assert_eq!(back.observations[0].sigma_m, rows[0].sigma_m);
 }
+
+/// A file of more than a few MB is read in chunks on worker threads
+/// (`io::measurements`, issue 16) when the machine has more than one: every
+/// row, line number, warning and error must be what one reader gives. The
+/// expected values come from the generator here, not from the reader.
+#[test]
+fn large_files_read_in_chunks_keep_lines_values_and_errors() {
+    let job = job();
+    let mut rng = Rng::new(16);
+    // CRLF and LF lines, blank lines, a time column; ~4 MB.
+    let mut text = format!("{HEADER},t\n");
+    let mut line = 1;
+    let mut expected = Vec::new();
+    let mut first_outside = None;
+    let mut outside = 0;
+    for k in 0..60_000_i64 {
+        if k % 997 == 0 {
+            text.push_str(if k % 2 == 0 { "\r\n" } else { "\n" });
+            line += 1;
+        }
+        // j1 in degrees, every 5000th row beyond its limits (±2.5 rad) by
+        // more than 10 % of the range.
+        let j1 = if k % 5000 == 4999 {
+            200.0
+        } else {
+            (rng.uniform() - 0.5) * 200.0
+        };
+        if j1 > 171.0 {
+            outside += 1;
+            first_outside.get_or_insert(line + 1);
+        }
+        // Exact in binary: the reader's decimal shift is then x / 1000.
+        let x = (k % 2000) as f64 + 0.25;
+        let end = if k % 3 == 0 { "\r\n" } else { "\n" };
+        text.push_str(&format!(
+            "{},0,1,0,{j1},20,100,{x},1.5,-2,{}{end}",
+            k + 1,
+            k
+        ));
+        line += 1;
+        expected.push((line, j1.to_radians(), x / 1000.0, k as f64));
+    }
+    assert!(text.len() > 3 << 20, "large enough to be chunked");
+    let m = read(&job, &text).unwrap();
+    assert_eq!(m.observations.len(), expected.len());
+    for (o, &(line, q1, x, t)) in m.observations.iter().zip(&expected) {
+        assert_eq!((o.line, o.q[0], o.p_m[0], o.t_s), (line, q1, x, Some(t)));
+    }
+    let w: Vec<String> = m.warnings.iter().map(ToString::to_string).collect();
+    let first = first_outside.unwrap();
+    assert!(
+        w.iter().any(|w| w.starts_with(&format!(
+            "d.csv:{first}: column 'j1': {outside} value(s) outside the URDF limits"
+        ))),
+        "{w:?}"
+    );
+    // An error deep in the file: its line and column, as one reader says.
+    let bad_line = expected[45_000].0;
+    let mut lines: Vec<&str> = text.split('\n').collect();
+    let bad = lines[bad_line - 1].replacen(",1,0,", ",9,0,", 1);
+    lines[bad_line - 1] = &bad;
+    let e = read_err(&job, &lines.join("\n"));
+    assert_eq!(
+        (e.kind, e.line, e.column.as_deref()),
+        (ErrorKind::UnknownMarker, Some(bad_line), Some("marker"))
+    );
+    // A short row deep in the file: the csv reader's error, its line.
+    let short = format!("{}\n1,0,1\n", text.trim_end());
+    let e = read_err(&job, &short);
+    assert_eq!((e.kind, e.line), (ErrorKind::Syntax, Some(line + 1)));
+    assert!(
+        e.to_string()
+            .contains("row has 3 fields, the header has 11"),
+        "{e}"
+    );
+}

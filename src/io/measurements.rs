@@ -37,13 +37,14 @@
 
 use std::path::{Path, PathBuf};
 
-use super::cells::{parse_int, parse_real, raw, Scale};
-use super::setup::{AngleUnit, LengthUnit, Setup};
-use super::urdf::{Robot, UrdfJointKind};
+use super::setup::Setup;
+use super::urdf::Robot;
 use super::{ErrorKind, InputError, InputWarning};
 
 mod pairing;
+mod records;
 use pairing::{pair, warnings, Stats};
+use records::{chunked, Layout};
 
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
@@ -272,21 +273,19 @@ fn parse_bytes(
     // after CRLF line ends and does not count blank lines. A line ends at
     // `\n`, `\r\n` or a lone `\r` (old Mac files), as the csv crate's
     // records do.
-    let newlines: Vec<usize> = bytes
-        .iter()
-        .enumerate()
-        .filter_map(|(i, &b)| {
-            let end = b == b'\n' || (b == b'\r' && bytes.get(i + 1) != Some(&b'\n'));
-            end.then_some(i)
+    let threads = crate::calibrate::parallel::threads();
+    let newlines: Vec<usize> = if threads > 1 && bytes.len() >= 1 << 21 {
+        let n = bytes.len();
+        crate::calibrate::parallel::map(threads, threads, |k| {
+            records::line_ends(bytes, k * n / threads..(k + 1) * n / threads)
         })
-        .collect();
-    let line_at = |pos: Option<&csv::Position>| {
-        let Some(pos) = pos else { return 1 };
-        let mut at = pos.byte() as usize;
-        while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
-            at += 1;
-        }
-        newlines.partition_point(|&n| n < at) + 1
+        .concat()
+    } else {
+        records::line_ends(bytes, 0..bytes.len())
+    };
+    let line_at = |pos: Option<&csv::Position>| match pos {
+        Some(pos) => records::line_at(bytes, &newlines, pos.byte() as usize),
+        None => 1,
     };
     let err = |kind, line: usize, message: String| {
         InputError::new(file.clone(), kind, message).at_line(line)
@@ -411,171 +410,32 @@ fn parse_bytes(
         ));
     }
 
-    let units = setup.units;
-    let dof = robot.dof();
-    let markers: Vec<u32> = setup.markers.iter().map(|m| m.id).collect();
-    let mut stats = Stats::new(dof);
-    let mut observations: Vec<Observation> = Vec::new();
-    let mut record = csv::StringRecord::new();
-    while rdr.read_record(&mut record).map_err(csv_err)? {
-        let line = line_at(record.position());
-        let mut o = Observation {
-            q: vec![0.0; dof],
-            line,
-            rep: 1,
-            marker: markers.first().copied().unwrap_or(1),
-            ..Observation::default()
-        };
-        for ((cell, &col), name) in record.iter().zip(&cols).zip(header.iter()) {
-            let cerr = |kind, message: String| cell_err(kind, line, name, message);
-            if col == Col::Ignored {
-                continue;
+    let layout = Layout {
+        file: &file,
+        robot,
+        setup,
+        header: &header,
+        cols: &cols,
+        joint_field: &joint_field,
+        markers: setup.markers.iter().map(|m| m.id).collect(),
+    };
+    let data_start = rdr.position().byte() as usize;
+    let (observations, stats) = match chunked(bytes, data_start, &newlines, &layout, threads) {
+        Some(done) => done,
+        None => {
+            // One reader over the whole file (small files, quoted cells,
+            // and every file with an error: its message is this
+            // reader's, with the file's own record numbers).
+            let mut stats = Stats::new(robot.dof());
+            let mut observations: Vec<Observation> = Vec::new();
+            let mut record = csv::StringRecord::new();
+            while rdr.read_record(&mut record).map_err(csv_err)? {
+                let line = line_at(record.position());
+                observations.push(layout.observation(&record, line, &mut stats)?);
             }
-            if cell.is_empty() {
-                return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
-            }
-            match col {
-                Col::Ignored => {}
-                Col::Config => {
-                    o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?
-                }
-                Col::Rep => o.rep = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?,
-                Col::Marker => {
-                    o.marker = cell.parse().map_err(|_| {
-                        cerr(
-                            ErrorKind::Syntax,
-                            format!("'{cell}' is not a marker id (integer 0 to {})", u32::MAX),
-                        )
-                    })?;
-                    if !markers.contains(&o.marker) {
-                        return Err(cerr(
-                            ErrorKind::UnknownMarker,
-                            format!("marker {} is not declared in the setup", o.marker),
-                        ));
-                    }
-                }
-                Col::Load => {
-                    o.load_kg = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
-                    if o.load_kg < 0.0 {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            format!("negative load {} kg", o.load_kg),
-                        ));
-                    }
-                    if o.load_kg > MAX_LOAD_KG {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            format!(
-                                "load {:?} kg is more than {MAX_LOAD_KG:?} kg: no robot carries it \
-                                 (another unit, or an overflow?)",
-                                o.load_kg
-                            ),
-                        ));
-                    }
-                    if o.load_kg > 0.0 && setup.load.is_none() {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            "loaded row, but the setup has no [load] saying where the load acts"
-                                .into(),
-                        ));
-                    }
-                }
-                Col::Joint(j) => {
-                    let kind = robot.joint_kinds[j];
-                    let scale = if kind.is_angular() {
-                        Scale::Angle(units.angle)
-                    } else {
-                        Scale::Length(units.length)
-                    };
-                    let v = parse_real(cell, scale).map_err(|(k, m)| cerr(k, m))?;
-                    if kind.is_angular() {
-                        stats.max_angle_written = stats.max_angle_written.max(raw(cell).abs());
-                    }
-                    if let (UrdfJointKind::Revolute, AngleUnit::Rad, Some(l)) =
-                        (kind, units.angle, robot.limits[j])
-                    {
-                        let tau = std::f64::consts::TAU;
-                        if v.abs() > tau && l.lower >= -tau && l.upper <= tau {
-                            return Err(cerr(
-                                ErrorKind::Units,
-                                format!(
-                                    "{v} rad is beyond ±2π for a joint limited to [{}, {}] rad: \
-                                     is the column in degrees? ([units] angle = \"rad\")",
-                                    l.lower, l.upper
-                                ),
-                            ));
-                        }
-                    }
-                    if let Some(l) = robot.limits[j] {
-                        let margin = 0.1 * (l.upper - l.lower);
-                        if v < l.lower - margin || v > l.upper + margin {
-                            let (count, _) = stats.outside[j].get_or_insert((0, line));
-                            *count += 1;
-                        }
-                    }
-                    o.q[j] = v;
-                }
-                Col::Pos(k) => {
-                    let v = parse_real(cell, Scale::Length(units.length))
-                        .map_err(|(k, m)| cerr(k, m))?;
-                    if v.abs() > MAX_POSITION_M {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            format!(
-                                "{v:?} m is more than {MAX_POSITION_M:?} m from the origin \
-                                 (another unit, or an overflow?)"
-                            ),
-                        ));
-                    }
-                    if units.length == LengthUnit::M && v.abs() > 100.0 {
-                        return Err(cerr(
-                            ErrorKind::Units,
-                            format!(
-                                "{v} m is more than 100 m from the origin: is the column in \
-                                 millimetres? ([units] length = \"m\")"
-                            ),
-                        ));
-                    }
-                    stats.max_pos_written = stats.max_pos_written.max(raw(cell).abs());
-                    o.p_m[k] = v;
-                }
-                Col::Time => {
-                    let t = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
-                    if t.abs() > MAX_TIME_S {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            format!(
-                                "{t:?} s is more than {MAX_TIME_S:?} s from 0 (milliseconds, \
-                                 or an overflow?)"
-                            ),
-                        ));
-                    }
-                    o.t_s = Some(t);
-                }
-                Col::Sigma(k) => {
-                    let v = parse_real(cell, Scale::Length(units.length))
-                        .map_err(|(k, m)| cerr(k, m))?;
-                    if !(0.0..=MAX_POSITION_M).contains(&v) {
-                        return Err(cerr(
-                            ErrorKind::InvalidValue,
-                            format!(
-                                "σ {v:?} m: the instrument's standard deviation is a length \
-                                 from 0 to {MAX_POSITION_M:?} m"
-                            ),
-                        ));
-                    }
-                    o.sigma_m.get_or_insert([0.0; 3])[k] = v;
-                }
-            }
+            (observations, stats)
         }
-        // Every joint has its column (checked with the header).
-        o.q_written = WrittenCells::new(
-            joint_field
-                .iter()
-                .map(|&f| f.and_then(|f| record.get(f)).unwrap_or("")),
-        );
-        observations.push(o);
-    }
+    };
     if observations.is_empty() {
         return Err(err(
             ErrorKind::InvalidValue,
@@ -585,7 +445,7 @@ fn parse_bytes(
     }
 
     let (deflections, moved) = pair(&observations, &file)?;
-    let warnings = warnings(&file, robot, units, &stats, moved);
+    let warnings = warnings(&file, robot, setup.units, &stats, moved);
 
     Ok(Measurements {
         file,

@@ -1,0 +1,319 @@
+//! The records of a measurement file after its header: one row into an
+//! [`Observation`] ([`Layout::observation`]), and the rows of a large file
+//! in chunks on worker threads ([`chunked`]).
+
+use std::path::Path;
+
+use super::super::cells::{parse_int, parse_real, raw, Scale};
+use super::super::setup::{AngleUnit, LengthUnit, Setup};
+use super::super::urdf::{Robot, UrdfJointKind};
+use super::super::{ErrorKind, InputError};
+use super::{Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S};
+
+/// Fewest bytes of records a chunk is made for: smaller files are read by
+/// one reader.
+const MIN_CHUNK_BYTES: usize = 1 << 20;
+
+/// What a record's cells are: the file's header as read.
+pub(super) struct Layout<'a> {
+    /// The file, for errors.
+    pub(super) file: &'a Path,
+    /// The robot the joint columns are of.
+    pub(super) robot: &'a Robot,
+    /// Units, markers and load.
+    pub(super) setup: &'a Setup,
+    /// The header's cells (the columns' names).
+    pub(super) header: &'a csv::StringRecord,
+    /// Each field's column.
+    pub(super) cols: &'a [Col],
+    /// Each joint's field.
+    pub(super) joint_field: &'a [Option<usize>],
+    /// The setup's marker ids.
+    pub(super) markers: Vec<u32>,
+}
+
+impl Layout<'_> {
+    /// The record on `line` as an observation; `stats` takes its joint
+    /// values and positions (limits, units).
+    ///
+    /// # Errors
+    /// The first of its cells that is rejected (module [`super`]), with the
+    /// line and the column.
+    pub(super) fn observation(
+        &self,
+        record: &csv::StringRecord,
+        line: usize,
+        stats: &mut Stats,
+    ) -> Result<Observation, InputError> {
+        let mut o = Observation {
+            q: vec![0.0; self.robot.dof()],
+            line,
+            rep: 1,
+            marker: self.markers.first().copied().unwrap_or(1),
+            ..Observation::default()
+        };
+        for ((cell, &col), name) in record.iter().zip(self.cols).zip(self.header.iter()) {
+            let cerr = |kind, message: String| {
+                InputError::new(self.file, kind, message)
+                    .at_line(line)
+                    .in_column(name)
+            };
+            if col == Col::Ignored {
+                continue;
+            }
+            if cell.is_empty() {
+                return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
+            }
+            match col {
+                Col::Ignored => {}
+                Col::Config => {
+                    o.config = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?
+                }
+                Col::Rep => o.rep = parse_int(cell).map_err(|m| cerr(ErrorKind::Syntax, m))?,
+                Col::Marker => {
+                    o.marker = cell.parse().map_err(|_| {
+                        cerr(
+                            ErrorKind::Syntax,
+                            format!("'{cell}' is not a marker id (integer 0 to {})", u32::MAX),
+                        )
+                    })?;
+                    if !self.markers.contains(&o.marker) {
+                        return Err(cerr(
+                            ErrorKind::UnknownMarker,
+                            format!("marker {} is not declared in the setup", o.marker),
+                        ));
+                    }
+                }
+                Col::Load => {
+                    o.load_kg = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
+                    if o.load_kg < 0.0 {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!("negative load {} kg", o.load_kg),
+                        ));
+                    }
+                    if o.load_kg > MAX_LOAD_KG {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "load {:?} kg is more than {MAX_LOAD_KG:?} kg: no robot carries it \
+                                 (another unit, or an overflow?)",
+                                o.load_kg
+                            ),
+                        ));
+                    }
+                    if o.load_kg > 0.0 && self.setup.load.is_none() {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            "loaded row, but the setup has no [load] saying where the load acts"
+                                .into(),
+                        ));
+                    }
+                }
+                Col::Joint(j) => {
+                    let kind = self.robot.joint_kinds[j];
+                    let scale = if kind.is_angular() {
+                        Scale::Angle(self.setup.units.angle)
+                    } else {
+                        Scale::Length(self.setup.units.length)
+                    };
+                    let v = parse_real(cell, scale).map_err(|(k, m)| cerr(k, m))?;
+                    if kind.is_angular() {
+                        stats.max_angle_written = stats.max_angle_written.max(raw(cell).abs());
+                    }
+                    if let (UrdfJointKind::Revolute, AngleUnit::Rad, Some(l)) =
+                        (kind, self.setup.units.angle, self.robot.limits[j])
+                    {
+                        let tau = std::f64::consts::TAU;
+                        if v.abs() > tau && l.lower >= -tau && l.upper <= tau {
+                            return Err(cerr(
+                                ErrorKind::Units,
+                                format!(
+                                    "{v} rad is beyond ±2π for a joint limited to [{}, {}] rad: \
+                                     is the column in degrees? ([units] angle = \"rad\")",
+                                    l.lower, l.upper
+                                ),
+                            ));
+                        }
+                    }
+                    if let Some(l) = self.robot.limits[j] {
+                        let margin = 0.1 * (l.upper - l.lower);
+                        if v < l.lower - margin || v > l.upper + margin {
+                            let (count, _) = stats.outside[j].get_or_insert((0, line));
+                            *count += 1;
+                        }
+                    }
+                    o.q[j] = v;
+                }
+                Col::Pos(k) => {
+                    let v = parse_real(cell, Scale::Length(self.setup.units.length))
+                        .map_err(|(k, m)| cerr(k, m))?;
+                    if v.abs() > MAX_POSITION_M {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{v:?} m is more than {MAX_POSITION_M:?} m from the origin \
+                                 (another unit, or an overflow?)"
+                            ),
+                        ));
+                    }
+                    if self.setup.units.length == LengthUnit::M && v.abs() > 100.0 {
+                        return Err(cerr(
+                            ErrorKind::Units,
+                            format!(
+                                "{v} m is more than 100 m from the origin: is the column in \
+                                 millimetres? ([units] length = \"m\")"
+                            ),
+                        ));
+                    }
+                    stats.max_pos_written = stats.max_pos_written.max(raw(cell).abs());
+                    o.p_m[k] = v;
+                }
+                Col::Time => {
+                    let t = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
+                    if t.abs() > MAX_TIME_S {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{t:?} s is more than {MAX_TIME_S:?} s from 0 (milliseconds, \
+                                 or an overflow?)"
+                            ),
+                        ));
+                    }
+                    o.t_s = Some(t);
+                }
+                Col::Sigma(k) => {
+                    let v = parse_real(cell, Scale::Length(self.setup.units.length))
+                        .map_err(|(k, m)| cerr(k, m))?;
+                    if !(0.0..=MAX_POSITION_M).contains(&v) {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "σ {v:?} m: the instrument's standard deviation is a length \
+                                 from 0 to {MAX_POSITION_M:?} m"
+                            ),
+                        ));
+                    }
+                    o.sigma_m.get_or_insert([0.0; 3])[k] = v;
+                }
+            }
+        }
+        // Every joint has its column (checked with the header).
+        o.q_written = WrittenCells::new(
+            self.joint_field
+                .iter()
+                .map(|&f| f.and_then(|f| record.get(f)).unwrap_or("")),
+        );
+        Ok(o)
+    }
+}
+
+/// Where the lines of `bytes[range]` end (`\n`, `\r\n` or a lone `\r`,
+/// as the csv crate's records do), positions in `bytes`.
+pub(super) fn line_ends(bytes: &[u8], range: std::ops::Range<usize>) -> Vec<usize> {
+    let from = range.start;
+    bytes[range]
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &b)| {
+            let i = from + k;
+            let end = b == b'\n' || (b == b'\r' && bytes.get(i + 1) != Some(&b'\n'));
+            end.then_some(i)
+        })
+        .collect()
+}
+
+/// The line of a record at byte `at` of `bytes` (past any line end there),
+/// with `newlines` every line end of `bytes` ([`line_ends`]).
+pub(super) fn line_at(bytes: &[u8], newlines: &[usize], mut at: usize) -> usize {
+    while at < bytes.len() && matches!(bytes[at], b'\r' | b'\n') {
+        at += 1;
+    }
+    newlines.partition_point(|&n| n < at) + 1
+}
+
+/// The records from byte `start` of `bytes` (past the header), read in
+/// chunks that end at line ends, on up to `threads` threads, and joined in
+/// file order: the observations and stats one reader makes. `None` when the
+/// file is small, has quotes (a quoted cell may hold a line end), or any
+/// chunk has an error: the caller then reads the file with one reader,
+/// which gives the error with the file's own record numbers.
+pub(super) fn chunked(
+    bytes: &[u8],
+    start: usize,
+    newlines: &[usize],
+    layout: &Layout<'_>,
+    threads: usize,
+) -> Option<(Vec<Observation>, Stats)> {
+    let data = bytes.get(start..)?;
+    if threads < 2 || data.len() < 2 * MIN_CHUNK_BYTES || data.contains(&b'"') {
+        return None;
+    }
+    let chunks = (4 * threads).min(data.len() / MIN_CHUNK_BYTES);
+    // Chunk `k` ends after the first `\n` at or past its share.
+    let mut ends = Vec::with_capacity(chunks);
+    for k in 1..chunks {
+        let from = (start + k * data.len() / chunks).max(ends.last().copied().unwrap_or(start));
+        match bytes[from..].iter().position(|&b| b == b'\n') {
+            Some(p) => ends.push(from + p + 1),
+            None => break,
+        }
+    }
+    ends.push(bytes.len());
+    ends.dedup();
+    let bounds: Vec<(usize, usize)> = ends
+        .iter()
+        .scan(start, |lo, &hi| {
+            let b = (*lo, hi);
+            *lo = hi;
+            Some(b)
+        })
+        .collect();
+    let parts = crate::calibrate::parallel::map_until(
+        bounds.len(),
+        threads,
+        |k| {
+            let (lo, hi) = bounds[k];
+            let mut rdr = csv::ReaderBuilder::new()
+                .has_headers(false)
+                .flexible(true)
+                .trim(csv::Trim::All)
+                .from_reader(&bytes[lo..hi]);
+            let mut stats = Stats::new(layout.robot.dof());
+            // At most one record per line (no slack to copy at the join).
+            let lines =
+                newlines.partition_point(|&n| n < hi) - newlines.partition_point(|&n| n < lo);
+            let mut out = Vec::with_capacity(lines + 1);
+            let mut record = csv::StringRecord::new();
+            loop {
+                match rdr.read_record(&mut record) {
+                    Ok(true) => {}
+                    Ok(false) => return Some((out, stats)),
+                    Err(_) => return None,
+                }
+                if record.len() != layout.header.len() {
+                    return None;
+                }
+                let at = lo + record.position().map_or(0, |p| p.byte() as usize);
+                let line = line_at(bytes, newlines, at);
+                out.push(layout.observation(&record, line, &mut stats).ok()?);
+            }
+        },
+        Option::is_none,
+    );
+    let mut observations = Vec::with_capacity(parts.iter().flatten().map(|p| p.0.len()).sum());
+    let mut stats = Stats::new(layout.robot.dof());
+    for part in parts {
+        let (obs, s) = part?;
+        observations.extend(obs);
+        stats.max_angle_written = stats.max_angle_written.max(s.max_angle_written);
+        stats.max_pos_written = stats.max_pos_written.max(s.max_pos_written);
+        for (all, chunk) in stats.outside.iter_mut().zip(s.outside) {
+            *all = match (*all, chunk) {
+                (Some((n, first)), Some((m, _))) => Some((n + m, first)),
+                (a, b) => a.or(b),
+            };
+        }
+    }
+    Some((observations, stats))
+}
