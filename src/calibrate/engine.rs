@@ -97,12 +97,14 @@ impl Engine<'_> {
                 return Ok(Arc::clone(d));
             }
         }
-        // Dropped before the next is built: one design in memory, not two.
-        *last = None;
-        let d = Arc::new(
-            Design::new(&self.rows, params, &self.lin, &self.names)
-                .map_err(|e| CalibrationError::Core("columns", e))?,
-        );
+        // Dropped before the next is built: one design in memory, not two;
+        // its storage reused when nobody else holds it.
+        let old = last.take().and_then(|(_, _, d)| Arc::try_unwrap(d).ok());
+        let d = match old {
+            Some(old) => Design::new_from(old, &self.rows, params, &self.lin, &self.names),
+            None => Design::new(&self.rows, params, &self.lin, &self.names),
+        };
+        let d = Arc::new(d.map_err(|e| CalibrationError::Core("columns", e))?);
         if let Some(at) = &self.rows.at {
             *last = Some((params.to_vec(), at.clone(), Arc::clone(&d)));
         }
