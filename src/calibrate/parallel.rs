@@ -14,6 +14,9 @@
 //!   ([`for_runs_mut`]); never more than one thread per
 //!   [`MIN_ROWS_PER_THREAD`] rows ([`for_rows`]: a thread costs tens of µs
 //!   to start, a small job stays on the calling thread).
+//! - The angle bins of each joint (`rows/build.rs`: each sorts every
+//!   value) and the chunks of a large measurement file
+//!   (`io::measurements`, joined in file order).
 //!
 //! The answers are therefore bit for bit those of the serial loop, whatever
 //! the number of threads (tests: `tests` below, and `tests/cli_threads.rs`
