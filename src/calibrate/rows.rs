@@ -228,7 +228,7 @@ impl Rows {
         let g_unit = gravity.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
         self.gravity_unit = g_unit;
         let com = self.com;
-        let file = &self.file;
+        let file: &str = &self.file;
         // With several threads, a run after the first row that fails may
         // already have moved its rows' equilibria, the starting points of
         // the next relinearisation (a damped step retries from them); the
@@ -257,9 +257,10 @@ impl Rows {
                 }),
                 own_weight_mps2: absolute.then_some(gravity),
             };
+            // (Borrows the file's name: a copy per call was two allocations
+            // per row and relinearisation.)
+            let line = row.line;
             let core = |what: &'static str| {
-                let line = row.line;
-                let file = file.clone();
                 move |e: Error| match e {
                     Error::NotConverged { .. }
                     | Error::NotIdentifiable { .. }
