@@ -250,7 +250,9 @@ impl Linearisation {
     /// when every joint is rigid (the rows are the first-order ones) or the
     /// model is linear.
     pub fn law(&self, q: &[f64], absolute: bool, gravity: &[[f64; 2]]) -> Option<Law> {
-        if self.model == DeflectionModel::Linear {
+        // No value: every term is zero, the robot rigid (without the four
+        // vectors per row and relinearisation that say so).
+        if self.model == DeflectionModel::Linear || self.values.is_empty() {
             return None;
         }
         let law = self.joint_law(q, absolute, gravity);
