@@ -67,12 +67,25 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         &selected
     };
     let y = &d.y;
-    let chol = (b.tr_mul(b)).cholesky()?;
+    // `Λ = BᵀB` as nalgebra's `tr_mul` computes it (each element the `dot`
+    // of two columns), the upper triangle's dots on worker threads and
+    // mirrored: the same bits (a product commutes), half the dots.
+    let n = cols.len();
+    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|i| (i..n).map(move |j| (i, j))).collect();
+    let dots = super::parallel::map(pairs.len(), threads.min(pairs.len()), |k| {
+        let (i, j) = pairs[k];
+        b.column(i).dot(&b.column(j))
+    });
+    let mut lambda = DMatrix::zeros(n, n);
+    for (&(i, j), &v) in pairs.iter().zip(&dots) {
+        lambda[(i, j)] = v;
+        lambda[(j, i)] = v;
+    }
+    let chol = lambda.cholesky()?;
     let x = chol.solve(&b.tr_mul(&DVector::from_column_slice(y)));
     if !x.iter().all(|v| v.is_finite()) {
         return None;
     }
-    let n = cols.len();
     // A group of one row (one point per configuration: the case with the
     // most groups) in fixed-size arithmetic without an allocation per
     // group: `w_a = Λ⁻¹ b_aᵀ` from the inverse, `H_ab = b_b · w_a`.
