@@ -331,7 +331,9 @@ impl Engine<'_> {
         self.restore(fitted)?;
         let d = self.design(&fitted.params)?;
         let cols: Vec<usize> = (0..fitted.params.len()).collect();
-        let mut res = Vec::with_capacity(d.rows());
+        // The held-out residuals' squares summed in row order as they come
+        // (the RMS [`rms_um`] takes of them, without a vector of them all).
+        let mut res = SquareSum::default();
         (self.progress)(&format!(
             "held-out RMS: {} fits, one without each configuration",
             self.rows.configs.len()
@@ -377,11 +379,11 @@ impl Engine<'_> {
         };
         for g in 0..groups {
             if let Some(f) = fast.as_ref().filter(|f| f.ok.get(g) == Some(&true)) {
-                res.extend_from_slice(&f.res[by.range(g)]);
+                res.extend(&f.res[by.range(g)]);
                 continue;
             }
             if let Some(r) = folds.get(g).and_then(Option::as_ref) {
-                res.extend_from_slice(r);
+                res.extend(r);
                 continue;
             }
             let mut use_cols = cols.clone();
@@ -397,11 +399,11 @@ impl Engine<'_> {
             };
             let Some(out) = out else { return Ok(None) };
             for &i in by.of(g) {
-                res.push(d.residual(&use_cols, &out.x, i));
+                res.extend(&[d.residual(&use_cols, &out.x, i)]);
             }
         }
         self.restore(fitted)?;
-        Ok(Some(rms_um(&res)))
+        Ok(Some(res.rms_um()))
     }
 
     /// `f` with its held-out RMS.
@@ -483,5 +485,40 @@ impl Engine<'_> {
                 f.fit.covariance.iter().copied(),
             ),
         }
+    }
+}
+
+/// `Σ |r|²` of residuals in the order they come and their number: the
+/// [`rms_um`] of all of them, bit for bit (`rms_um` sums them in order
+/// from −0 too).
+#[derive(Debug)]
+struct SquareSum {
+    sum: f64,
+    count: usize,
+}
+
+impl Default for SquareSum {
+    fn default() -> Self {
+        Self {
+            sum: -0.0,
+            count: 0,
+        }
+    }
+}
+
+impl SquareSum {
+    fn extend(&mut self, res: &[Vector3<f64>]) {
+        for r in res {
+            self.sum += r.norm_squared();
+        }
+        self.count += res.len();
+    }
+
+    /// As [`rms_um`] of every residual added.
+    fn rms_um(&self) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        (self.sum / self.count as f64).sqrt() * 1e6
     }
 }

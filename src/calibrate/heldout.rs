@@ -154,10 +154,10 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         }
         (res, ok)
     });
-    let mut out = HeldOut {
-        res: Vec::with_capacity(d.rows()),
-        ok: Vec::with_capacity(groups),
-    };
+    // The first run's vectors grown by the others' (not a third copy).
+    let mut runs = runs.into_iter();
+    let (res, ok) = runs.next().unwrap_or_default();
+    let mut out = HeldOut { res, ok };
     for (res, ok) in runs {
         out.res.extend(res);
         out.ok.extend(ok);

@@ -67,9 +67,13 @@ pub fn lack_of_fit(
     params: usize,
     residuals: &[Vector3<f64>],
 ) -> Option<LackOfFit> {
+    // No repetitions: no pure error to test against (one row per
+    // configuration says so without the cells).
+    if rows.rows.len() == rows.configs.len() {
+        return None;
+    }
     let (cell, n_cells) = cells(rows);
     if n_cells == rows.rows.len() {
-        // No repetitions: no pure error to test against.
         return None;
     }
     // Per cell, in row order: the sum, then the squares about the mean (the
