@@ -26,12 +26,15 @@
 use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3, U3};
 
 use super::design::Design;
+
+mod terms;
 use crate::estimate::accumulator::symmetric;
 use crate::estimate::{
     group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Block, Fit, Noise,
     Reweightable, RobustWeight, Solution,
 };
 use crate::Error;
+use terms::{add_terms, column_shares, leverage3_rows, Term, LANES};
 
 /// The rows of a [`Design`] on some of its columns, optionally without one
 /// group (leave-one-out).
@@ -121,6 +124,21 @@ impl<'a> View<'a> {
         }
     }
 
+    /// `f(t, columns)` for each share `t` of the triangle's columns
+    /// ([`column_shares`]), on worker threads when the rows are many
+    /// ([`super::parallel::for_rows`]), with the shares: each element of
+    /// the triangle is summed by one share, over every row in order, as a
+    /// pass on one thread sums it (the same bits on any number of threads).
+    fn by_columns<T: Send>(
+        &self,
+        f: impl Fn(usize, std::ops::Range<usize>) -> T + Sync,
+    ) -> Vec<(std::ops::Range<usize>, T)> {
+        let n = self.cols.len();
+        let shares = column_shares(n, super::parallel::for_rows(self.rows.len()));
+        let parts = super::parallel::map(shares.len(), shares.len(), |t| f(t, shares[t].clone()));
+        shares.into_iter().zip(parts).collect()
+    }
+
     /// The three axes of row `k` of a copy `b`.
     fn row_of<'b>(&self, b: &'b [f64], k: usize) -> [&'b [f64]; 3] {
         let n = self.cols.len();
@@ -168,28 +186,50 @@ impl<'a> View<'a> {
     /// a weight is negative or anything is not finite.
     fn sums(&self, weights: &[Vector3<f64>]) -> Option<Accumulator<f64, Dyn>> {
         let n = self.cols.len();
-        let mut info = DMatrix::<f64>::zeros(n, n);
-        let mut eta = DVector::<f64>::zeros(n);
-        let (mut yy, mut equations) = (0.0, 0);
         let ok = |w: &Vector3<f64>| w.iter().all(|w| *w >= 0.0 && w.is_finite());
         if !self.rows.iter().all(|&i| ok(&weights[self.d.group[i]])) {
             return None;
         }
-        self.each_block(|rows, b| {
-            let mut terms = Vec::with_capacity(rows.len());
-            for (k, &i) in rows.iter().enumerate() {
-                let w = weights[self.d.group[i]];
-                let (f, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
-                yy = ((yy + f[0] * y[0] * y[0]) + f[1] * y[1] * y[1]) + f[2] * y[2] * y[2];
-                equations += f.iter().filter(|f| **f > 0.0).count();
-                terms.push(Term {
-                    b: self.row_of(b, k),
-                    k: f,
-                    y,
-                });
-            }
-            add_terms(info.as_mut_slice(), Some(eta.as_mut_slice()), n, &terms);
+        // Each share of the triangle's columns over every row ([`by_columns`]);
+        // the first also sums `Δpᵀ W² Δp` and counts the equations.
+        let parts = self.by_columns(|t, columns| {
+            let mut info = DMatrix::<f64>::zeros(n, n);
+            let mut eta = DVector::<f64>::zeros(n);
+            let (mut yy, mut equations) = (0.0, 0);
+            self.each_block(|rows, b| {
+                let mut terms = Vec::with_capacity(rows.len());
+                for (k, &i) in rows.iter().enumerate() {
+                    let w = weights[self.d.group[i]];
+                    let (f, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
+                    if t == 0 {
+                        yy = ((yy + f[0] * y[0] * y[0]) + f[1] * y[1] * y[1]) + f[2] * y[2] * y[2];
+                        equations += f.iter().filter(|f| **f > 0.0).count();
+                    }
+                    terms.push(Term {
+                        b: self.row_of(b, k),
+                        k: f,
+                        y,
+                    });
+                }
+                let (m, e) = (info.as_mut_slice(), Some(eta.as_mut_slice()));
+                add_terms(m, e, n, &terms, columns.clone());
+            });
+            (info, eta, yy, equations)
         });
+        let mut info = DMatrix::<f64>::zeros(n, n);
+        let mut eta = DVector::<f64>::zeros(n);
+        let (mut yy, mut equations) = (0.0, 0);
+        for (t, (columns, (part, part_eta, part_yy, part_equations))) in
+            parts.into_iter().enumerate()
+        {
+            for j in columns {
+                info.column_mut(j).copy_from(&part.column(j));
+                eta[j] = part_eta[j];
+            }
+            if t == 0 {
+                (yy, equations) = (part_yy, part_equations);
+            }
+        }
         let finite = yy.is_finite() && info.iter().chain(eta.iter()).all(|v| v.is_finite());
         finite.then(|| Accumulator::from_sums(info, eta, yy, equations))
     }
@@ -218,23 +258,32 @@ impl<'a> View<'a> {
                 && s.iter().all(|s| *s > 0.0 && s.is_finite())
         });
         if ok {
-            self.each_block(|rows, b| {
-                let mut terms = Vec::with_capacity(rows.len());
-                for (r, &i) in rows.iter().enumerate() {
-                    let g = self.d.group[i];
-                    let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
-                    let k = |a: usize| {
-                        let w2 = w[a] * w[a];
-                        w2 * w2 * s[a] * s[a]
-                    };
-                    terms.push(Term {
-                        b: self.row_of(b, r),
-                        k: [k(0), k(1), k(2)],
-                        y: [0.0; 3],
-                    });
-                }
-                add_terms(m.as_mut_slice(), None, n, &terms);
+            let parts = self.by_columns(|_, columns| {
+                let mut m = DMatrix::<f64>::zeros(n, n);
+                self.each_block(|rows, b| {
+                    let mut terms = Vec::with_capacity(rows.len());
+                    for (r, &i) in rows.iter().enumerate() {
+                        let g = self.d.group[i];
+                        let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+                        let k = |a: usize| {
+                            let w2 = w[a] * w[a];
+                            w2 * w2 * s[a] * s[a]
+                        };
+                        terms.push(Term {
+                            b: self.row_of(b, r),
+                            k: [k(0), k(1), k(2)],
+                            y: [0.0; 3],
+                        });
+                    }
+                    add_terms(m.as_mut_slice(), None, n, &terms, columns.clone());
+                });
+                m
             });
+            for (columns, part) in parts {
+                for j in columns {
+                    m.column_mut(j).copy_from(&part.column(j));
+                }
+            }
             if m.iter().all(|v| v.is_finite()) {
                 return Ok(symmetric(&m));
             }
@@ -369,78 +418,6 @@ impl Reweightable<f64, Dyn> for View<'_> {
         robust_weights(sigma, weight, weights)?;
         self.fit(weights, active, sigma, dof, true)
     }
-}
-
-/// One row's share of a rank-3 update: its three axes' columns, the factor
-/// of each axis (`w²`, or `w⁴σ²` for `M`) and its `Δp`.
-struct Term<'a> {
-    b: [&'a [f64]; 3],
-    k: [f64; 3],
-    y: [f64; 3],
-}
-
-/// `m[i][j] += Σ_a b_a[i] (k_a b_a[j])` for `i ≤ j` (`m` column-major
-/// `n × n`) and `η_j += Σ_a (k_a b_a[j]) y_a`, for every term in order:
-/// each element's sum is the core's (`add_upper3`: the three axes left to
-/// right, row after row), two rows per pass over the triangle.
-fn add_terms(m: &mut [f64], mut eta: Option<&mut [f64]>, n: usize, terms: &[Term<'_>]) {
-    let mut pairs = terms.chunks_exact(2);
-    for pair in pairs.by_ref() {
-        let (t, u) = (&pair[0], &pair[1]);
-        for (j, column) in m.chunks_exact_mut(n.max(1)).enumerate().take(n) {
-            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
-            let c = [u.k[0] * u.b[0][j], u.k[1] * u.b[1][j], u.k[2] * u.b[2][j]];
-            if let Some(e) = eta.as_deref_mut() {
-                let v = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
-                e[j] = ((v + c[0] * u.y[0]) + c[1] * u.y[1]) + c[2] * u.y[2];
-            }
-            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
-            let ub = (&u.b[0][..=j], &u.b[1][..=j], &u.b[2][..=j]);
-            for (i, x) in column[..=j].iter_mut().enumerate() {
-                let v = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
-                *x = ((v + ub.0[i] * c[0]) + ub.1[i] * c[1]) + ub.2[i] * c[2];
-            }
-        }
-    }
-    for t in pairs.remainder() {
-        for (j, column) in m.chunks_exact_mut(n.max(1)).enumerate().take(n) {
-            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
-            if let Some(e) = eta.as_deref_mut() {
-                e[j] = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
-            }
-            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
-            for (i, x) in column[..=j].iter_mut().enumerate() {
-                *x = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
-            }
-        }
-    }
-}
-
-/// Rows whose leverages [`leverage3_rows`] computes at once.
-const LANES: usize = 4;
-
-/// `bᵀ Λ⁻¹ b` of the three axes of `LANES` rows (`b[(3k + a) LANES + j]`:
-/// column `k`, axis `a`, row `j`; `inv` column-major `p × p`), at
-/// `q[a LANES + j]`: for each row and axis the arithmetic of
-/// [`crate::estimate::leverage`] (`Σ_c (Σ_r Λ⁻¹_rc b_r) b_c`, both sums in
-/// index order), bit for bit; the `3 LANES` sums are independent chains
-/// side by side (the processor overlaps them, the compiler may vectorise
-/// across them: neither changes any lane's arithmetic).
-fn leverage3_rows(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
-    let mut q = [0.0; 3 * LANES];
-    let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
-    for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
-        let mut s = [0.0; 3 * LANES];
-        for (r, &v) in col.iter().enumerate() {
-            for (s, &x) in s.iter_mut().zip(bk(r)) {
-                *s += v * x;
-            }
-        }
-        for ((q, s), &x) in q.iter_mut().zip(&s).zip(bk(c)) {
-            *q += s * x;
-        }
-    }
-    q
 }
 
 #[cfg(test)]
