@@ -400,6 +400,37 @@ where
     }
 }
 
+impl<T: RealField + Copy, D: Dim> Solution<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// [`std_devs`] of [`Solution::cov_sandwich`]`(middle)`, bit for bit,
+    /// without the rest of the covariance: `Λ⁻¹ M` in full (every row is
+    /// needed), then only the diagonal of its product with `Λ⁻¹`, each
+    /// element summed in index order from +0 as [`mat_mul`] does, and
+    /// symmetrised as `cov_sandwich` does (`(c + c) · ½`). The iterations
+    /// of [`super::Reweightable::fit_irls`] that are not the last need
+    /// nothing else.
+    #[must_use]
+    #[inline(never)]
+    pub(crate) fn sandwich_std(&self, middle: &OMatrix<T, D, D>) -> OVector<T, D> {
+        let p = mat_mul(&self.lambda_inv, middle);
+        let n = p.nrows().max(1);
+        let half = nalgebra::convert::<f64, T>(0.5);
+        let mut std = OVector::<T, D>::zeros_generic(p.shape_generic().0, Const::<1>);
+        // Column `i` of `Λ⁻¹` gives `cᵢᵢ = Σₖ pᵢₖ Λ⁻¹ₖᵢ`.
+        let cols = self.lambda_inv.as_slice().chunks_exact(n);
+        for (i, (s, inv_col)) in std.as_mut_slice().iter_mut().zip(cols).enumerate() {
+            let mut c = T::zero();
+            for (k, &v) in inv_col.iter().enumerate() {
+                c += p[(i, k)] * v;
+            }
+            *s = ((c + c) * half).max(T::zero()).sqrt();
+        }
+        std
+    }
+}
+
 /// Standard deviations `√diag(C)` of a covariance matrix.
 #[must_use]
 pub fn std_devs<T: RealField + Copy, D: Dim>(cov: &OMatrix<T, D, D>) -> OVector<T, D>
