@@ -103,6 +103,7 @@ where
         let mut ahead = Ahead {
             weight: &settings.weight,
             info: Information::zeros(dim),
+            weights: [Vector3::zeros(); G],
             ready: false,
         };
         let more = settings.max_iterations > 0;
@@ -124,7 +125,12 @@ where
         let mut x = ols.x;
         let mut k = 1;
         loop {
-            robust_weights(sigma, &settings.weight, weights)?;
+            if ahead.ready {
+                // `robust_weights(sigma, …)`, computed by the last fit.
+                weights.copy_from_slice(&ahead.weights[..weights.len()]);
+            } else {
+                robust_weights(sigma, &settings.weight, weights)?;
+            }
             // (No head start on a fit after the last one.)
             let more = k < settings.max_iterations;
             let (fit, middle) = fit_parts(
@@ -203,7 +209,7 @@ fn fit_parts<T: RealField + Copy, D: Dim, const G: usize>(
     sigma: &mut [Vector3<T>],
     dof: &mut [Vector3<T>],
     estimated: bool,
-    ahead: Option<&mut Ahead<'_, T, D>>,
+    ahead: Option<&mut Ahead<'_, T, D, G>>,
     next: bool,
 ) -> Result<(Solution<T, D>, OMatrix<T, D, D>), Error>
 where
@@ -235,7 +241,8 @@ where
     };
     let middle = match ahead {
         Some(a) if next => {
-            let (middle, ready) = stats.middle_and_next(weights, noise, a.weight, &mut a.info)?;
+            let (middle, ready) =
+                stats.middle_and_next(weights, noise, a.weight, &mut a.info, &mut a.weights)?;
             a.ready = ready;
             middle
         }
@@ -249,15 +256,17 @@ where
     Ok((solution, symmetric(&middle)))
 }
 
-/// The next fit's `Λ`, `η`, … computed ahead: `ready` when `info` holds
-/// [`GroupedStats::information_upper`] of eq. 14's weights (`weight`) of
-/// the last fit's σ.
-struct Ahead<'a, T: RealField + Copy, D: Dim>
+/// The next fit's weights and `Λ`, `η`, … computed ahead: `ready` when
+/// `weights` holds `robust_weights` of the last fit's σ (eq. 14 with
+/// `weight`, every σ accepted) and `info` their
+/// [`GroupedStats::information_upper`].
+struct Ahead<'a, T: RealField + Copy, D: Dim, const G: usize>
 where
     DefaultAllocator: Alloc<D>,
 {
     weight: &'a RobustWeight<T>,
     info: Information<T, D>,
+    weights: [Vector3<T>; G],
     ready: bool,
 }
 

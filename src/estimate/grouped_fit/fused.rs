@@ -34,16 +34,18 @@ where
     /// beside it [`GroupedStats::information_upper`] of the weights that
     /// `robust_weights(noise.sigma, weight, …)` would give, into `next`:
     /// `true` when it would give them and `information_upper` would
-    /// accept them (`next` is not to be used otherwise).
+    /// accept them (`next` is not to be used otherwise); the weights
+    /// into `next_weights`.
     pub(crate) fn middle_and_next(
         &self,
         weights: &[Vector3<T>],
         noise: Noise<'_, T>,
         weight: &RobustWeight<T>,
         next: &mut Information<T, D>,
+        next_weights: &mut [Vector3<T>],
     ) -> Result<(OMatrix<T, D, D>, bool), Error> {
         let groups = self.groups().len();
-        if weights.len() != groups || !noise.fits(groups) {
+        if weights.len() != groups || !noise.fits(groups) || next_weights.len() < groups {
             return Err(Error::Mismatch {
                 what: "one weight (and sigma) per group",
             });
@@ -51,8 +53,10 @@ where
         let dim = self.dim();
         let n = dim.value();
         let mut middle = OMatrix::<T, D, D>::zeros_generic(dim, dim);
-        next.upper.fill(T::zero());
-        next.eta.fill(T::zero());
+        // (Slices: nalgebra's `fill` goes element by element through its
+        // iterator.)
+        next.upper.as_mut_slice().fill(T::zero());
+        next.eta.as_mut_slice().fill(T::zero());
         let Information {
             upper: info,
             eta,
@@ -62,13 +66,16 @@ where
         (*yy, *equations) = (T::zero(), 0);
         let mut next = true;
         let mut idx = [0u8; 64];
-        for (gi, (g, w)) in self.groups().iter().zip(weights).enumerate() {
+        let groups = self.groups().iter().zip(weights).zip(next_weights);
+        for (gi, ((g, w), next_w)) in groups.enumerate() {
             let s = noise.sigma(gi, w);
-            // The next weights' `w'²` (0: the axis adds nothing), as
-            // `robust_weights` and then `information_upper` take them.
+            // The next weights (`robust_weights`) and their `w'²` (0: the
+            // axis adds nothing), as `information_upper` takes them.
+            let (wn, bad) = axis_factors(|a| weight.weight(noise.sigma[gi][a]));
+            *next_w = Vector3::new(wn[0], wn[1], wn[2]);
+            next &= bad.is_none();
             let (kl, bad) = axis_factors(|a| {
-                let w = weight.weight(noise.sigma[gi][a])?;
-                moment_weight(w, None, g.axes[a].n).map(|w2| w2.unwrap_or(T::zero()))
+                moment_weight(wn[a], None, g.axes[a].n).map(|w2| w2.unwrap_or(T::zero()))
             });
             next &= bad.is_none();
             let Some(m) = support_indices(self.supports()[gi], n, &mut idx) else {
