@@ -116,7 +116,7 @@ where
         active: OVector<bool, D>,
     ) -> Result<Self, Error> {
         let n = lambda.nrows();
-        if !lambda.as_slice().iter().all(|v| v.is_finite()) {
+        if !all_finite(lambda.as_slice()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -333,7 +333,7 @@ where
                 what: "one eta per parameter",
             });
         }
-        if !eta.as_slice().iter().all(|v| v.is_finite()) {
+        if !all_finite(eta.as_slice()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -346,9 +346,7 @@ where
         };
         let x = f.solve(eta);
         let inv = f.inverse();
-        if !(x.as_slice().iter().all(|v| v.is_finite())
-            && inv.as_slice().iter().all(|v| v.is_finite()))
-        {
+        if !(all_finite(x.as_slice()) && all_finite(inv.as_slice())) {
             return Err(Error::NonFinite { what: "estimate" });
         }
         let wrss = (yy - dot(&x, eta)).max(T::zero());
@@ -429,6 +427,15 @@ where
         }
         std
     }
+}
+
+/// Whether every value is finite, as `v · 0 = 0` (a floating-point
+/// compare; `is_finite` compares the bits as a 64-bit integer, which
+/// SSE2 does not have), over all of them without an early exit: the
+/// compiler does two at a time.
+fn all_finite<T: RealField + Copy>(v: &[T]) -> bool {
+    let zero = T::zero();
+    v.iter().fold(true, |ok, &v| ok & (v * zero == zero))
 }
 
 /// Standard deviations `√diag(C)` of a covariance matrix.
