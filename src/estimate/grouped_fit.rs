@@ -81,7 +81,7 @@ where
     /// tolerance), the same fits, history and result bit for bit, but the
     /// sandwich covariance in full only for the fit it returns: the others
     /// need only its diagonal, the standard deviations
-    /// ([`Solution::sandwich_std`]).
+    /// (`Solution::sandwich_std`).
     fn fit_irls(
         &self,
         settings: &IrlsSettings<T>,
