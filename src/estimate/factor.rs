@@ -116,7 +116,7 @@ where
         active: OVector<bool, D>,
     ) -> Result<Self, Error> {
         let n = lambda.nrows();
-        if !lambda.as_slice().iter().all(|v| v.is_finite()) {
+        if !all_finite(lambda.as_slice()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -333,7 +333,7 @@ where
                 what: "one eta per parameter",
             });
         }
-        if !eta.as_slice().iter().all(|v| v.is_finite()) {
+        if !all_finite(eta.as_slice()) {
             return Err(Error::NonFinite {
                 what: "information",
             });
@@ -346,9 +346,7 @@ where
         };
         let x = f.solve(eta);
         let inv = f.inverse();
-        if !(x.as_slice().iter().all(|v| v.is_finite())
-            && inv.as_slice().iter().all(|v| v.is_finite()))
-        {
+        if !(all_finite(x.as_slice()) && all_finite(inv.as_slice())) {
             return Err(Error::NonFinite { what: "estimate" });
         }
         let wrss = (yy - dot(&x, eta)).max(T::zero());
@@ -398,6 +396,46 @@ where
         // Symmetrise what rounding left asymmetric.
         (&c + c.transpose()) * nalgebra::convert::<f64, T>(0.5)
     }
+}
+
+impl<T: RealField + Copy, D: Dim> Solution<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    /// [`std_devs`] of [`Solution::cov_sandwich`]`(middle)`, bit for bit,
+    /// without the rest of the covariance: `Λ⁻¹ M` in full (every row is
+    /// needed), then only the diagonal of its product with `Λ⁻¹`, each
+    /// element summed in index order from +0 as [`mat_mul`] does, and
+    /// symmetrised as `cov_sandwich` does (`(c + c) · ½`). The iterations
+    /// of [`super::Reweightable::fit_irls`] that are not the last need
+    /// nothing else.
+    #[must_use]
+    #[inline(never)]
+    pub(crate) fn sandwich_std(&self, middle: &OMatrix<T, D, D>) -> OVector<T, D> {
+        let p = mat_mul(&self.lambda_inv, middle);
+        let n = p.nrows().max(1);
+        let half = nalgebra::convert::<f64, T>(0.5);
+        let mut std = OVector::<T, D>::zeros_generic(p.shape_generic().0, Const::<1>);
+        // Column `i` of `Λ⁻¹` gives `cᵢᵢ = Σₖ pᵢₖ Λ⁻¹ₖᵢ`.
+        let cols = self.lambda_inv.as_slice().chunks_exact(n);
+        for (i, (s, inv_col)) in std.as_mut_slice().iter_mut().zip(cols).enumerate() {
+            let mut c = T::zero();
+            for (k, &v) in inv_col.iter().enumerate() {
+                c += p[(i, k)] * v;
+            }
+            *s = ((c + c) * half).max(T::zero()).sqrt();
+        }
+        std
+    }
+}
+
+/// Whether every value is finite, as `v · 0 = 0` (a floating-point
+/// compare; `is_finite` compares the bits as a 64-bit integer, which
+/// SSE2 does not have), over all of them without an early exit: the
+/// compiler does two at a time.
+fn all_finite<T: RealField + Copy>(v: &[T]) -> bool {
+    let zero = T::zero();
+    v.iter().fold(true, |ok, &v| ok & (v * zero == zero))
 }
 
 /// Standard deviations `√diag(C)` of a covariance matrix.

@@ -19,10 +19,14 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector
 use super::accumulator::{symmetric, Accumulator};
 use super::factor::Solution;
 use super::grouped::{support_indices, GroupMoments, GroupedStats};
-use super::irls::{pool_small_groups, robust_weights, Fit, Noise, Reweightable};
+use super::irls::{
+    pool_small_groups, robust_weights, Fit, IrlsSettings, Iteration, Noise, Reweightable,
+};
 use super::weights::RobustWeight;
 use super::Alloc;
 use crate::Error;
+
+mod fused;
 
 impl<T: RealField + Copy, D: Dim, const G: usize> Reweightable<T, D> for GroupedStats<T, D, G>
 where
@@ -71,6 +75,99 @@ where
         robust_weights(sigma, weight, weights)?;
         fit_grouped(self, weights, active, sigma, dof, true)
     }
+
+    /// The default [`Reweightable::fit_irls`] (OLS, then
+    /// [`Reweightable::fit_reweighted`] until the change is below the
+    /// tolerance), the same fits, history and result bit for bit, but the
+    /// sandwich covariance in full only for the fit it returns: the others
+    /// need only its diagonal, the standard deviations
+    /// (`Solution::sandwich_std`).
+    fn fit_irls(
+        &self,
+        settings: &IrlsSettings<T>,
+        active: &[bool],
+        weights: &mut [Vector3<T>],
+        sigma: &mut [Vector3<T>],
+        dof: &mut [Vector3<T>],
+        mut history: impl FnMut(&Iteration<T, D>),
+    ) -> Result<Fit<T, D>, Error> {
+        if settings.max_iterations == 0 {
+            return Err(Error::OutOfRange {
+                what: "max_iterations",
+                index: 0,
+                len: 0,
+            });
+        }
+        weights.fill(Vector3::repeat(T::one()));
+        let dim = self.dim();
+        let mut ahead = Ahead {
+            weight: &settings.weight,
+            info: Information::zeros(dim),
+            weights: [Vector3::zeros(); G],
+            ready: false,
+        };
+        let more = settings.max_iterations > 0;
+        let (ols, ols_middle) = fit_parts(
+            self,
+            weights,
+            active,
+            sigma,
+            dof,
+            false,
+            Some(&mut ahead),
+            more,
+        )?;
+        history(&Iteration {
+            x: ols.x.clone(),
+            std: ols.sandwich_std(&ols_middle),
+            change: T::zero(),
+        });
+        let mut x = ols.x;
+        let mut k = 1;
+        loop {
+            if ahead.ready {
+                // `robust_weights(sigma, …)`, computed by the last fit.
+                weights.copy_from_slice(&ahead.weights[..weights.len()]);
+            } else {
+                robust_weights(sigma, &settings.weight, weights)?;
+            }
+            // (No head start on a fit after the last one.)
+            let more = k < settings.max_iterations;
+            let (fit, middle) = fit_parts(
+                self,
+                weights,
+                active,
+                sigma,
+                dof,
+                true,
+                Some(&mut ahead),
+                more,
+            )?;
+            let std = fit.sandwich_std(&middle);
+            let mut change = T::zero();
+            for i in 0..active.len() {
+                if active[i] && std[i] > T::zero() {
+                    change = change.max((fit.x[i] - x[i]).abs() / std[i]);
+                }
+            }
+            history(&Iteration {
+                x: fit.x.clone(),
+                std,
+                change,
+            });
+            let converged = change < settings.tolerance;
+            if converged || !more {
+                return Ok(Fit {
+                    covariance: fit.cov_sandwich(&middle),
+                    solution: fit,
+                    iterations: k,
+                    converged,
+                });
+            }
+            x = fit.x;
+            k += 1;
+        }
+    }
 }
 
 /// [`fit_with`] on grouped statistics, the same result bit for bit and the
@@ -89,7 +186,43 @@ fn fit_grouped<T: RealField + Copy, D: Dim, const G: usize>(
 where
     DefaultAllocator: Alloc<D>,
 {
-    let info = stats.information_upper(weights)?;
+    let (solution, middle) = fit_parts(stats, weights, active, sigma, dof, estimated, None, false)?;
+    let covariance = solution.cov_sandwich(&middle);
+    Ok(Fit {
+        solution,
+        covariance,
+        iterations: 0,
+        converged: false,
+    })
+}
+
+/// [`fit_grouped`] without the covariance: the solution and the
+/// sandwich's middle term `M` (full, symmetric). With `ahead`, `Λ` from
+/// it when it is ready (computed by the fit before, for these weights);
+/// and with `next`, it is filled for the next fit
+/// ([`GroupedStats::middle_and_next`]).
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn fit_parts<T: RealField + Copy, D: Dim, const G: usize>(
+    stats: &GroupedStats<T, D, G>,
+    weights: &[Vector3<T>],
+    active: &[bool],
+    sigma: &mut [Vector3<T>],
+    dof: &mut [Vector3<T>],
+    estimated: bool,
+    ahead: Option<&mut Ahead<'_, T, D, G>>,
+    next: bool,
+) -> Result<(Solution<T, D>, OMatrix<T, D, D>), Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let fresh;
+    let info = match ahead.as_deref() {
+        Some(a) if a.ready => &a.info,
+        _ => {
+            fresh = stats.information_upper(weights)?;
+            &fresh
+        }
+    };
     // As `Accumulator::solve_active`.
     let (equations, parameters) = (info.equations, active.iter().filter(|a| **a).count());
     if active.len() == info.upper.nrows() && equations < parameters {
@@ -106,14 +239,35 @@ where
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = symmetric(&stats.middle_upper(weights, noise)?);
-    let covariance = solution.cov_sandwich(&middle);
-    Ok(Fit {
-        solution,
-        covariance,
-        iterations: 0,
-        converged: false,
-    })
+    let middle = match ahead {
+        Some(a) if next => {
+            let (middle, ready) =
+                stats.middle_and_next(weights, noise, a.weight, &mut a.info, &mut a.weights)?;
+            a.ready = ready;
+            middle
+        }
+        a => {
+            if let Some(a) = a {
+                a.ready = false;
+            }
+            stats.middle_upper(weights, noise)?
+        }
+    };
+    Ok((solution, symmetric(&middle)))
+}
+
+/// The next fit's weights and `Λ`, `η`, … computed ahead: `ready` when
+/// `weights` holds `robust_weights` of the last fit's σ (eq. 14 with
+/// `weight`, every σ accepted) and `info` their
+/// [`GroupedStats::information_upper`].
+struct Ahead<'a, T: RealField + Copy, D: Dim, const G: usize>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    weight: &'a RobustWeight<T>,
+    info: Information<T, D>,
+    weights: [Vector3<T>; G],
+    ready: bool,
 }
 
 impl<T: RealField + Copy, D: Dim, const G: usize> GroupedStats<T, D, G>
@@ -164,17 +318,9 @@ where
             // On the support: the three axes' weights first (0: the axis
             // adds nothing); a bad one ends the sums after the axes before
             // it, as one axis at a time would.
-            let mut k = [T::zero(); 3];
-            let mut bad = None;
-            for (a, (ax, &w)) in g.axes.iter().zip(w.iter()).enumerate() {
-                match moment_weight(w, None, ax.n) {
-                    Ok(w2) => k[a] = w2.unwrap_or(T::zero()),
-                    Err(e) => {
-                        bad = Some(e);
-                        break;
-                    }
-                }
-            }
+            let (k, bad) = axis_factors(|a| {
+                moment_weight(w[a], None, g.axes[a].n).map(|w2| w2.unwrap_or(T::zero()))
+            });
             add_group(&mut info, g, k, &idx[..m]);
             for (ax, &w2) in g.axes.iter().zip(&k) {
                 if w2 != T::zero() {
@@ -238,17 +384,7 @@ where
                 }
                 continue;
             };
-            let mut k = [T::zero(); 3];
-            let mut bad = None;
-            for (a, ((ax, &w), &s)) in g.axes.iter().zip(w.iter()).zip(s.iter()).enumerate() {
-                match moment_weight(w, Some(s), ax.n) {
-                    Ok(w2) => k[a] = w2.map_or(T::zero(), |w2| w2 * w2 * s * s),
-                    Err(e) => {
-                        bad = Some(e);
-                        break;
-                    }
-                }
-            }
+            let (k, bad) = middle_factors(g, w, &s);
             add_group(&mut middle, g, k, &idx[..m]);
             if let Some(e) = bad {
                 return Err(overflow_first(&middle, None, T::zero(), e));
@@ -273,6 +409,20 @@ where
     pub(crate) equations: usize,
 }
 
+impl<T: RealField + Copy, D: Dim> Information<T, D>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    fn zeros(dim: D) -> Self {
+        Self {
+            upper: OMatrix::zeros_generic(dim, dim),
+            eta: OVector::zeros_generic(dim, Const::<1>),
+            yy: T::zero(),
+            equations: 0,
+        }
+    }
+}
+
 /// The checks of `Accumulator::add_moments` on one group and axis's weight
 /// `w` (and σ), in its order: `Some(w²)` when its `n` rows enter the sums,
 /// `None` when they do not (no rows, or weight 0).
@@ -289,6 +439,40 @@ fn moment_weight<T: RealField + Copy>(
     }
     let w2 = w * w;
     Ok((n > 0 && w2 != T::zero()).then_some(w2))
+}
+
+/// `f(a)` of the three axes up to the first error, 0 from it on, and that
+/// error. (Straight-line code, not a loop with a `break`: the factors
+/// then stay in registers, where the loop stored them one by one and
+/// `add_group` read two at once, a load the stores could not forward.)
+#[inline(always)]
+fn axis_factors<T: RealField + Copy>(
+    f: impl Fn(usize) -> Result<T, Error>,
+) -> ([T; 3], Option<Error>) {
+    let zero = T::zero();
+    match (f(0), f(1), f(2)) {
+        (Ok(a), Ok(b), Ok(c)) => ([a, b, c], None),
+        (Err(e), _, _) => ([zero; 3], Some(e)),
+        (Ok(a), Err(e), _) => ([a, zero, zero], Some(e)),
+        (Ok(a), Ok(b), Err(e)) => ([a, b, zero], Some(e)),
+    }
+}
+
+/// The factors `w⁴ σ²` of `M` of a group's three axes, with weights `w`
+/// and the middle term's σ `s` ([`axis_factors`] of [`moment_weight`]).
+#[inline(always)]
+fn middle_factors<T: RealField + Copy, D: Dim>(
+    g: &GroupMoments<T, D>,
+    w: &Vector3<T>,
+    s: &Vector3<T>,
+) -> ([T; 3], Option<Error>)
+where
+    DefaultAllocator: Alloc<D>,
+{
+    axis_factors(|a| {
+        moment_weight(w[a], Some(s[a]), g.axes[a].n)
+            .map(|w2| w2.map_or(T::zero(), |w2| w2 * w2 * s[a] * s[a]))
+    })
 }
 
 /// `m += S₀ k₀`, `+= S₁ k₁`, `+= S₂ k₂` on the upper triangle, `Sₐ` the

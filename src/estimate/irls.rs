@@ -495,9 +495,11 @@ pub fn robust_weights<T: RealField + Copy>(
             what: "one weight per group",
         });
     }
+    // The checks of `RobustWeight::weight` first, in its order, without
+    // its division (the weights are computed once, below).
     for s in sigma {
         for a in 0..3 {
-            weight.weight(s[a])?;
+            weight.check_sigma(s[a])?;
         }
     }
     for (o, s) in out.iter_mut().zip(sigma) {

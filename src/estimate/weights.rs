@@ -59,13 +59,20 @@ impl<T: RealField + Copy> RobustWeight<T> {
     /// assert_eq!(rw.weight(0.0).unwrap(), 1.0);
     /// ```
     pub fn weight(&self, sigma: T) -> Result<T, Error> {
+        self.check_sigma(sigma)?;
+        Ok(self.sigma0 / (self.sigma0 + self.lambda * sigma))
+    }
+
+    /// The errors of [`RobustWeight::weight`] for `sigma`, without the
+    /// weight.
+    pub(crate) fn check_sigma(&self, sigma: T) -> Result<(), Error> {
         if !sigma.is_finite() {
             return Err(Error::NonFinite { what: "sigma" });
         }
         if sigma < T::zero() {
             return Err(Error::NotPositive { what: "sigma" });
         }
-        Ok(self.sigma0 / (self.sigma0 + self.lambda * sigma))
+        Ok(())
     }
 }
 
