@@ -429,13 +429,23 @@ where
     }
 }
 
-/// Whether every value is finite, as `v · 0 = 0` (a floating-point
-/// compare; `is_finite` compares the bits as a 64-bit integer, which
-/// SSE2 does not have), over all of them without an early exit: the
-/// compiler does two at a time.
+/// Whether every value is finite. On the host as `v · 0 = 0` (a
+/// floating-point compare; `is_finite` compares the bits as a 64-bit
+/// integer, which SSE2 does not have), over all of them without an early
+/// exit: the compiler does two at a time. On a device (no `std`) as
+/// `is_finite` with an early exit: with soft floats the product is a call
+/// per value, and the fold's code did not fit the Cortex-M3's 64 KiB
+/// flash. The same verdict either way (`∞ · 0` and `NaN · 0` are NaN).
+#[cfg(feature = "std")]
 fn all_finite<T: RealField + Copy>(v: &[T]) -> bool {
     let zero = T::zero();
     v.iter().fold(true, |ok, &v| ok & (v * zero == zero))
+}
+
+/// [`all_finite`] on a device: see the host's.
+#[cfg(not(feature = "std"))]
+fn all_finite<T: RealField + Copy>(v: &[T]) -> bool {
+    v.iter().all(|v| v.is_finite())
 }
 
 /// Standard deviations `√diag(C)` of a covariance matrix.
