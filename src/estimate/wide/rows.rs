@@ -404,13 +404,19 @@ impl Chunks<'_> {
         let avx = v4.avx512f;
         let (n, cap, full) = (self.n, self.cap, self.n / 8);
         let rs = &self.rows.b[i0 * n..(i0 + G) * n];
-        let k: [pulp::f64x8; G] = core::array::from_fn(|g| v4.splat_f64s(scale(i0 + g)));
+        // Loops, not `array::from_fn`: a closure does not inherit the target
+        // features, and an intrinsic in it becomes a call.
+        let mut k = [v4.splat_f64s(0.0); G];
+        for g in 0..G {
+            k[g] = v4.splat_f64s(scale(i0 + g));
+        }
         let at = self.row0 + i0;
+        let mut x = [v4.splat_f64s(0.0); G];
         for c in 0..full {
-            let x: [pulp::f64x8; G] = core::array::from_fn(|g| {
-                let x: [f64; 8] = rs[g * n + 8 * c..][..8].try_into().unwrap_or([0.0; 8]);
-                pulp::cast(x)
-            });
+            for g in 0..G {
+                let v: [f64; 8] = rs[g * n + 8 * c..][..8].try_into().unwrap_or([0.0; 8]);
+                x[g] = pulp::cast(v);
+            }
             let dst = &mut d[c * cap + at..][..G];
             for g in 0..G {
                 let y = v4.mul_f64s(k[g], x[g]);
@@ -418,12 +424,12 @@ impl Chunks<'_> {
                 q[g] = v4.mul_add_f64s(y, y, q[g]);
             }
         }
-        let x: [pulp::f64x8; G] = core::array::from_fn(|g| {
-            let x: [f64; 8] = rs[g * n + n - 8..][..8].try_into().unwrap_or([0.0; 8]);
-            let x = avx._mm512_maskz_permutexvar_pd(self.low, self.idx, pulp::cast(x));
+        for g in 0..G {
+            let v: [f64; 8] = rs[g * n + n - 8..][..8].try_into().unwrap_or([0.0; 8]);
+            let v = avx._mm512_maskz_permutexvar_pd(self.low, self.idx, pulp::cast(v));
             let dp = avx._mm512_set1_pd(self.rows.dp[i0 + g]);
-            pulp::cast(avx._mm512_mask_mov_pd(x, self.dp_lane, dp))
-        });
+            x[g] = pulp::cast(avx._mm512_mask_mov_pd(v, self.dp_lane, dp));
+        }
         let dst = &mut d[full * cap + at..][..G];
         for g in 0..G {
             let y = v4.mul_f64s(k[g], x[g]);
