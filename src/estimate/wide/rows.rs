@@ -56,10 +56,10 @@ impl WideAccumulator {
     /// measurement). For a caller that has its rows this way, or can write
     /// them so as cheaply as a [`crate::Block`]: the copy into the buffer
     /// needs no de-interleave of a column-major block, and the checks run
-    /// once per buffer of rows, in the vector code (at N = 30, AVX-512, a
-    /// block's three rows take about 15 % less time than [`Self::update`]
-    /// of the block; BENCHMARKS.md). `N < 8` takes the copy one value at a
-    /// time.
+    /// once per buffer of rows, in the vector code. On AVX-512 a block's
+    /// three rows take about a quarter less time than [`Self::update`] of
+    /// the block at N = 9, 5 to 10 % less at N = 30 and 60 (BENCHMARKS.md).
+    /// `N < 8` takes the copy one value at a time.
     ///
     /// # Errors
     /// When the lengths of `b`, `dp`, `w` and `sigma` do not agree with one
