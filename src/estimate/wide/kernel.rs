@@ -25,7 +25,9 @@
 //! panel), kept in registers while the buffered rows stream by: per row,
 //! `NV` vector loads of `B`, `NC` broadcasts of `A` and `NV · NC` fused
 //! multiply-adds, summed over the rows in order (the scalar update's
-//! order, each product fused).
+//! order, each product fused). With 8-lane vectors and at least 16
+//! columns, the first two panels are one tile of 24 accumulators
+//! ([`first_two`]) instead of tiles of 8 and 16.
 
 use pulp::{Arch, Simd, WithSimd};
 
@@ -106,6 +108,10 @@ impl WithSimd for RankK<'_> {
 fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
     let m = op.m;
     let mut j0 = 0;
+    if NC == 8 && S::F64_LANES == 8 && m >= 16 {
+        first_two::<S>(s, &mut op);
+        j0 = 16;
+    }
     while j0 + NC <= m {
         panel::<S, NC>(s, &mut op, j0, NV);
         j0 += NC;
@@ -123,6 +129,48 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
         5 => panel::<S, 5>(s, &mut op, j0, tall(5)),
         6 => panel::<S, 6>(s, &mut op, j0, tall(6)),
         _ => panel::<S, 7>(s, &mut op, j0, tall(7)),
+    }
+}
+
+/// The first two column panels of eight (columns `0 .. 16`) with 8-lane
+/// vectors, in one tile of 24 accumulators: vector 0 × columns `0 .. 16`
+/// and vector 1 × columns `8 .. 16`. As two panels, the first is a tile of
+/// one vector × 8 columns: 8 accumulators, exactly the FMA latency × units,
+/// no slack. Each element gets the same fused products in the same order.
+#[inline(always)]
+fn first_two<S: Simd>(s: S, op: &mut RankK<'_>) {
+    let (rows, cap, mp) = (op.rows, op.cap, op.mp);
+    let (bv, _) = S::as_simd_f64s(op.b);
+    let (b0, b1) = (&bv[..rows], &bv[cap..cap + rows]);
+    // Row r's columns 0 .. 8 and 8 .. 16 (chunks 0 and 1 of the buffer).
+    let (a0, a1) = (&op.a[..rows * 8], &op.a[cap * 8..cap * 8 + rows * 8]);
+    let (cv, _) = S::as_mut_simd_f64s(op.c);
+    let vcol = mp / 8;
+    let mut lo = [s.splat_f64s(0.0); 16];
+    let mut hi = [s.splat_f64s(0.0); 8];
+    for k in 0..16 {
+        lo[k] = cv[k * vcol];
+    }
+    for k in 0..8 {
+        hi[k] = cv[(8 + k) * vcol + 1];
+    }
+    for r in 0..rows {
+        let (x0, x1) = (b0[r], b1[r]);
+        let (r0, r1) = (&a0[r * 8..r * 8 + 8], &a1[r * 8..r * 8 + 8]);
+        for k in 0..8 {
+            lo[k] = s.mul_add_e_f64s(x0, s.splat_f64s(r0[k]), lo[k]);
+        }
+        for k in 0..8 {
+            let y = s.splat_f64s(r1[k]);
+            lo[8 + k] = s.mul_add_e_f64s(x0, y, lo[8 + k]);
+            hi[k] = s.mul_add_e_f64s(x1, y, hi[k]);
+        }
+    }
+    for k in 0..16 {
+        cv[k * vcol] = lo[k];
+    }
+    for k in 0..8 {
+        cv[(8 + k) * vcol + 1] = hi[k];
     }
 }
 
