@@ -58,7 +58,8 @@ impl WideAccumulator {
     /// needs no de-interleave of a column-major block, and the checks run
     /// once per buffer of rows, in the vector code. On AVX-512 a block's
     /// three rows take about a quarter less time than [`Self::update`] of
-    /// the block at N = 9, 5 to 10 % less at N = 30 and 60 (BENCHMARKS.md).
+    /// the block at N = 9, 5 to 15 % less at N = 30 and a few percent less
+    /// at N = 60 (BENCHMARKS.md).
     /// `N < 8` takes the copy one value at a time.
     ///
     /// # Errors
