@@ -48,8 +48,11 @@ robcal::estimate::wide::WideAccumulator (SIMD, dispatched at run time), and
 numpy's normal equations on the same rows in chunks of one ring
 (L += A.T @ (w2*A), eta += (w2*A).T @ dp, yy += dp @ (w2*dp)), with the
 machine's FMA peak measured through robcal's dispatch (independent FMA
-chains), interleaved core, wide, peak, numpy per round. numpy's sums are
-checked against robcal's before timing. Flops are counted as the useful
+chains), interleaved core, wide, peak, numpy per round. The wide accumulator
+runs through its three entry points, each on the same stream with the same
+sums: `update` (one block a call, the main table), `update_many` (a slice
+of blocks, one ring a call) and `update_rows` (the ring's rows row-major,
+3000 a call). numpy's sums are checked against robcal's before timing. Flops are counted as the useful
 work, 3 N(N+1)/2 * 2 per block for the upper triangle of Lambda plus 3 N * 2
 for eta (numpy computes the full N x N product: about twice that).
 """
@@ -296,12 +299,14 @@ def stream_main(args):
         rc = Stream(args.stream, n)
         isa = rc.ask("info")[0]
         flops = (3 * n * (n + 1) + 3 * n * 2) * blocks  # Λ (upper) and η
-        times = {"core": [], "wide": [], "peak": [], "numpy": []}
+        times = {"core": [], "wide": [], "many": [], "rows": [], "peak": [], "numpy": []}
         peak_flops = float(rc.ask("peak 1")[0])
-        rc.ask("run 1 wide")
+        for mode in ("wide", "many", "rows"):
+            rc.ask(f"run 1 {mode}")
         for _ in range(rounds):
             times["core"] += [int(t) for t in rc.ask("run 1 core")]
-            times["wide"] += [int(t) for t in rc.ask("run 1 wide")]
+            for mode in ("wide", "many", "rows"):
+                times[mode] += [int(t) for t in rc.ask(f"run 1 {mode}")]
             times["peak"] += [int(t) for t in rc.ask("peak 5")[1:]]
             times["numpy"] += timed(lambda: numpy_stream(rows, n, blocks // ring), 1)
         rc.close()
@@ -309,7 +314,7 @@ def stream_main(args):
         peak = peak_flops / min(times["peak"])  # flops per ns: GFLOP/s
         peak_med = peak_flops / med["peak"] / 1e9
         results.append((n, isa, flops, med, peak, peak_med, times))
-    print(f"\n{rounds} rounds, interleaved core, wide, peak, numpy; median [best] of each:")
+    print(f"\n{rounds} rounds, interleaved core, wide (update, update_many, update_rows), peak, numpy; median [best] of each:")
     print(
         "  N   core (scalar)            wide (SIMD)              numpy                    "
         "peak GFLOP/s         wide % of peak       core/wide  numpy/wide"
@@ -326,6 +331,18 @@ def stream_main(args):
             f"{100 * flops / med['wide'] / 1e9 / peak_med:4.1f} [{100 * flops / best['wide'] / 1e9 / peak:4.1f}] %"
             f"       {med['core'] / med['wide']:5.2f}x     {med['numpy'] / med['wide']:5.2f}x"
         )
+    print("\nthe batched entry points (same stream, same sums): update_many (1000 blocks a call), update_rows (3000 rows a call):")
+    print("  N   wide update              update_many              update_rows              % of peak: update, many, rows")
+    for n, isa, flops, med, peak, peak_med, times in results:
+        best = {k: min(v) / 1e9 for k, v in times.items()}
+
+        def cell(k):
+            return f"{med[k] * 1e3:7.1f} [{best[k] * 1e3:7.1f}] ms"
+
+        def pct(k):
+            return f"{100 * flops / med[k] / 1e9 / peak_med:4.1f} [{100 * flops / best[k] / 1e9 / peak:4.1f}]"
+
+        print(f"  {n:<3} {cell('wide')}  {cell('many')}  {cell('rows')}  {pct('wide')}, {pct('many')}, {pct('rows')} %")
     print("load average after: %.2f %.2f %.2f" % os.getloadavg())
     for n, isa, flops, med, peak, peak_med, times in results:
         print(

@@ -4,7 +4,8 @@
 //! dispatched at run time) at N = 9, 30 and 60 — one update per block (a
 //! live accumulator fed from a ring of 1000 weighted blocks; the wide one's
 //! flush every few dozen rows amortised in it) and 10⁶ blocks streamed from
-//! the same ring — and the machine's FMA peak through the same dispatch
+//! the same ring (through `update`, `update_many` a ring at a time, and
+//! `update_rows` on the ring's rows row-major) — and the machine's FMA peak through the same dispatch
 //! (independent FMA chains). Throughputs are in flops ("elem/s" is
 //! FLOP/s): 3·N(N+1)/2·2 per block for the upper triangle of `Λ` plus
 //! 3·N·2 for `η`; the peak probe's own count.
@@ -20,7 +21,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::Dyn;
-use robcal::estimate::wide::{Instructions, WideAccumulator};
+use robcal::estimate::wide::{Instructions, Rows, WideAccumulator};
 use robcal::{Accumulator, Block};
 
 /// Distinct blocks the updates cycle through.
@@ -30,6 +31,19 @@ const BLOCKS: usize = 1_000_000;
 
 fn ring(n: usize) -> Vec<Block<f64, Dyn>> {
     host_tests::stream_ring(n, RING)
+}
+
+/// The blocks' rows row-major: `b` (rows × N), `Δp`, `w`.
+fn row_major(ring: &[Block<f64, Dyn>]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (mut b, mut dp, mut w) = (Vec::new(), Vec::new(), Vec::new());
+    for blk in ring {
+        for r in 0..3 {
+            b.extend(blk.b.row(r).iter());
+            dp.push(blk.dp[r]);
+            w.push(blk.w[r]);
+        }
+    }
+    (b, dp, w)
 }
 
 /// Useful flops of one block: `Λ`'s upper triangle and `η`.
@@ -82,6 +96,33 @@ fn bench_n(c: &mut Criterion, n: usize) {
             let mut acc = WideAccumulator::new(n);
             for k in 0..BLOCKS {
                 acc.update(&ring[k % RING]).unwrap();
+            }
+            black_box(acc.accumulator())
+        })
+    });
+    // The batched entry points on the same stream: a slice of blocks (the
+    // ring) a call, and the ring's rows row-major a call.
+    group.bench_function(BenchmarkId::new("wide-many", n), |b| {
+        b.iter(|| {
+            let mut acc = WideAccumulator::new(n);
+            for _ in 0..BLOCKS / RING {
+                acc.update_many(&ring).unwrap();
+            }
+            black_box(acc.accumulator())
+        })
+    });
+    let (rb, rdp, rw) = row_major(&ring);
+    group.bench_function(BenchmarkId::new("wide-rows", n), |b| {
+        b.iter(|| {
+            let mut acc = WideAccumulator::new(n);
+            let rows = Rows {
+                b: &rb,
+                dp: &rdp,
+                w: &rw,
+                sigma: None,
+            };
+            for _ in 0..BLOCKS / RING {
+                acc.update_rows(rows).unwrap();
             }
             black_box(acc.accumulator())
         })

@@ -20,7 +20,11 @@
 //! `serve N` reads commands, one per line, and answers each with one line:
 //!
 //! - `run K core` / `run K wide`: K streams of 10⁶ blocks, the time of each
-//!   in ns (the wide one includes the last flush);
+//!   in ns (the wide one includes the last flush); `run K many`: the same
+//!   through `WideAccumulator::update_many`, one call per pass over the ring
+//!   (1000 blocks); `run K rows`: the ring's rows row-major (made once,
+//!   before any timing) through `WideAccumulator::update_rows`, one call per
+//!   pass (3000 rows) — the same sums to the last bit (checked by `export`);
 //! - `peak K`: the flops of one peak probe, then K times in ns;
 //! - `info`: the instruction set the wide accumulator dispatched to;
 //! - `quit`.
@@ -30,7 +34,7 @@ use std::io::{BufRead, Write};
 use std::time::Instant;
 
 use nalgebra::Dyn;
-use robcal::estimate::wide::WideAccumulator;
+use robcal::estimate::wide::{Rows, WideAccumulator};
 use robcal::{Accumulator, Block};
 
 /// Distinct blocks in the stream (3000 rows).
@@ -60,6 +64,56 @@ fn stream_wide(n: usize, ring: &[Block<f64, Dyn>]) -> Accumulator<f64, Dyn> {
     acc.accumulator()
 }
 
+/// The same stream through [`WideAccumulator::update_many`], one call per
+/// pass over the ring (1000 blocks a call).
+fn stream_many(n: usize, ring: &[Block<f64, Dyn>]) -> Accumulator<f64, Dyn> {
+    let mut acc = WideAccumulator::new(n);
+    for _ in 0..BLOCKS / RING {
+        acc.update_many(ring).expect("finite blocks");
+    }
+    acc.accumulator()
+}
+
+/// The ring's rows row-major (`b`, `Δp`, `w`), for
+/// [`WideAccumulator::update_rows`].
+struct RowMajor {
+    b: Vec<f64>,
+    dp: Vec<f64>,
+    w: Vec<f64>,
+}
+
+fn row_major(ring: &[Block<f64, Dyn>]) -> RowMajor {
+    let mut rm = RowMajor {
+        b: Vec::new(),
+        dp: Vec::new(),
+        w: Vec::new(),
+    };
+    for blk in ring {
+        for r in 0..3 {
+            rm.b.extend(blk.b.row(r).iter());
+            rm.dp.push(blk.dp[r]);
+            rm.w.push(blk.w[r]);
+        }
+    }
+    rm
+}
+
+/// The same stream through [`WideAccumulator::update_rows`], one call per
+/// pass over the ring (3000 rows a call).
+fn stream_rows(n: usize, rm: &RowMajor) -> Accumulator<f64, Dyn> {
+    let mut acc = WideAccumulator::new(n);
+    let rows = Rows {
+        b: &rm.b,
+        dp: &rm.dp,
+        w: &rm.w,
+        sigma: None,
+    };
+    for _ in 0..BLOCKS / RING {
+        acc.update_rows(rows).expect("finite rows");
+    }
+    acc.accumulator()
+}
+
 fn export(dir: &str, n: usize, ring: &[Block<f64, Dyn>]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let mut bytes = Vec::with_capacity(RING * 3 * (n + 2) * 8);
@@ -75,6 +129,10 @@ fn export(dir: &str, n: usize, ring: &[Block<f64, Dyn>]) -> std::io::Result<()> 
     std::fs::write(format!("{dir}/stream_{n}.f64"), bytes)?;
     let acc = stream_wide(n, ring);
     let core = stream_core(n, ring);
+    assert!(
+        stream_many(n, ring) == acc && stream_rows(n, &row_major(ring)) == acc,
+        "update_many and update_rows give update's sums"
+    );
     let info = acc.information();
     let list = |v: &mut dyn Iterator<Item = f64>| {
         v.map(|x| format!("{x:e}")).collect::<Vec<_>>().join(" ")
@@ -108,6 +166,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some("serve") => {
             let n = n_arg(1)?;
             let ring = ring(n);
+            let rm = row_major(&ring);
             let probe = WideAccumulator::new(n);
             let stdin = std::io::stdin();
             let mut out = std::io::stdout().lock();
@@ -134,6 +193,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     ["run", k, "wide"] => {
                         let t = time(k.parse()?, &mut || {
                             black_box(stream_wide(n, black_box(&ring)));
+                        });
+                        writeln!(out, "{t}")?;
+                    }
+                    ["run", k, "many"] => {
+                        let t = time(k.parse()?, &mut || {
+                            black_box(stream_many(n, black_box(&ring)));
+                        });
+                        writeln!(out, "{t}")?;
+                    }
+                    ["run", k, "rows"] => {
+                        let t = time(k.parse()?, &mut || {
+                            black_box(stream_rows(n, black_box(&rm)));
                         });
                         writeln!(out, "{t}")?;
                     }

@@ -6,7 +6,10 @@
 //! the copy's last chunk), with weights (some zero), σ on some blocks, blocks of one and
 //! two rows, and stream lengths that end on a full buffer, a partial one and a single
 //! block; then every rejected input: the core's error, the statistics
-//! unchanged, and the stream going on as if the block had not come.
+//! unchanged, and the stream going on as if the block had not come. The
+//! batched entry points (`update_many`, `update_rows`) give the same sums as
+//! `update` one block at a time, bit for bit, and stop at a bad input with
+//! its index, having taken what came before it.
 //!
 //! "Relative" for a sum whose terms cancel is relative to the scale of its
 //! terms: `|Λᵢⱼ − Λ'ᵢⱼ| ≤ 1e-12 √(Λᵢᵢ Λⱼⱼ)` (Cauchy–Schwarz bounds
@@ -16,7 +19,7 @@
 
 use host_tests::Rng;
 use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
-use robcal::estimate::wide::{Instructions, WideAccumulator};
+use robcal::estimate::wide::{Instructions, Rejected, Rows, WideAccumulator};
 use robcal::{Accumulator, Block, Error};
 
 /// The sizes, the edges of the 8-column chunks, and one wider than
@@ -360,4 +363,319 @@ fn reset_forgets_everything() {
     assert_eq!(got.information(), DMatrix::zeros(7, 7));
     assert_eq!(got.equations(), empty.equations());
     assert_eq!(got.weighted_yy(), 0.0);
+}
+
+/// Blocks' used rows, row-major, for `update_rows`.
+#[derive(Default, Clone)]
+struct RowData {
+    n: usize,
+    b: Vec<f64>,
+    dp: Vec<f64>,
+    w: Vec<f64>,
+    sigma: Option<Vec<f64>>,
+}
+
+impl RowData {
+    fn new(n: usize, sigma: bool) -> Self {
+        Self {
+            n,
+            sigma: sigma.then(Vec::new),
+            ..Self::default()
+        }
+    }
+
+    /// The rows of `blk` (which carries σ exactly when these rows do).
+    fn push(&mut self, blk: &Block<f64, Dyn>) {
+        assert_eq!(blk.sigma.is_some(), self.sigma.is_some());
+        for r in 0..blk.rows {
+            self.b.extend((0..self.n).map(|c| blk.b[(r, c)]));
+            self.dp.push(blk.dp[r]);
+            self.w.push(blk.w[r]);
+            if let (Some(s), Some(bs)) = (self.sigma.as_mut(), blk.sigma) {
+                s.push(bs[r]);
+            }
+        }
+    }
+
+    fn rows(&self) -> Rows<'_> {
+        self.slice(0, self.dp.len())
+    }
+
+    /// Rows `from .. to`.
+    fn slice(&self, from: usize, to: usize) -> Rows<'_> {
+        Rows {
+            b: &self.b[from * self.n..to * self.n],
+            dp: &self.dp[from..to],
+            w: &self.w[from..to],
+            sigma: self.sigma.as_ref().map(|s| &s[from..to]),
+        }
+    }
+}
+
+/// `blocks` through `update_rows`: runs of blocks with and without σ, each
+/// run in calls of `step` rows (the last shorter).
+fn feed_rows(wide: &mut WideAccumulator, blocks: &[Block<f64, Dyn>], step: usize) {
+    let n = wide.parameters();
+    let mut k = 0;
+    while k < blocks.len() {
+        let sigma = blocks[k].sigma.is_some();
+        let mut data = RowData::new(n, sigma);
+        while k < blocks.len() && blocks[k].sigma.is_some() == sigma {
+            data.push(&blocks[k]);
+            k += 1;
+        }
+        let len = data.dp.len();
+        for from in (0..len).step_by(step) {
+            wide.update_rows(data.slice(from, (from + step).min(len)))
+                .unwrap();
+        }
+    }
+}
+
+#[test]
+fn batched_updates_give_the_same_bits_as_one_block_at_a_time() {
+    for (t, &n) in [0].iter().chain(&SIZES).enumerate() {
+        for (u, &count) in [1usize, 5, 33, 257].iter().enumerate() {
+            let mut rng = Rng::new(500 + 100 * t as u64 + u as u64);
+            let blocks: Vec<_> = (0..count).map(|k| block(&mut rng, n, k)).collect();
+            let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(n));
+            for blk in &blocks {
+                core.update(blk).unwrap();
+            }
+            for one in instruction_sets(n) {
+                let what = one.instructions();
+                let mut one = one;
+                for blk in &blocks {
+                    one.update(blk).unwrap();
+                }
+                let expected = one.accumulator();
+                same_statistics(&expected, &core);
+                for step in [1, 7, 1000] {
+                    let mut many = one.clone();
+                    many.reset();
+                    for part in blocks.chunks(step) {
+                        many.update_many(part).unwrap();
+                    }
+                    assert_eq!(many.accumulator(), expected, "{what} update_many, {step}");
+                    let mut rows = one.clone();
+                    rows.reset();
+                    feed_rows(&mut rows, &blocks, 3 * step + 1);
+                    assert_eq!(rows.accumulator(), expected, "{what} update_rows, {step}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn update_many_stops_at_a_bad_block_with_its_index() {
+    for n in [3, 9, 30] {
+        let mut rng = Rng::new(31 + n as u64);
+        let mut blocks: Vec<_> = (0..40).map(|k| block(&mut rng, n, k)).collect();
+        let bad = 23;
+        blocks[bad].b[(0, n - 1)] = f64::NAN;
+        for instructions in [Instructions::Detected, Instructions::Scalar] {
+            let (mut many, _) = primed(n, instructions).unwrap();
+            let mut one = many.clone();
+            let err = many.update_many(&blocks).unwrap_err();
+            let expected = one.clone().update(&blocks[bad]).unwrap_err();
+            assert_eq!(
+                err,
+                Rejected {
+                    index: bad,
+                    error: expected
+                }
+            );
+            for blk in &blocks[..bad] {
+                one.update(blk).unwrap();
+            }
+            assert_eq!(many.clone().accumulator(), one.clone().accumulator());
+            assert_eq!(many.equations(), one.equations());
+            // Going on past it: as if it had not come.
+            many.update_many(&blocks[bad + 1..]).unwrap();
+            for blk in &blocks[bad + 1..] {
+                one.update(blk).unwrap();
+            }
+            assert_eq!(many.accumulator(), one.accumulator());
+        }
+        // An empty batch changes nothing; a wrong size is refused at its index.
+        let mut wide = WideAccumulator::new(n);
+        wide.update_many(&[]).unwrap();
+        let other = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n + 1), Vector3::zeros());
+        let err = wide.update_many(&[blocks[0].clone(), other]).unwrap_err();
+        assert_eq!(err.index, 1);
+        assert!(matches!(err.error, Error::Mismatch { .. }));
+        assert_eq!(
+            wide.equations(),
+            blocks[0].w.iter().filter(|w| **w > 0.0).count()
+        );
+    }
+}
+
+/// A change that makes one row bad.
+type Edit = Box<dyn Fn(&mut RowData)>;
+
+/// A block of one row: `b`, `Δp`, `w`, `σ` (the other rows poison).
+fn one_row(b: &[f64], dp: f64, w: f64, sigma: Option<f64>) -> Block<f64, Dyn> {
+    let n = b.len();
+    let m = OMatrix::<f64, U3, Dyn>::from_fn(n, |r, c| if r == 0 { b[c] } else { f64::NAN });
+    let mut blk = Block::new(m, Vector3::new(dp, f64::NAN, f64::NAN))
+        .with_weights(Vector3::new(w, -1.0, -1.0));
+    if let Some(s) = sigma {
+        blk = blk.with_sigma(Vector3::new(s, -1.0, -1.0));
+    }
+    blk.rows = 1;
+    blk
+}
+
+#[test]
+fn update_rows_stops_at_a_bad_row_with_the_error_of_update() {
+    for n in [3, 9, 30] {
+        for sigma in [false, true] {
+            let mut rng = Rng::new(77 + n as u64);
+            let mut data = RowData::new(n, sigma);
+            for k in 0..40 {
+                // 7k + 1: never a block of fewer rows (poisoned past them).
+                let mut blk = block(&mut rng, n, 7 * k + 1);
+                assert_eq!(blk.rows, 3);
+                blk.sigma = sigma.then(|| Vector3::from_fn(|_, _| rng.range(1e-4, 1e-2)));
+                data.push(&blk);
+            }
+            let bad = 61;
+            let edits: Vec<Edit> = vec![
+                Box::new(move |d| d.b[bad * n + n / 2] = f64::NAN),
+                Box::new(move |d| d.b[bad * n] = f64::INFINITY),
+                Box::new(move |d| d.dp[bad] = f64::NEG_INFINITY),
+                Box::new(move |d| d.w[bad] = -0.5),
+                Box::new(move |d| d.w[bad] = f64::NAN),
+                Box::new(move |d| d.w[bad] = f64::INFINITY),
+                Box::new(move |d| {
+                    d.w[bad] = 0.0;
+                    d.b[bad * n] = f64::INFINITY;
+                }),
+                // Finite, but the sums would overflow.
+                Box::new(move |d| d.b[bad * n..(bad + 1) * n].fill(1e160)),
+                Box::new(move |d| d.w[bad] = 1e160),
+                // w² = ∞ on a row of zeros: the core's `b (w² b)` is NaN.
+                Box::new(move |d| {
+                    d.w[bad] = 1e155;
+                    d.b[bad * n..(bad + 1) * n].fill(0.0);
+                    d.dp[bad] = 0.0;
+                }),
+                Box::new(move |d| {
+                    if let Some(s) = d.sigma.as_mut() {
+                        s[bad] = 0.0;
+                    }
+                }),
+                Box::new(move |d| {
+                    if let Some(s) = d.sigma.as_mut() {
+                        s[bad] = f64::NAN;
+                    }
+                }),
+            ];
+            for edit in &edits {
+                let mut data = data.clone();
+                edit(&mut data);
+                let row = one_row(
+                    &data.b[bad * n..(bad + 1) * n],
+                    data.dp[bad],
+                    data.w[bad],
+                    data.sigma.as_ref().map(|s| s[bad]),
+                );
+                for instructions in [Instructions::Detected, Instructions::Scalar] {
+                    let (mut wide, mut core) = primed(n, instructions).unwrap();
+                    let mut expected = wide.clone();
+                    let got = wide.update_rows(data.rows());
+                    let Err(err) = expected.update(&row) else {
+                        // Not a bad row after all (σ edits without σ).
+                        got.unwrap();
+                        continue;
+                    };
+                    assert_eq!(core.clone().update(&row).unwrap_err(), err);
+                    assert_eq!(
+                        got.unwrap_err(),
+                        Rejected {
+                            index: bad,
+                            error: err
+                        }
+                    );
+                    let mut before = expected.clone();
+                    before.update_rows(data.slice(0, bad)).unwrap();
+                    assert_eq!(wide.clone().accumulator(), before.clone().accumulator());
+                    assert_eq!(wide.equations(), before.equations());
+                    // Going on past it: as if it had not come.
+                    let len = data.dp.len();
+                    wide.update_rows(data.slice(bad + 1, len)).unwrap();
+                    before.update_rows(data.slice(bad + 1, len)).unwrap();
+                    assert_eq!(wide.clone().accumulator(), before.accumulator());
+                    // And as the core with the same rows, one-row blocks.
+                    for i in (0..len).filter(|&i| i != bad) {
+                        let s = data.sigma.as_ref().map(|s| s[i]);
+                        let r = one_row(&data.b[i * n..(i + 1) * n], data.dp[i], data.w[i], s);
+                        core.update(&r).unwrap();
+                    }
+                    same_statistics(&wide.accumulator(), &core);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn update_rows_refuses_lengths_that_disagree_and_takes_nothing() {
+    let n = 9;
+    let mut rng = Rng::new(4);
+    let mut data = RowData::new(n, true);
+    for k in 0..5 {
+        let mut blk = block(&mut rng, n, 3 * k + 1);
+        blk.rows = 3;
+        data.push(&blk);
+    }
+    let (mut wide, _) = primed(n, Instructions::Detected).unwrap();
+    let before = wide.clone().accumulator();
+    let rows = data.rows();
+    let short = |f: &dyn Fn(&mut Rows)| {
+        let mut r = rows;
+        f(&mut r);
+        r
+    };
+    for bad in [
+        short(&|r| r.b = &r.b[1..]),
+        short(&|r| r.w = &r.w[1..]),
+        short(&|r| r.dp = &r.dp[1..]),
+        short(&|r| r.sigma = r.sigma.map(|s| &s[1..])),
+    ] {
+        let err = wide.update_rows(bad).unwrap_err();
+        assert_eq!(err.index, 0);
+        assert!(matches!(err.error, Error::Mismatch { .. }));
+        assert_eq!(wide.clone().accumulator(), before);
+    }
+    // No rows: nothing changes.
+    wide.update_rows(data.slice(0, 0)).unwrap();
+    assert_eq!(wide.clone().accumulator(), before);
+    assert!(data.slice(0, 0).is_empty() && data.rows().len() == 15);
+}
+
+#[test]
+fn update_rows_takes_large_finite_values_as_update_does() {
+    // b ≈ 1e153: the running bound fails, the exact check accepts.
+    let n = 9;
+    for scale in [1e150, 1e153] {
+        for sigma in [false, true] {
+            let b =
+                OMatrix::<f64, U3, Dyn>::from_fn(n, |r, c| scale * (1.0 + (r + c) as f64 * 0.01));
+            let mut blk = Block::new(b, Vector3::new(1.0, 2.0, 3.0));
+            if sigma {
+                blk = blk.with_sigma(Vector3::repeat(1e-3));
+            }
+            let mut data = RowData::new(n, sigma);
+            data.push(&blk);
+            for mut wide in instruction_sets(n) {
+                let mut one = wide.clone();
+                one.update(&blk).unwrap();
+                wide.update_rows(data.rows()).unwrap();
+                assert_eq!(wide.accumulator(), one.accumulator());
+            }
+        }
+    }
 }

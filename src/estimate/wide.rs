@@ -15,6 +15,13 @@
 //! and `Σ Δpᵀ W² Δp` come from the same update, `Δp` being one more column
 //! (`[B | Δp]ᵀ W² [B | Δp]`); `M` from `V = W²Σ [B | Δp]` the same way.
 //!
+//! Blocks can also come several at a time ([`WideAccumulator::update_many`],
+//! one dispatch per call), or as rows already row-major
+//! ([`WideAccumulator::update_rows`] with [`Rows`]: no de-interleave of a
+//! column-major block, the checks once per buffer of rows): the same sums
+//! to the last bit, a bad input refused with its index, what came before
+//! it taken.
+//!
 //! The sums are the scalar update's terms, row by row in the same order;
 //! each term is `(w bᵢ)(w bⱼ)` where the core has `bᵢ (w² bⱼ)`, and each
 //! product is fused with its addition (one rounding instead of two): they
@@ -53,8 +60,14 @@ use super::block::{validate_rows, Block};
 use super::Accumulator;
 use crate::Error;
 
+mod copy;
 mod kernel;
-use kernel::{at, Push, PAD};
+mod many;
+mod rows;
+use copy::{Copier, Dispatched, Push};
+use kernel::{at, PAD};
+pub use many::Rejected;
+pub use rows::Rows;
 
 /// The instruction set of a [`WideAccumulator`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -104,7 +117,7 @@ pub struct WideAccumulator {
     /// [`Accumulator::update`]).
     bound: f64,
     /// The permutes of the last chunk of a block's copy (AVX-512):
-    /// [`kernel::row_permutes`]`(n mod 8)`.
+    /// [`copy::row_permutes`]`(n mod 8)`.
     tail: [[[i64; 8]; 2]; 3],
 }
 
@@ -186,7 +199,7 @@ impl WideAccumulator {
             equations: 0,
             sigma_rows: 0,
             bound: 0.0,
-            tail: kernel::row_permutes(n % 8),
+            tail: copy::row_permutes(n % 8),
         }
     }
 
@@ -240,6 +253,12 @@ impl WideAccumulator {
     /// another order than that check). The statistics are unchanged on
     /// error.
     pub fn update(&mut self, block: &Block<f64, Dyn>) -> Result<(), Error> {
+        self.push_block(block, &Dispatched(self.arch))
+    }
+
+    /// [`Self::update`] with the copy of the rows run by `copier`.
+    #[inline(always)]
+    fn push_block<C: Copier>(&mut self, block: &Block<f64, Dyn>, copier: &C) -> Result<(), Error> {
         let (b, dp, w, sigma, rows) = (
             &block.b,
             &block.dp,
@@ -267,15 +286,15 @@ impl WideAccumulator {
         }
         // Rows without σ in a buffer with σ rows: zero rows of `V`.
         let ws = if rw.sigma {
-            Some(rw.ws)
+            Some(&rw.ws)
         } else {
-            self.sigma_pending.then_some([0.0; 3])
+            self.sigma_pending.then_some(&[0.0; 3])
         };
         let len = self.cap * self.mp;
-        let q = Push {
+        let q = copier.copy(&mut Push {
             b: b.as_slice(),
-            dp: [dp[0], dp[1], dp[2]],
-            w: rw.w,
+            dp: &dp.data.0[0],
+            w: &rw.w,
             ws,
             rows,
             cap: self.cap,
@@ -283,11 +302,10 @@ impl WideAccumulator {
             du: aligned_mut(&mut self.u, len),
             dv: ws.map(|_| aligned_mut(&mut self.v, len)),
             tail: &self.tail,
-        }
-        .run(self.arch);
+        });
         // The core's running bound: `(Σ w² + Σ w⁴σ²) q` bounds the change of
         // every checked value (`q` ≥ every b², Δp²).
-        let k = rw.w2.iter().chain(&rw.s2).fold(0.0, |k, v| k + v);
+        let k = ((rw.w2[0] + rw.w2[1]) + (rw.w2[2] + rw.s2[0])) + (rw.s2[1] + rw.s2[2]);
         let next = (self.bound + k * q) * (1.0 + 1.0 / 1024.0);
         let bound = if next <= f64::MAX / 16.0 {
             next
@@ -429,32 +447,41 @@ struct RowWeights {
 
 impl RowWeights {
     /// `None` when a weight is negative or NaN or a σ is not positive.
-    // `!(w >= 0)` is meant: it is true for NaN, which `w < 0` is not.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    ///
+    /// Written with a fixed index per row (the rows past `rows` as zero
+    /// weights), not a loop to `rows`: the values stay in registers, where
+    /// arrays written one value at a time and then copied in wide moves
+    /// stall the processor (store forwarding) in the batched loop.
+    #[inline(always)]
     fn new(w: &[f64], sigma: Option<&nalgebra::Vector3<f64>>, rows: usize) -> Option<Self> {
-        let mut rw = Self {
-            w: [0.0; 3],
-            ws: [0.0; 3],
-            w2: [0.0; 3],
-            s2: [0.0; 3],
-            sigma: sigma.is_some(),
-            equations: 0,
-        };
-        for r in 0..rows {
-            let k = w[r] * w[r];
-            if !(w[r] >= 0.0) {
-                return None;
-            }
-            (rw.w[r], rw.w2[r]) = (w[r], k);
-            rw.equations += usize::from(k > 0.0);
-            if let Some(s) = sigma {
-                if !(s[r] > 0.0) {
+        let used = [true, rows > 1, rows > 2];
+        let w: [f64; 3] = core::array::from_fn(|r| if used[r] { w[r] } else { 0.0 });
+        // `x >= 0` is false for NaN.
+        if !w.iter().all(|&x| x >= 0.0) {
+            return None;
+        }
+        let w2 = w.map(|x| x * x);
+        let equations = w2.iter().map(|&k| usize::from(k > 0.0)).sum();
+        let (ws, s2) = match sigma {
+            Some(s) => {
+                let s: [f64; 3] = core::array::from_fn(|r| if used[r] { s[r] } else { 0.0 });
+                if !(0..3).all(|r| !used[r] || s[r] > 0.0) {
                     return None;
                 }
-                rw.ws[r] = k * s[r];
-                rw.s2[r] = k * k * s[r] * s[r];
+                (
+                    core::array::from_fn(|r| w2[r] * s[r]),
+                    core::array::from_fn(|r| w2[r] * w2[r] * s[r] * s[r]),
+                )
             }
-        }
-        Some(rw)
+            None => ([0.0; 3], [0.0; 3]),
+        };
+        Some(Self {
+            w,
+            ws,
+            w2,
+            s2,
+            sigma: sigma.is_some(),
+            equations,
+        })
     }
 }

@@ -25,7 +25,9 @@
 //! panel), kept in registers while the buffered rows stream by: per row,
 //! `NV` vector loads of `B`, `NC` broadcasts of `A` and `NV · NC` fused
 //! multiply-adds, summed over the rows in order (the scalar update's
-//! order, each product fused).
+//! order, each product fused). With 8-lane vectors and at least 16
+//! columns, the first two panels are one tile of 24 accumulators
+//! ([`first_two`]) instead of tiles of 8 and 16.
 
 use pulp::{Arch, Simd, WithSimd};
 
@@ -106,6 +108,10 @@ impl WithSimd for RankK<'_> {
 fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
     let m = op.m;
     let mut j0 = 0;
+    if NC == 8 && S::F64_LANES == 8 && m >= 16 {
+        first_two::<S>(s, &mut op);
+        j0 = 16;
+    }
     while j0 + NC <= m {
         panel::<S, NC>(s, &mut op, j0, NV);
         j0 += NC;
@@ -123,6 +129,48 @@ fn panels<S: Simd, const NV: usize, const NC: usize>(s: S, mut op: RankK<'_>) {
         5 => panel::<S, 5>(s, &mut op, j0, tall(5)),
         6 => panel::<S, 6>(s, &mut op, j0, tall(6)),
         _ => panel::<S, 7>(s, &mut op, j0, tall(7)),
+    }
+}
+
+/// The first two column panels of eight (columns `0 .. 16`) with 8-lane
+/// vectors, in one tile of 24 accumulators: vector 0 × columns `0 .. 16`
+/// and vector 1 × columns `8 .. 16`. As two panels, the first is a tile of
+/// one vector × 8 columns: 8 accumulators, exactly the FMA latency × units,
+/// no slack. Each element gets the same fused products in the same order.
+#[inline(always)]
+fn first_two<S: Simd>(s: S, op: &mut RankK<'_>) {
+    let (rows, cap, mp) = (op.rows, op.cap, op.mp);
+    let (bv, _) = S::as_simd_f64s(op.b);
+    let (b0, b1) = (&bv[..rows], &bv[cap..cap + rows]);
+    // Row r's columns 0 .. 8 and 8 .. 16 (chunks 0 and 1 of the buffer).
+    let (a0, a1) = (&op.a[..rows * 8], &op.a[cap * 8..cap * 8 + rows * 8]);
+    let (cv, _) = S::as_mut_simd_f64s(op.c);
+    let vcol = mp / 8;
+    let mut lo = [s.splat_f64s(0.0); 16];
+    let mut hi = [s.splat_f64s(0.0); 8];
+    for k in 0..16 {
+        lo[k] = cv[k * vcol];
+    }
+    for k in 0..8 {
+        hi[k] = cv[(8 + k) * vcol + 1];
+    }
+    for r in 0..rows {
+        let (x0, x1) = (b0[r], b1[r]);
+        let (r0, r1) = (&a0[r * 8..r * 8 + 8], &a1[r * 8..r * 8 + 8]);
+        for k in 0..8 {
+            lo[k] = s.mul_add_e_f64s(x0, s.splat_f64s(r0[k]), lo[k]);
+        }
+        for k in 0..8 {
+            let y = s.splat_f64s(r1[k]);
+            lo[8 + k] = s.mul_add_e_f64s(x0, y, lo[8 + k]);
+            hi[k] = s.mul_add_e_f64s(x1, y, hi[k]);
+        }
+    }
+    for k in 0..16 {
+        cv[k * vcol] = lo[k];
+    }
+    for k in 0..8 {
+        cv[(8 + k) * vcol + 1] = hi[k];
     }
 }
 
@@ -192,238 +240,6 @@ fn tile<S: Simd, const NV: usize, const NC: usize>(s: S, op: &mut RankK<'_>, iv:
         let at = (j0 + k) * vcol + iv;
         cv[at..at + NV].copy_from_slice(col);
     }
-}
-
-/// One block's rows into the buffers: row `row0 + r` of `U` gets
-/// `w[r] [bᵀ | Δp]` of the block's row `r` (`B` column-major 3 × n), of `V`
-/// (with σ) `ws[r] [bᵀ | Δp]`, for `r < rows`. Returns `Σ b² + Σ Δp²` over
-/// those rows (unweighted): not finite when a value is not (nor when the
-/// sum overflows).
-pub(super) struct Push<'a> {
-    pub(super) b: &'a [f64],
-    pub(super) dp: [f64; 3],
-    pub(super) w: [f64; 3],
-    pub(super) ws: Option<[f64; 3]>,
-    pub(super) rows: usize,
-    pub(super) cap: usize,
-    pub(super) row0: usize,
-    pub(super) du: &'a mut [f64],
-    pub(super) dv: Option<&'a mut [f64]>,
-    /// [`row_permutes`]`(n mod 8)` (AVX-512's last chunk).
-    pub(super) tail: &'a [[[i64; 8]; 2]; 3],
-}
-
-impl Push<'_> {
-    /// Runs on the instruction set of `arch` (the kernel's layout). The
-    /// dispatched code gets a reference, not a copy: a copy of the fields
-    /// just written, read back in wide vectors, stalls the processor
-    /// (store forwarding) for longer than a small block's whole update.
-    pub(super) fn run(mut self, arch: Arch) -> f64 {
-        #[cfg(target_arch = "x86_64")]
-        if let Arch::V4(v4) = arch {
-            if self.rows == 3 {
-                return v4.vectorize(PushV4 {
-                    push: &mut self,
-                    v4,
-                });
-            }
-        }
-        arch.dispatch(PushAny(&mut self))
-    }
-
-    /// Columns `j0 ..` and `Δp` of the used rows, one value at a time (a
-    /// partial sum of squares per row: no long chain of dependent adds).
-    #[inline(always)]
-    fn columns_from(&mut self, l: usize, j0: usize) -> f64 {
-        let n = self.b.len() / 3;
-        let mut q = [0.0; 3];
-        for j in j0..=n {
-            for r in 0..self.rows {
-                let x = if j < n { self.b[3 * j + r] } else { self.dp[r] };
-                q[r] += x * x;
-                let i = at(l, self.cap, self.row0 + r, j);
-                self.du[i] = self.w[r] * x;
-                if let (Some(dv), Some(ws)) = (self.dv.as_deref_mut(), self.ws) {
-                    dv[i] = ws[r] * x;
-                }
-            }
-        }
-        (q[0] + q[1]) + q[2]
-    }
-}
-
-/// [`Push`] on any instruction set: one value at a time.
-struct PushAny<'a, 'b>(&'b mut Push<'a>);
-
-impl WithSimd for PushAny<'_, '_> {
-    type Output = f64;
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, s: S) -> f64 {
-        let push = self.0;
-        if push.rows < 3 {
-            return push.columns_from(S::F64_LANES, 0);
-        }
-        // All three rows: the squares over the block as it lies (vectors,
-        // four partial sums), the copy without a chain of dependent adds.
-        let (head, tail) = S::as_simd_f64s(push.b);
-        let mut acc = [s.splat_f64s(0.0); 4];
-        let mut quads = head.chunks_exact(4);
-        for v in quads.by_ref() {
-            for (a, &x) in acc.iter_mut().zip(v) {
-                *a = s.mul_add_e_f64s(x, x, *a);
-            }
-        }
-        for (a, &x) in acc.iter_mut().zip(quads.remainder()) {
-            *a = s.mul_add_e_f64s(x, x, *a);
-        }
-        let t = s.add_f64s(s.add_f64s(acc[0], acc[1]), s.add_f64s(acc[2], acc[3]));
-        let mut q = s.reduce_sum_f64s(t);
-        for &x in tail.iter().chain(&push.dp) {
-            q += x * x;
-        }
-        let (l, cap, row0) = (S::F64_LANES, push.cap, push.row0);
-        for (j, x) in push.b.chunks_exact(3).chain([&push.dp[..]]).enumerate() {
-            for r in 0..3 {
-                let i = at(l, cap, row0 + r, j);
-                push.du[i] = push.w[r] * x[r];
-                if let (Some(dv), Some(ws)) = (push.dv.as_deref_mut(), push.ws) {
-                    dv[i] = ws[r] * x[r];
-                }
-            }
-        }
-        q
-    }
-}
-
-/// The permutes of [`Push`] with AVX-512 that take row `r` of `t` columns
-/// (1 ..= 8; 0: none) out of 24 values `x` (three vectors: `t` columns,
-/// column-major 3 × 8, ending at the 24th value; the first `8 − t` columns
-/// before them are not used): lane `c < t` of the result is `x[3(c + 8 − t) + r]`, the
-/// first permute taking what the first two vectors hold, the second the
-/// rest from the third (other lanes: anything). `[first, second]` per row.
-pub(super) const fn row_permutes(t: usize) -> [[[i64; 8]; 2]; 3] {
-    let mut p = [[[0i64; 8]; 2]; 3];
-    let mut r = 0;
-    while r < 3 {
-        let mut c = 0;
-        while c < 8 {
-            p[r][1][c] = c as i64;
-            if c < t {
-                let i = 3 * (c + 8 - t) + r;
-                if i < 16 {
-                    p[r][0][c] = i as i64;
-                } else {
-                    p[r][1][c] = (i - 8) as i64;
-                }
-            }
-            c += 1;
-        }
-        r += 1;
-    }
-    p
-}
-
-/// [`row_permutes`] of a whole chunk (eight columns).
-const BODY: [[[i64; 8]; 2]; 3] = row_permutes(8);
-
-/// [`Push`] of a three-row block with AVX-512: eight columns (24 values,
-/// three vectors) at a time, split into the three rows by two permutes
-/// each. The last chunk (the remaining `t = n mod 8` columns, then `Δp` as
-/// one more column, then zeros: the buffer's padding) from the last 24
-/// values of `B` (permutes of their own, `tail`), or, when `B` has fewer
-/// (`n < 8`), from masked loads.
-#[cfg(target_arch = "x86_64")]
-struct PushV4<'a, 'b> {
-    push: &'b mut Push<'a>,
-    v4: pulp::x86::V4,
-}
-
-#[cfg(target_arch = "x86_64")]
-impl pulp::NullaryFnOnce for PushV4<'_, '_> {
-    type Output = f64;
-
-    #[inline(always)]
-    fn call(self) -> f64 {
-        use core::arch::x86_64::__m512d;
-        use pulp::x86::V4;
-        let PushV4 { push, v4 } = self;
-        let avx = v4.avx512f;
-        let (cap, row0) = (push.cap, push.row0);
-        let n = push.b.len() / 3;
-        let (full, t) = (n / 8, n % 8);
-        let perms = v4_permutes(&BODY);
-        let k = push.w.map(|k| v4.splat_f64s(k));
-        let ks = push.ws.map(|s| s.map(|k| v4.splat_f64s(k)));
-        let mut q = [v4.splat_f64s(0.0); 3];
-        let (du, _) = V4::as_mut_simd_f64s(push.du);
-        let mut dv = push.dv.as_deref_mut().map(|dv| V4::as_mut_simd_f64s(dv).0);
-        let (src, _) = V4::as_simd_f64s(&push.b[..24 * full]);
-        for (chunk, x) in src.chunks_exact(3).enumerate() {
-            let x: [__m512d; 3] = [x[0], x[1], x[2]].map(pulp::cast);
-            for r in 0..3 {
-                let y = v4_split(v4, x, perms[r]);
-                let i = chunk * cap + row0 + r;
-                q[r] = v4.mul_add_f64s(y, y, q[r]);
-                du[i] = v4.mul_f64s(k[r], y);
-                if let (Some(dv), Some(ks)) = (dv.as_deref_mut(), ks) {
-                    dv[i] = v4.mul_f64s(ks[r], y);
-                }
-            }
-        }
-        // The last chunk: lane t is Δp, the lanes past it zero.
-        let x: [__m512d; 3] = if t == 0 {
-            [avx._mm512_setzero_pd(); 3]
-        } else if n >= 8 {
-            let (src, _) = V4::as_simd_f64s(&push.b[3 * n - 24..]);
-            [src[0], src[1], src[2]].map(pulp::cast)
-        } else {
-            let b = push.b;
-            [0, 8, 16].map(|v| pulp::cast(v4.partial_load_f64s(b.get(v..).unwrap_or(&[]))))
-        };
-        let tail = if n >= 8 {
-            v4_permutes(push.tail)
-        } else {
-            perms
-        };
-        let (low, dp_lane) = ((1u8 << t) - 1, 1u8 << t);
-        for r in 0..3 {
-            let dp = avx._mm512_maskz_mov_pd(dp_lane, avx._mm512_set1_pd(push.dp[r]));
-            let y = avx._mm512_mask_mov_pd(dp, low, pulp::cast(v4_split(v4, x, tail[r])));
-            let y: pulp::f64x8 = pulp::cast(y);
-            let i = full * cap + row0 + r;
-            q[r] = v4.mul_add_f64s(y, y, q[r]);
-            du[i] = v4.mul_f64s(k[r], y);
-            if let (Some(dv), Some(ks)) = (dv.as_deref_mut(), ks) {
-                dv[i] = v4.mul_f64s(ks[r], y);
-            }
-        }
-        v4.reduce_sum_f64s(v4.add_f64s(v4.add_f64s(q[0], q[1]), q[2]))
-    }
-}
-
-/// [`row_permutes`] as AVX-512 index vectors.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn v4_permutes(p: &[[[i64; 8]; 2]; 3]) -> [[core::arch::x86_64::__m512i; 2]; 3] {
-    [
-        [pulp::cast(p[0][0]), pulp::cast(p[0][1])],
-        [pulp::cast(p[1][0]), pulp::cast(p[1][1])],
-        [pulp::cast(p[2][0]), pulp::cast(p[2][1])],
-    ]
-}
-
-/// One row out of three vectors (see [`row_permutes`]).
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn v4_split(
-    v4: pulp::x86::V4,
-    x: [core::arch::x86_64::__m512d; 3],
-    p: [core::arch::x86_64::__m512i; 2],
-) -> pulp::f64x8 {
-    let avx = v4.avx512f;
-    let y = avx._mm512_permutex2var_pd(x[0], p[0], x[1]);
-    pulp::cast(avx._mm512_permutex2var_pd(y, p[1], x[2]))
 }
 
 /// The machine's fused multiply-add peak through the same dispatch as
