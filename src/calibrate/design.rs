@@ -165,6 +165,7 @@ impl Design {
         }
         let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
         super::parallel::for_runs_mut(&mut { runs }, threads, |_, runs| {
+            let mut frames = crate::robot::Frames::empty();
             for (run, columns) in runs.iter_mut() {
                 for (i, row) in run.iter().enumerate() {
                     let k = if linearised {
@@ -172,7 +173,7 @@ impl Design {
                     } else {
                         Vec::new()
                     };
-                    let frames = all.frames(row)?;
+                    all.frames_into(row, &mut frames)?;
                     let sample = row.sample(&frames, &k, all.gravity_unit);
                     for ((p, &si), column) in params.iter().zip(&si).zip(columns.iter_mut()) {
                         let col = p.column_si(&sample)? * si;

@@ -238,7 +238,8 @@ impl Rows {
         let before: Option<Vec<Vec<f64>>> = (threads > 1
             && lin.model == super::DeflectionModel::Exact)
             .then(|| self.rows.iter().map(|r| r.frames.theta.clone()).collect());
-        let one = |row: &mut Row| -> Result<(), CalibrationError> {
+        // `rigid`: the run's frames of a rigid row, filled in place.
+        let one = |row: &mut Row, rigid: &mut Frames<f64, J>| -> Result<(), CalibrationError> {
             let m = geometry
                 .markers
                 .get(usize::from(row.marker))
@@ -281,12 +282,14 @@ impl Rows {
             }
             match lin.law(&row.q, absolute, &row.gravity_q) {
                 None => {
-                    let rigid = chain.frames(&row.q).map_err(core("forward kinematics"))?;
+                    chain
+                        .frames_into(&row.q, rigid)
+                        .map_err(core("forward kinematics"))?;
                     let p_rigid = rigid.point_m(&m);
                     loading
-                        .torques(chain, &rigid, &mut row.tau)
+                        .torques(chain, rigid, &mut row.tau)
                         .map_err(core("torques"))?;
-                    row.load = loading.load.map(|l| l.wrench(&rigid));
+                    row.load = loading.load.map(|l| l.wrench(rigid));
                     row.frames.theta.clear();
                     row.p = p_rigid;
                     row.twists.clear();
@@ -360,8 +363,9 @@ impl Rows {
             Ok(())
         };
         let done = super::parallel::for_runs_mut(&mut self.rows, threads, |first, run| {
+            let mut rigid = Frames::empty();
             for (k, row) in run.iter_mut().enumerate() {
-                one(row).map_err(|e| (first + k, e))?;
+                one(row, &mut rigid).map_err(|e| (first + k, e))?;
             }
             Ok(())
         });
@@ -384,13 +388,23 @@ impl Rows {
     /// # Errors
     /// [`Error`] from the forward kinematics (a row not relinearised).
     pub fn frames(&self, row: &Row) -> Result<Frames<f64, J>, Error> {
+        let mut out = Frames::empty();
+        self.frames_into(row, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Rows::frames`] into `out` ([`crate::robot::Chain::frames_into`]).
+    ///
+    /// # Errors
+    /// As [`Rows::frames`].
+    pub fn frames_into(&self, row: &Row, out: &mut Frames<f64, J>) -> Result<(), Error> {
         let chain = self.chains.get(row.frames.chain).ok_or(Error::Mismatch {
             what: "rows not evaluated at a geometry",
         })?;
         if row.frames.theta.is_empty() {
-            chain.frames(&row.q)
+            chain.frames_into(&row.q, out)
         } else {
-            chain.frames(&row.frames.theta)
+            chain.frames_into(&row.frames.theta, out)
         }
     }
 

@@ -79,6 +79,15 @@ pub struct Frames<T: RealField + Copy, const J: usize> {
 }
 
 impl<T: RealField + Copy, const J: usize> Frames<T, J> {
+    /// No joint, the tip at the base: what [`Chain::frames_into`] fills.
+    pub fn empty() -> Self {
+        Self {
+            joints: heapless::Vec::new(),
+            q: heapless::Vec::new(),
+            tip: Isometry3::identity(),
+        }
+    }
+
     /// The joint frames, base to tip.
     pub fn joints(&self) -> &[JointFrame<T>] {
         &self.joints
@@ -126,6 +135,18 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// [`Error::Mismatch`] when `q.len() != dof`; [`Error::NonFinite`] when
     /// `q` holds NaN or ±∞.
     pub fn frames(&self, q: &[T]) -> Result<Frames<T, J>, Error> {
+        let mut out = Frames::empty();
+        self.frames_into(q, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Chain::frames`] into `out` (its joints replaced): the same frames,
+    /// without moving a [`Frames`] (room for `J` joints) on return, for a
+    /// caller that evaluates many poses.
+    ///
+    /// # Errors
+    /// As [`Chain::frames`]; `out` is unchanged on error.
+    pub fn frames_into(&self, q: &[T], out: &mut Frames<T, J>) -> Result<(), Error> {
         if q.len() != self.dof() {
             return Err(Error::Mismatch {
                 what: "joint vector length differs from the chain's dof",
@@ -134,7 +155,10 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         if !q.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite { what: "q" });
         }
-        let mut joints: heapless::Vec<JointFrame<T>, J> = heapless::Vec::new();
+        // The chain holds at most `J` joints and `q` is its length: the
+        // pushes below cannot fail (mapped anyway), `out` is whole on return.
+        let joints = &mut out.joints;
+        joints.clear();
         for (j, (joint, &qj)) in self.joints().iter().zip(q).enumerate() {
             // Parents come before their children (`Chain::push_child`).
             let zero = match self.parent(j).and_then(|p| joints.get(p)) {
@@ -174,17 +198,15 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
                 }
             }
         }
-        let mut qv = heapless::Vec::new();
-        qv.extend_from_slice(q)
+        out.q.clear();
+        out.q
+            .extend_from_slice(q)
             .map_err(|_| Error::CapacityExceeded {
                 what: "frames",
                 capacity: J,
             })?;
-        Ok(Frames {
-            joints,
-            q: qv,
-            tip: t * *self.tip(),
-        })
+        out.tip = t * *self.tip();
+        Ok(())
     }
 
     /// `T_tip` at joint values `q`.
