@@ -39,6 +39,10 @@ fn check_robot<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
             "marker",
         );
         assert_eq!(frames.q(), &q[..]);
+        // In place: the same frames, into a buffer that held another pose.
+        let mut into = chain.frames(&vec![0.3; q.len()]).unwrap();
+        chain.frames_into(q, &mut into).unwrap();
+        assert_eq!(into, frames);
     }
 }
 
@@ -91,6 +95,12 @@ fn wrong_length_or_non_finite_q_is_an_error() {
     let mut q = [0.0; 6];
     q[3] = f64::NAN;
     assert!(matches!(chain.frames(&q), Err(Error::NonFinite { .. })));
+    // In place, a rejected pose leaves the buffer as it was.
+    let before = chain.frames(&[0.2; 6]).unwrap();
+    let mut into = before.clone();
+    assert!(chain.frames_into(&q, &mut into).is_err());
+    assert!(chain.frames_into(&[0.0; 5], &mut into).is_err());
+    assert_eq!(into, before);
     assert!(matches!(
         chain.frames(&[0.0; 6]).unwrap().joint(6),
         Err(Error::OutOfRange { .. })
