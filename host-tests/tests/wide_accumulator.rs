@@ -679,3 +679,60 @@ fn update_rows_takes_large_finite_values_as_update_does() {
         }
     }
 }
+
+#[test]
+fn update_rows_checks_the_weights_of_every_row_position() {
+    // The weights are checked eight rows a vector, then the rest one by
+    // one: a bad weight or σ at each of the 20 positions of a call (two
+    // vectors and a tail of four), and zero weights, which count no
+    // equation, at each position.
+    type Weights = fn(&mut f64, &mut f64);
+    let edits: [Weights; 7] = [
+        |w, _| *w = -0.5,
+        |w, _| *w = f64::NAN,
+        |w, _| *w = 1e160,
+        |w, _| *w = 0.0,
+        |_, s| *s = 0.0,
+        |_, s| *s = f64::NAN,
+        // w⁴σ² = ∞, w² and σ finite.
+        |w, s| (*w, *s) = (1e80, 1e10),
+    ];
+    for n in [9, 30] {
+        let mut rng = Rng::new(31 + n as u64);
+        let mut data = RowData::new(n, true);
+        for k in 0..7 {
+            let mut blk = block(&mut rng, n, 7 * k + 1);
+            blk.sigma = Some(Vector3::from_fn(|_, _| rng.range(1e-4, 1e-2)));
+            data.push(&blk);
+        }
+        data.w.iter_mut().for_each(|w| *w = w.max(0.25));
+        for edit in edits {
+            for bad in 0..20 {
+                let mut data = data.clone();
+                let (mut w, mut s) = (data.w[bad], data.sigma.as_ref().unwrap()[bad]);
+                edit(&mut w, &mut s);
+                data.w[bad] = w;
+                data.sigma.as_mut().unwrap()[bad] = s;
+                for instructions in [Instructions::Detected, Instructions::Scalar] {
+                    let Some(mut wide) = WideAccumulator::with_instructions(n, instructions) else {
+                        continue;
+                    };
+                    let mut expected = wide.clone();
+                    let got = wide.update_rows(data.slice(0, 20));
+                    let mut refused = None;
+                    for i in 0..20 {
+                        let s = data.sigma.as_ref().map(|s| s[i]);
+                        let r = one_row(&data.b[i * n..(i + 1) * n], data.dp[i], data.w[i], s);
+                        if let Err(error) = expected.update(&r) {
+                            refused = Some(Rejected { index: i, error });
+                            break;
+                        }
+                    }
+                    assert_eq!(got.err(), refused, "n {n} row {bad}");
+                    assert_eq!(wide.equations(), expected.equations());
+                    assert_eq!(wide.accumulator(), expected.accumulator());
+                }
+            }
+        }
+    }
+}

@@ -57,9 +57,9 @@ impl WideAccumulator {
     /// them so as cheaply as a [`crate::Block`]: the copy into the buffer
     /// needs no de-interleave of a column-major block, and the checks run
     /// once per buffer of rows, in the vector code. On AVX-512 a block's
-    /// three rows take about a quarter less time than [`Self::update`] of
-    /// the block at N = 9, 5 to 15 % less at N = 30 and a few percent less
-    /// at N = 60 (BENCHMARKS.md).
+    /// three rows take about 40 % less time than [`Self::update`] of the
+    /// block at N = 9, 15 to 20 % less at N = 30 and a few percent less at
+    /// N = 60 (BENCHMARKS.md).
     /// `N < 8` takes the copy one value at a time.
     ///
     /// # Errors
@@ -315,17 +315,12 @@ impl pulp::NullaryFnOnce for CopyRowsV4<'_, '_> {
             return op.with_simd(v4);
         }
         let rows = op.rows;
-        let count = rows.len();
+        let (bad, equations) = checks(v4, &rows);
         let mut out = Copied {
             q: 0.0,
-            bad: false,
-            equations: 0,
+            bad,
+            equations,
         };
-        for i in 0..count {
-            let (_, _, bad, counts) = weights(&rows, i);
-            out.bad |= bad;
-            out.equations += usize::from(counts);
-        }
         let t = n % 8;
         // Lane c < t of the last chunk: the row's value n − t + c, which is
         // lane 8 − t + c of its last eight values.
@@ -352,6 +347,41 @@ impl pulp::NullaryFnOnce for CopyRowsV4<'_, '_> {
         }
         out
     }
+}
+
+/// [`weights`] of every row, eight rows a vector (the scalar checks, one
+/// row at a time, were about a sixth of the copy at N = 30): whether one is
+/// refused, the rows with `w² > 0`. The same comparisons (ordered: false for
+/// NaN) on the same products.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn checks(v4: pulp::x86::V4, rows: &Rows<'_>) -> (bool, usize) {
+    let count = rows.len();
+    let whole = count - count % 8;
+    let (zero, inf) = (v4.splat_f64s(0.0), v4.splat_f64s(f64::INFINITY));
+    let load = |x: &[f64], i0: usize| -> pulp::f64x8 {
+        let v: [f64; 8] = x[i0..i0 + 8].try_into().unwrap_or([0.0; 8]);
+        pulp::cast(v)
+    };
+    let (mut good, mut equations) = (0xffu8, 0);
+    for i0 in (0..whole).step_by(8) {
+        let w = load(rows.w, i0);
+        let k = v4.mul_f64s(w, w);
+        good &= v4.cmp_ge_f64x8(w, zero).0 & v4.cmp_lt_f64x8(k, inf).0;
+        if let Some(s) = rows.sigma {
+            let s = load(s, i0);
+            let t = v4.mul_f64s(v4.mul_f64s(v4.mul_f64s(k, k), s), s);
+            good &= v4.cmp_gt_f64x8(s, zero).0 & v4.cmp_lt_f64x8(t, inf).0;
+        }
+        equations += v4.cmp_gt_f64x8(k, zero).0.count_ones() as usize;
+    }
+    let mut bad = good != 0xff;
+    for i in whole..count {
+        let (_, _, refused, counts) = weights(rows, i);
+        bad |= refused;
+        equations += usize::from(counts);
+    }
+    (bad, equations)
 }
 
 /// The rows' column chunks for [`CopyRowsV4`].
@@ -413,12 +443,15 @@ impl Chunks<'_> {
         }
         let at = self.row0 + i0;
         let mut x = [v4.splat_f64s(0.0); G];
-        for c in 0..full {
+        // Whole chunks of eight as arrays, and the buffer's chunks zipped:
+        // no bounds check in the loop (they were a third of its
+        // instructions).
+        let cols: [&[[f64; 8]]; G] = core::array::from_fn(|g| rs[g * n..][..n].as_chunks().0);
+        for (c, col) in d.chunks_exact_mut(cap).take(full).enumerate() {
             for g in 0..G {
-                let v: [f64; 8] = rs[g * n + 8 * c..][..8].try_into().unwrap_or([0.0; 8]);
-                x[g] = pulp::cast(v);
+                x[g] = pulp::cast(cols[g][c]);
             }
-            let dst = &mut d[c * cap + at..][..G];
+            let dst = &mut col[at..at + G];
             for g in 0..G {
                 let y = v4.mul_f64s(k[g], x[g]);
                 dst[g] = y;
