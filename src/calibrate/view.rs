@@ -216,9 +216,12 @@ impl<'a> View<'a> {
             });
             (info, eta, yy, equations)
         });
-        let mut info = DMatrix::<f64>::zeros(n, n);
-        let mut eta = DVector::<f64>::zeros(n);
-        let (mut yy, mut equations) = (0.0, 0);
+        let mut parts = parts;
+        let (mut info, mut eta, mut yy, mut equations) = match &parts[..] {
+            // One share (a small view, or one thread): its sums are all.
+            [(columns, _)] if *columns == (0..n) => parts.pop()?.1,
+            _ => (DMatrix::zeros(n, n), DVector::zeros(n), 0.0, 0),
+        };
         for (t, (columns, (part, part_eta, part_yy, part_equations))) in
             parts.into_iter().enumerate()
         {
@@ -280,6 +283,11 @@ impl<'a> View<'a> {
                 m
             });
             for (columns, part) in parts {
+                if columns == (0..n) {
+                    // One share: its sum is all.
+                    m = part;
+                    continue;
+                }
                 for j in columns {
                     m.column_mut(j).copy_from(&part.column(j));
                 }
