@@ -15,7 +15,7 @@ use super::linearisation::Linearisation;
 use super::moments::DesignMoments;
 use super::names::Names;
 use super::report::{Absorbed, LeftOut, Parameter};
-use super::residuals::rms_um;
+use super::residuals::{rms_um, SquareSum};
 use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy, Progress};
 use crate::model::Param;
@@ -187,6 +187,10 @@ impl Engine<'_> {
                     return Err(CalibrationError::Dependent(left));
                 }
             }
+            let full_fit = || {
+                fit(&d, &cols, None, &self.fit_settings)
+                    .map_err(|e| CalibrationError::Core("fit", e))
+            };
             let by_sigma = iterates && params.iter().any(Linearisation::tracks);
             let estimate_only = match &ols {
                 Some(acc) if !by_sigma => Some(
@@ -199,8 +203,7 @@ impl Engine<'_> {
             let x: Vec<f64> = match &estimate_only {
                 Some(s) => s.x.as_slice().to_vec(),
                 None => {
-                    let o = fit(&d, &cols, None, &self.fit_settings)
-                        .map_err(|e| CalibrationError::Core("fit", e))?;
+                    let o = full_fit()?;
                     let x = o.x.clone();
                     out = Some(o);
                     x
@@ -236,8 +239,7 @@ impl Engine<'_> {
             }
             let out = match out {
                 Some(out) => out,
-                None => fit(&d, &cols, None, &self.fit_settings)
-                    .map_err(|e| CalibrationError::Core("fit", e))?,
+                None => full_fit()?,
             };
             let residuals: Vec<Vector3<f64>> = (0..d.rows())
                 .map(|i| d.residual(&cols, &out.x, i))
@@ -332,7 +334,7 @@ impl Engine<'_> {
         let d = self.design(&fitted.params)?;
         let cols: Vec<usize> = (0..fitted.params.len()).collect();
         // The held-out residuals' squares summed in row order as they come
-        // (the RMS [`rms_um`] takes of them, without a vector of them all).
+        // (their [`rms_um`], without a vector of them all).
         let mut res = SquareSum::default();
         (self.progress)(&format!(
             "held-out RMS: {} fits, one without each configuration",
@@ -485,40 +487,5 @@ impl Engine<'_> {
                 f.fit.covariance.iter().copied(),
             ),
         }
-    }
-}
-
-/// `Σ |r|²` of residuals in the order they come and their number: the
-/// [`rms_um`] of all of them, bit for bit (`rms_um` sums them in order
-/// from −0 too).
-#[derive(Debug)]
-struct SquareSum {
-    sum: f64,
-    count: usize,
-}
-
-impl Default for SquareSum {
-    fn default() -> Self {
-        Self {
-            sum: -0.0,
-            count: 0,
-        }
-    }
-}
-
-impl SquareSum {
-    fn extend(&mut self, res: &[Vector3<f64>]) {
-        for r in res {
-            self.sum += r.norm_squared();
-        }
-        self.count += res.len();
-    }
-
-    /// As [`rms_um`] of every residual added.
-    fn rms_um(&self) -> f64 {
-        if self.count == 0 {
-            return 0.0;
-        }
-        (self.sum / self.count as f64).sqrt() * 1e6
     }
 }

@@ -11,10 +11,45 @@ use crate::estimate::{nested_test, Accumulator, Block};
 
 /// RMS of the norm of 3-D position residuals \[m\], in µm (0 for none).
 pub fn rms_um(res: &[Vector3<f64>]) -> f64 {
-    if res.is_empty() {
-        return 0.0;
+    let mut s = SquareSum::default();
+    s.extend(res);
+    s.rms_um()
+}
+
+/// `Σ |r|²` of residuals in the order they come, and their number: the
+/// [`rms_um`] of residuals that need not all be held at once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SquareSum {
+    sum: f64,
+    count: usize,
+}
+
+impl Default for SquareSum {
+    fn default() -> Self {
+        // From −0, as `Iterator::sum` of `f64` starts.
+        Self {
+            sum: -0.0,
+            count: 0,
+        }
     }
-    (res.iter().map(|r| r.norm_squared()).sum::<f64>() / res.len() as f64).sqrt() * 1e6
+}
+
+impl SquareSum {
+    /// Adds the squares of `res`, in order.
+    pub fn extend(&mut self, res: &[Vector3<f64>]) {
+        for r in res {
+            self.sum += r.norm_squared();
+        }
+        self.count += res.len();
+    }
+
+    /// RMS \[µm\] of every residual added (0 for none).
+    pub fn rms_um(&self) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        (self.sum / self.count as f64).sqrt() * 1e6
+    }
 }
 
 /// Lack of fit from the repetitions (the core's, so that the device's

@@ -20,7 +20,7 @@ use super::accumulator::{symmetric, Accumulator};
 use super::factor::Solution;
 use super::grouped::{support_indices, GroupMoments, GroupedStats};
 use super::irls::{
-    pool_small_groups, robust_weights, Fit, IrlsSettings, Iteration, Noise, Reweightable,
+    change, pool_small_groups, robust_weights, Fit, IrlsSettings, Iteration, Noise, Reweightable,
 };
 use super::weights::RobustWeight;
 use super::Alloc;
@@ -106,7 +106,7 @@ where
             weights: [Vector3::zeros(); G],
             ready: false,
         };
-        let more = settings.max_iterations > 0;
+        // (A first reweighted fit follows: `max_iterations` ≥ 1.)
         let (ols, ols_middle) = fit_parts(
             self,
             weights,
@@ -115,7 +115,7 @@ where
             dof,
             false,
             Some(&mut ahead),
-            more,
+            true,
         )?;
         history(&Iteration {
             x: ols.x.clone(),
@@ -144,12 +144,7 @@ where
                 more,
             )?;
             let std = fit.sandwich_std(&middle);
-            let mut change = T::zero();
-            for i in 0..active.len() {
-                if active[i] && std[i] > T::zero() {
-                    change = change.max((fit.x[i] - x[i]).abs() / std[i]);
-                }
-            }
+            let change = change(active, &fit.x, &x, &std);
             history(&Iteration {
                 x: fit.x.clone(),
                 std,

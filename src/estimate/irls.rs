@@ -265,12 +265,7 @@ where
         for k in 1..=settings.max_iterations {
             let next = self.fit_reweighted(&settings.weight, active, weights, sigma, dof)?;
             let std = next.std();
-            let mut change = T::zero();
-            for i in 0..active.len() {
-                if active[i] && std[i] > T::zero() {
-                    change = change.max((next.solution.x[i] - fit.solution.x[i]).abs() / std[i]);
-                }
-            }
+            let change = change(active, &next.solution.x, &fit.solution.x, &std);
             history(&Iteration {
                 x: next.solution.x.clone(),
                 std,
@@ -285,6 +280,26 @@ where
         }
         Ok(fit)
     }
+}
+
+/// The largest move `|xᵢ − previousᵢ| / σᵢ` of an active parameter with
+/// `σᵢ > 0` (0 for none): the convergence test of iterative reweighting.
+pub(crate) fn change<T: RealField + Copy, D: Dim>(
+    active: &[bool],
+    x: &OVector<T, D>,
+    previous: &OVector<T, D>,
+    std: &OVector<T, D>,
+) -> T
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let mut change = T::zero();
+    for i in 0..active.len() {
+        if active[i] && std[i] > T::zero() {
+            change = change.max((x[i] - previous[i]).abs() / std[i]);
+        }
+    }
+    change
 }
 
 /// The fit behind [`Reweightable::fit_weighted`] (`estimated = false`) and

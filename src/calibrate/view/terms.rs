@@ -27,12 +27,7 @@ pub(super) fn add_terms(
     let mut pairs = terms.chunks_exact(2);
     for pair in pairs.by_ref() {
         let (t, u) = (&pair[0], &pair[1]);
-        for (j, column) in m
-            .chunks_exact_mut(n.max(1))
-            .enumerate()
-            .take(columns.end.min(n))
-            .skip(columns.start)
-        {
+        for (j, column) in triangle_columns(m, n, &columns) {
             let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
             let c = [u.k[0] * u.b[0][j], u.k[1] * u.b[1][j], u.k[2] * u.b[2][j]];
             if let Some(e) = eta.as_deref_mut() {
@@ -48,12 +43,7 @@ pub(super) fn add_terms(
         }
     }
     for t in pairs.remainder() {
-        for (j, column) in m
-            .chunks_exact_mut(n.max(1))
-            .enumerate()
-            .take(columns.end.min(n))
-            .skip(columns.start)
-        {
+        for (j, column) in triangle_columns(m, n, &columns) {
             let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
             if let Some(e) = eta.as_deref_mut() {
                 e[j] = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
@@ -64,6 +54,19 @@ pub(super) fn add_terms(
             }
         }
     }
+}
+
+/// The columns `j` in `columns` of the column-major `n × n` matrix `m`,
+/// with their index.
+fn triangle_columns<'m>(
+    m: &'m mut [f64],
+    n: usize,
+    columns: &std::ops::Range<usize>,
+) -> impl Iterator<Item = (usize, &'m mut [f64])> {
+    m.chunks_exact_mut(n.max(1))
+        .enumerate()
+        .take(columns.end.min(n))
+        .skip(columns.start)
 }
 
 /// Rows whose leverages [`leverage3_rows`] computes at once.
