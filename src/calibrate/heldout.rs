@@ -89,20 +89,43 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
     // A group of one row (one point per configuration: the case with the
     // most groups) in fixed-size arithmetic without an allocation per
     // group: `w_a = Λ⁻¹ b_aᵀ` from the inverse, `H_ab = b_b · w_a`.
+    //
+    // `w` holds the row's three axes (`[a n..(a + 1) n]`, read once from
+    // the design's columns) then `w_a` (`[(3 + a) n..(4 + a) n]`). Each
+    // `w_a` is summed over `c` in order, as `(0..n).map(..).sum()` sums it
+    // (from its first term: a float sum starts at −0.0), for all `r` side
+    // by side (the inverse's column `c` is contiguous): the same bits, where
+    // a sum per `r` read the design and the inverse across their strides.
     let inv = chol.inverse();
     let one = |i: usize, w: &mut [f64], out: &mut Vec<Vector3<f64>>| {
-        let bg = |a: usize, c: usize| b[(3 * i + a, c)];
+        let (bi, w) = w.split_at_mut(3 * n);
+        for c in 0..n {
+            for a in 0..3 {
+                bi[a * n + c] = b[(3 * i + a, c)];
+            }
+        }
         let mut e = Vector3::from_fn(|a, _| y[3 * i + a]);
         for (c, xc) in x.iter().enumerate() {
             for a in 0..3 {
-                e[a] -= bg(a, c) * xc;
+                e[a] -= bi[a * n + c] * xc;
             }
         }
         for a in 0..3 {
-            for (r, wr) in w[a * n..(a + 1) * n].iter_mut().enumerate() {
-                *wr = (0..n).map(|c| inv[(r, c)] * bg(a, c)).sum();
+            let (row, wa) = (&bi[a * n..(a + 1) * n], &mut w[a * n..(a + 1) * n]);
+            for (c, &bc) in row.iter().enumerate() {
+                let column = &inv.as_slice()[c * n..(c + 1) * n];
+                if c == 0 {
+                    for (wr, &v) in wa.iter_mut().zip(column) {
+                        *wr = v * bc;
+                    }
+                } else {
+                    for (wr, &v) in wa.iter_mut().zip(column) {
+                        *wr += v * bc;
+                    }
+                }
             }
         }
+        let bg = |a: usize, c: usize| bi[a * n + c];
         let ih = Matrix3::from_fn(|a, c| {
             let h: f64 = (0..n).map(|r| bg(c, r) * w[a * n + r]).sum();
             f64::from(u8::from(a == c)) - h
@@ -138,7 +161,7 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
     let threads = threads.clamp(1, groups.max(1));
     let runs = super::parallel::map(threads, threads, |k| {
         let (lo, hi) = (k * groups / threads, (k + 1) * groups / threads);
-        let mut w = vec![0.0; 3 * n];
+        let mut w = vec![0.0; 6 * n];
         let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
         let mut ok = Vec::with_capacity(hi - lo);
         for g in lo..hi {
