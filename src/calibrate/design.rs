@@ -88,6 +88,66 @@ impl GroupRows {
     }
 }
 
+/// Each run's piece of every column of a design's storage `data` (resized
+/// to `3·rows × params`, column-major; every element is then written, so
+/// storage of the right size is not zeroed first: 300 MB at 10⁶ rows): run
+/// `r` is rows `r·per..`, its piece of a column `3·per` values.
+fn pieces(data: &mut Vec<f64>, m: usize, n: usize, per: usize) -> Vec<Vec<&mut [f64]>> {
+    data.resize(3 * m * n, 0.0);
+    let mut pieces: Vec<Vec<&mut [f64]>> = (0..m.div_ceil(per)).map(|_| Vec::new()).collect();
+    for column in data.chunks_mut((3 * m).max(1)) {
+        for (piece, run) in column.chunks_mut(3 * per).zip(pieces.iter_mut()) {
+            run.push(piece);
+        }
+    }
+    pieces
+}
+
+/// How the columns of some parameters are computed at a row.
+struct Columns<'a> {
+    params: &'a [Param],
+    /// Each parameter's reported unit in SI.
+    si: Vec<f64>,
+    /// Whether a column needs the joints' compliances (the load's centre of
+    /// mass).
+    linearised: bool,
+    lin: &'a Linearisation,
+}
+
+impl<'a> Columns<'a> {
+    fn new(params: &'a [Param], lin: &'a Linearisation, names: &super::names::Names) -> Self {
+        Self {
+            params,
+            si: params.iter().map(|p| names.unit(p).si).collect(),
+            linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
+            lin,
+        }
+    }
+
+    /// The row's columns at its `frames` into row `k` of a run's `piece`
+    /// of every column.
+    fn write(
+        &self,
+        row: &Row,
+        frames: &crate::robot::Frames<f64, { super::geometry::J }>,
+        gravity_unit: Vector3<f64>,
+        piece: &mut [&mut [f64]],
+        k: usize,
+    ) -> Result<(), Error> {
+        let compliance = if self.linearised {
+            self.lin.compliance_at(&row.q)
+        } else {
+            Vec::new()
+        };
+        let sample = row.sample(frames, &compliance, gravity_unit);
+        for ((p, &si), column) in self.params.iter().zip(&self.si).zip(piece.iter_mut()) {
+            let col = p.column_si(&sample)? * si;
+            column[3 * k..3 * k + 3].copy_from_slice(col.as_slice());
+        }
+        Ok(())
+    }
+}
+
 impl Design {
     /// Columns of `params` at `rows` (at their last relinearisation, each
     /// row's frames recomputed there); `load_com` about the compliances of
@@ -145,48 +205,89 @@ impl Design {
         lin: &Linearisation,
         names: &super::names::Names,
         threads: usize,
-        mut storage: Vec<f64>,
+        storage: Vec<f64>,
     ) -> Result<Self, Error> {
-        let (rows, groups) = (&all.rows[..], all.configs.len());
-        let linearised = params.iter().any(|p| matches!(p, Param::LoadCom { .. }));
+        let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
-        let si: Vec<f64> = params.iter().map(|p| names.unit(p).si).collect();
-        // Column-major `3·rows × params`; each thread writes its run of rows
-        // into its piece of every column. (Every element is written: storage
-        // of the right size is not zeroed first, 300 MB at 10⁶ rows.)
-        storage.resize(3 * m * n, 0.0);
-        let mut data = storage;
+        let columns = Columns::new(params, lin, names);
         let per = m.div_ceil(threads.max(1)).max(1);
-        let mut pieces: Vec<Vec<&mut [f64]>> = (0..m.div_ceil(per)).map(|_| Vec::new()).collect();
-        for column in data.chunks_mut((3 * m).max(1)) {
-            for (piece, run) in column.chunks_mut(3 * per).zip(pieces.iter_mut()) {
-                run.push(piece);
-            }
-        }
+        let mut data = storage;
+        let pieces = pieces(&mut data, m, n, per);
         let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
         super::parallel::for_runs_mut(&mut { runs }, threads, |_, runs| {
             let mut frames = crate::robot::Frames::empty();
-            for (run, columns) in runs.iter_mut() {
-                for (i, row) in run.iter().enumerate() {
-                    let k = if linearised {
-                        lin.compliance_at(&row.q)
-                    } else {
-                        Vec::new()
-                    };
+            for (run, piece) in runs.iter_mut() {
+                for (k, row) in run.iter().enumerate() {
                     all.frames_into(row, &mut frames)?;
-                    let sample = row.sample(&frames, &k, all.gravity_unit);
-                    for ((p, &si), column) in params.iter().zip(&si).zip(columns.iter_mut()) {
-                        let col = p.column_si(&sample)? * si;
-                        column[3 * i..3 * i + 3].copy_from_slice(col.as_slice());
-                    }
+                    columns.write(row, &frames, all.gravity_unit, piece, k)?;
                 }
             }
             Ok::<_, Error>(())
         })?;
-        let b = DMatrix::from_vec(3 * m, n, data);
+        Ok(Self::finish(all, params, data))
+    }
+
+    /// The rows of `all` relinearised at `geometry` and `lin`
+    /// ([`Rows::relinearise`]) and the design of `params` there, built in
+    /// the same pass from the frames the relinearisation computes (one
+    /// forward kinematics per row, not two), into the storage of `old`
+    /// when given: the rows and the design are those of
+    /// [`Rows::relinearise`] then [`Design::new`], bit for bit.
+    ///
+    /// # Errors
+    /// The outer error as [`Rows::relinearise`]; when the rows are
+    /// relinearised but a column cannot be computed, `Ok(Err(_))` with
+    /// [`Design::new`]'s error.
+    pub fn relinearised(
+        all: &mut Rows,
+        geometry: &super::geometry::Geometry,
+        lin: &Linearisation,
+        params: &[Param],
+        names: &super::names::Names,
+        old: Option<Self>,
+    ) -> Result<Result<Self, Error>, super::settings::CalibrationError> {
+        let threads = super::parallel::for_rows(all.rows.len());
+        Self::relinearised_on(all, geometry, lin, params, names, old, threads)
+    }
+
+    /// [`Design::relinearised`] on `threads` threads.
+    ///
+    /// # Errors
+    /// As [`Design::relinearised`].
+    pub fn relinearised_on(
+        all: &mut Rows,
+        geometry: &super::geometry::Geometry,
+        lin: &Linearisation,
+        params: &[Param],
+        names: &super::names::Names,
+        old: Option<Self>,
+        threads: usize,
+    ) -> Result<Result<Self, Error>, super::settings::CalibrationError> {
+        let m = all.rows.len();
+        let per = m.div_ceil(threads.max(1)).max(1);
+        let mut data = old.map(|d| Vec::from(d.b.data)).unwrap_or_default();
+        let columns = Columns::new(params, lin, names);
+        let pieces = pieces(&mut data, m, params.len(), per);
+        let columns = &columns;
+        let done = all.relinearise_with(
+            geometry,
+            lin,
+            threads,
+            pieces,
+            |piece, k, row, frames, g| columns.write(row, frames, g, piece, k),
+        )?;
+        Ok(done.map(|()| Self::finish(all, params, data)))
+    }
+
+    /// The design of `params` at `all` from its columns in `data`
+    /// (column-major `3·rows × params`): the left-hand sides, the groups,
+    /// the instrument's σ.
+    fn finish(all: &Rows, params: &[Param], data: Vec<f64>) -> Self {
+        let (rows, groups) = (&all.rows[..], all.configs.len());
+        let b = DMatrix::from_vec(3 * rows.len(), params.len(), data);
         // (A `flat_map` has no exact size: it grew the vector push by push,
         // at 10⁶ rows a tenth of a second per design.)
-        let mut y = Vec::with_capacity(3 * m);
+        let mut y = Vec::with_capacity(3 * rows.len());
         for r in rows {
             y.extend_from_slice(r.y.as_slice());
         }
@@ -204,14 +305,14 @@ impl Design {
                 .map(|(s, &k)| (s / k.max(1.0)).map(f64::sqrt))
                 .collect()
         });
-        Ok(Self {
+        Self {
             params: params.to_vec(),
             b,
             y,
             group: rows.iter().map(|r| r.group).collect(),
             groups,
             instrument_sigma,
-        })
+        }
     }
 
     /// The rows of each group, in row order ([`GroupRows`]); `None` when a

@@ -119,6 +119,34 @@ impl Engine<'_> {
         self.rows.relinearise(&self.geometry, &self.lin)
     }
 
+    /// [`Engine::relinearise`], with the design of `params` there built in
+    /// the same pass ([`Design::relinearised`]: one forward kinematics per
+    /// row, not two) and kept for the next [`Engine::design`] of `params`.
+    /// (A column that cannot be computed is [`Engine::design`]'s error,
+    /// when it is asked for.)
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`].
+    pub fn relinearise_for(&mut self, params: &[Param]) -> Result<(), CalibrationError> {
+        let mut last = self
+            .last_design
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let old = last.take().and_then(|(_, _, d)| Arc::try_unwrap(d).ok());
+        let d = Design::relinearised(
+            &mut self.rows,
+            &self.geometry,
+            &self.lin,
+            params,
+            &self.names,
+            old,
+        )?;
+        if let (Ok(d), Some(at)) = (d, &self.rows.at) {
+            *last = Some((params.to_vec(), at.clone(), Arc::new(d)));
+        }
+        Ok(())
+    }
+
     /// Places the base by a rigid registration of the predicted marker
     /// positions onto the measured ones ([`Geometry::register`]), when
     /// `model` identifies the base and there are absolute rows.
@@ -138,7 +166,7 @@ impl Engine<'_> {
         let predicted: Vec<Vector3<f64>> = absolute.iter().map(|r| r.p).collect();
         let measured: Vec<Vector3<f64>> = absolute.iter().map(|r| r.measured).collect();
         self.geometry.register(&predicted, &measured);
-        self.relinearise()
+        self.relinearise_for(model)
     }
 
     /// Fits `params` by Gauss–Newton ([`super::linearisation`]): the
@@ -229,9 +257,12 @@ impl Engine<'_> {
                 || moved > self.policy.gauss_newton_sigma
             {
                 if relinearisations < self.policy.max_steps {
+                    // This design's storage is the next one's: nobody else
+                    // may hold it (a second 300 MB at 10⁶ rows).
+                    drop(d);
                     self.geometry.apply(params, &x);
                     let to = Linearisation::of(self.lin.model, params, &x, &self.names);
-                    self.step_towards(&to)?;
+                    self.step_towards(&to, params)?;
                     relinearisations += 1;
                     continue;
                 }
@@ -258,20 +289,25 @@ impl Engine<'_> {
         }
     }
 
-    /// Moves the joint law to `to` and relinearises; where a loaded robot
+    /// Moves the joint law to `to` and relinearises (with the design of
+    /// `params`, [`Engine::relinearise_for`]); where a loaded robot
     /// has no equilibrium there, halves the step (at most
     /// [`Policy::max_halvings`] times) — damped Gauss–Newton.
     ///
     /// # Errors
     /// [`CalibrationError::NoEquilibrium`] when even the smallest step has
     /// none; as [`Rows::relinearise`].
-    fn step_towards(&mut self, to: &Linearisation) -> Result<(), CalibrationError> {
+    fn step_towards(
+        &mut self,
+        to: &Linearisation,
+        params: &[Param],
+    ) -> Result<(), CalibrationError> {
         let from = self.lin.clone();
         let mut t = 1.0;
         let mut halvings = 0;
         loop {
             self.lin = from.towards(to, t);
-            match self.relinearise() {
+            match self.relinearise_for(params) {
                 Err(CalibrationError::NoEquilibrium(_)) if halvings < self.policy.max_halvings => {
                     t *= 0.5;
                     halvings += 1;

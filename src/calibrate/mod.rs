@@ -200,7 +200,9 @@ fn calibrate_rows(
         progress,
         last_design: Default::default(),
     };
-    e.relinearise()?;
+    // (With the model's design in the same pass: the independence test
+    // below needs it.)
+    e.relinearise_for(&model)?;
     plausibility::check_torques(&model, &e.rows, &e.names, &policy, file)?;
 
     // The declared model reduced to what the data can identify, at the

@@ -258,11 +258,37 @@ mod tests {
             rows.relinearise_on(&geometry, &lin, threads)
                 .expect("relinearise");
             let d = Design::new_on(&rows, &params, &lin, &names, threads).expect("design");
-            let r: Vec<_> = rows
-                .rows
-                .iter()
-                .map(|r| (r.y, r.p, r.tau.clone(), r.twists.clone()))
-                .collect();
+            let state = |rows: &Rows| -> Vec<_> {
+                rows.rows
+                    .iter()
+                    .map(|r| (r.y, r.p, r.tau.clone(), r.twists.clone()))
+                    .collect()
+            };
+            let r = state(&rows);
+            // Again with the design built in the relinearisation's pass
+            // (from the equilibria just found: the same rows), into the
+            // storage of another design: the same rows and design.
+            let old = Design::new_on(&rows, &params[..1], &lin, &names, 1).expect("design");
+            let fused = Design::relinearised_on(
+                &mut rows,
+                &geometry,
+                &lin,
+                &params,
+                &names,
+                Some(old),
+                threads,
+            )
+            .expect("relinearise")
+            .expect("columns");
+            let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(fused.b.as_slice()),
+                bits(d.b.as_slice()),
+                "{threads} threads"
+            );
+            assert_eq!(bits(&fused.y), bits(&d.y));
+            assert_eq!((fused.b.shape(), &fused.group), (d.b.shape(), &d.group));
+            assert!(state(&rows) == r, "{threads} threads");
             (r, d.b, d.y)
         };
         let one = at(1);

@@ -100,6 +100,10 @@ pub struct Row {
     pub y: Vector3<f64>,
 }
 
+/// A run of rows in [`Rows::relinearise_with`], with its state and its
+/// first error from `then`.
+type Run<'a, S> = (&'a mut [Row], Option<S>, Result<(), Error>);
+
 /// Where a row's [`Frames`] are: the joint values they are at (the
 /// commanded `q`, or with the exact deflection model the equilibrium) and
 /// the chain of the row's marker, placed at the geometry of the last
@@ -219,6 +223,32 @@ impl Rows {
         lin: &Linearisation,
         threads: usize,
     ) -> Result<(), CalibrationError> {
+        self.relinearise_with(geometry, lin, threads, Vec::<()>::new(), |_, _, _, _, _| {
+            Ok(())
+        })
+        .map(|_| ())
+    }
+
+    /// [`Rows::relinearise_on`], handing each row, once it is computed, to
+    /// `then(state, k, row, frames, gravity_unit)` with the row's frames
+    /// (those [`Rows::frames`] recomputes, bit for bit), `k` its index in
+    /// its run: the rows are split in runs of `rows.div_ceil(threads)`, one
+    /// per thread, and `states` holds one state per run (none: `then` is
+    /// not called). A design built here needs no second forward
+    /// kinematics per row ([`super::design::Design::relinearised`]).
+    /// `then`'s first error (in row order) does not stop the rows: it is
+    /// returned when they are all computed.
+    ///
+    /// # Errors
+    /// As [`Rows::relinearise`] (the first row's error in row order).
+    pub fn relinearise_with<S: Send>(
+        &mut self,
+        geometry: &Geometry,
+        lin: &Linearisation,
+        threads: usize,
+        states: Vec<S>,
+        then: impl Fn(&mut S, usize, &Row, &Frames<f64, J>, Vector3<f64>) -> Result<(), Error> + Sync,
+    ) -> Result<Result<(), Error>, CalibrationError> {
         self.at = None;
         self.chains = geometry.placed_chains();
         let chains = &self.chains;
@@ -238,8 +268,12 @@ impl Rows {
         let before: Option<Vec<Vec<f64>>> = (threads > 1
             && lin.model == super::DeflectionModel::Exact)
             .then(|| self.rows.iter().map(|r| r.frames.theta.clone()).collect());
-        // `rigid`: the run's frames of a rigid row, filled in place.
-        let one = |row: &mut Row, rigid: &mut Frames<f64, J>| -> Result<(), CalibrationError> {
+        // `rigid`: the run's frames of a rigid row, filled in place; `sink`
+        // gets the row and its frames.
+        let one = |row: &mut Row,
+                   rigid: &mut Frames<f64, J>,
+                   sink: &mut dyn FnMut(&Row, &Frames<f64, J>)|
+         -> Result<(), CalibrationError> {
             let m = geometry
                 .markers
                 .get(usize::from(row.marker))
@@ -298,6 +332,7 @@ impl Rows {
                     } else {
                         row.measured
                     };
+                    sink(row, rigid);
                 }
                 Some(law) => {
                     // The rigid robot's point: only a deflection row
@@ -358,17 +393,35 @@ impl Rows {
                     row.frames.theta.clear();
                     row.frames.theta.extend_from_slice(eq.frames.q());
                     row.p = p;
+                    sink(row, &eq.frames);
                 }
             }
             Ok(())
         };
-        let done = super::parallel::for_runs_mut(&mut self.rows, threads, |first, run| {
+        // One item per run (a run per thread, as `for_runs_mut` splits the
+        // rows), with its state and `then`'s first error.
+        let per = self.rows.len().div_ceil(threads.max(1)).max(1);
+        let mut states = states.into_iter();
+        let mut runs: Vec<Run<'_, S>> = self
+            .rows
+            .chunks_mut(per)
+            .map(|run| (run, states.next(), Ok(())))
+            .collect();
+        let done = super::parallel::for_runs_mut(&mut runs, threads, |first, items| {
             let mut rigid = Frames::empty();
-            for (k, row) in run.iter_mut().enumerate() {
-                one(row, &mut rigid).map_err(|e| (first + k, e))?;
+            for (r, (run, state, failed)) in items.iter_mut().enumerate() {
+                for (k, row) in run.iter_mut().enumerate() {
+                    let mut sink = |row: &Row, frames: &Frames<f64, J>| {
+                        if let (Some(state), Ok(())) = (state.as_mut(), &*failed) {
+                            *failed = then(state, k, row, frames, g_unit);
+                        }
+                    };
+                    one(row, &mut rigid, &mut sink).map_err(|e| ((first + r) * per + k, e))?;
+                }
             }
             Ok(())
         });
+        let then_failed = runs.into_iter().try_for_each(|(_, _, f)| f);
         if let Err((at, e)) = done {
             if let Some(before) = before {
                 for (row, theta) in self.rows.iter_mut().zip(before).skip(at + 1) {
@@ -378,7 +431,7 @@ impl Rows {
             return Err(e);
         }
         self.at = Some((geometry.clone(), lin.clone()));
-        Ok(())
+        Ok(then_failed)
     }
 
     /// The frames of `row` (one of these rows) at the last
