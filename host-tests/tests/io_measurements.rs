@@ -230,6 +230,19 @@ fn every_malformed_input_names_file_line_and_column() {
             "already at line 2",
         ),
         (
+            // The first row in file order whose key came before (config 2
+            // at line 4), against that earlier row; not the first key in
+            // sorted order (config 1, again at line 5).
+            format!(
+                "{HEADER}\n2,0,1,0,10,20,100,1000,0,500\n{ok}\n\
+                 2,0,1,0,10,20,100,1000,0,500\n{ok}\n{ok}\n"
+            ),
+            ErrorKind::Duplicate,
+            4,
+            None,
+            "config 2, rep 0, marker 1, load 0 kg already at line 2",
+        ),
+        (
             format!("{HEADER}\n{ok}\n1,0,1,5,1,2,3,4,5,6\n1,0,1,5,1,2,3,4,5,6\n"),
             ErrorKind::Duplicate,
             4,
