@@ -24,24 +24,32 @@ pub(crate) fn parse_int(cell: &str) -> Result<i64, String> {
         .map_err(|_| format!("'{cell}' is not an integer"))
 }
 
-/// The cell as written (already checked to parse).
-pub(crate) fn raw(cell: &str) -> f64 {
-    cell.parse().unwrap_or(0.0)
-}
-
 /// A finite real in SI; see the module doc for the unit conversion.
 pub(crate) fn parse_real(cell: &str, scale: Scale) -> Result<f64, (ErrorKind, String)> {
+    parse_real_written(cell, scale).map(|(_, v)| v)
+}
+
+/// [`parse_real`] with the number as written, before the unit's
+/// conversion (read once: a second parse of the cell for it was a tenth of
+/// reading a large file).
+pub(crate) fn parse_real_written(
+    cell: &str,
+    scale: Scale,
+) -> Result<(f64, f64), (ErrorKind, String)> {
     let v: f64 = cell
         .parse()
         .map_err(|_| (ErrorKind::Syntax, format!("'{cell}' is not a number")))?;
     if !v.is_finite() {
         return Err((ErrorKind::NonFinite, format!("non-finite value '{cell}'")));
     }
-    Ok(match scale {
-        Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => v,
-        Scale::Angle(AngleUnit::Deg) => v.to_radians(),
-        Scale::Length(LengthUnit::Mm) => milli(cell).unwrap_or(v / 1000.0),
-    })
+    Ok((
+        v,
+        match scale {
+            Scale::One | Scale::Angle(AngleUnit::Rad) | Scale::Length(LengthUnit::M) => v,
+            Scale::Angle(AngleUnit::Deg) => v.to_radians(),
+            Scale::Length(LengthUnit::Mm) => milli(cell).unwrap_or(v / 1000.0),
+        },
+    ))
 }
 
 /// The decimal `cell · 10⁻³`, correctly rounded.

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use super::super::cells::{parse_int, parse_real, raw, Scale};
+use super::super::cells::{parse_int, parse_real, parse_real_written, Scale};
 use super::super::setup::{AngleUnit, LengthUnit, Setup};
 use super::super::urdf::{Robot, UrdfJointKind};
 use super::super::{ErrorKind, InputError};
@@ -117,9 +117,10 @@ impl Layout<'_> {
                     } else {
                         Scale::Length(self.setup.units.length)
                     };
-                    let v = parse_real(cell, scale).map_err(|(k, m)| cerr(k, m))?;
+                    let (written, v) =
+                        parse_real_written(cell, scale).map_err(|(k, m)| cerr(k, m))?;
                     if kind.is_angular() {
-                        stats.max_angle_written = stats.max_angle_written.max(raw(cell).abs());
+                        stats.max_angle_written = stats.max_angle_written.max(written.abs());
                     }
                     if let (UrdfJointKind::Revolute, AngleUnit::Rad, Some(l)) =
                         (kind, self.setup.units.angle, self.robot.limits[j])
@@ -146,8 +147,9 @@ impl Layout<'_> {
                     o.q[j] = v;
                 }
                 Col::Pos(k) => {
-                    let v = parse_real(cell, Scale::Length(self.setup.units.length))
-                        .map_err(|(k, m)| cerr(k, m))?;
+                    let (written, v) =
+                        parse_real_written(cell, Scale::Length(self.setup.units.length))
+                            .map_err(|(k, m)| cerr(k, m))?;
                     if v.abs() > MAX_POSITION_M {
                         return Err(cerr(
                             ErrorKind::InvalidValue,
@@ -166,7 +168,7 @@ impl Layout<'_> {
                             ),
                         ));
                     }
-                    stats.max_pos_written = stats.max_pos_written.max(raw(cell).abs());
+                    stats.max_pos_written = stats.max_pos_written.max(written.abs());
                     o.p_m[k] = v;
                 }
                 Col::Time => {
