@@ -16,7 +16,7 @@
 
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector3};
 
-use super::accumulator::{symmetric, Accumulator};
+use super::accumulator::Accumulator;
 use super::factor::Solution;
 use super::grouped::{support_indices, GroupMoments, GroupedStats};
 use super::irls::{
@@ -204,18 +204,18 @@ fn fit_parts<T: RealField + Copy, D: Dim, const G: usize>(
     sigma: &mut [Vector3<T>],
     dof: &mut [Vector3<T>],
     estimated: bool,
-    ahead: Option<&mut Ahead<'_, T, D, G>>,
+    mut ahead: Option<&mut Ahead<'_, T, D, G>>,
     next: bool,
 ) -> Result<(Solution<T, D>, OMatrix<T, D, D>), Error>
 where
     DefaultAllocator: Alloc<D>,
 {
-    let fresh;
-    let info = match ahead.as_deref() {
-        Some(a) if a.ready => &a.info,
+    let mut fresh;
+    let info = match ahead.as_deref_mut() {
+        Some(a) if a.ready => &mut a.info,
         _ => {
             fresh = stats.information_upper(weights)?;
-            &fresh
+            &mut fresh
         }
     };
     // As `Accumulator::solve_active`.
@@ -226,15 +226,17 @@ where
             parameters,
         });
     }
-    let lambda = symmetric(&info.upper);
-    let solution = Solution::new(&lambda, &info.eta, info.yy, equations, active)?;
+    // `Λ` in full where its upper triangle was (the head start's is
+    // overwritten in full by the next one; not copied).
+    info.upper.fill_lower_triangle_with_upper_triangle();
+    let solution = Solution::new(&info.upper, &info.eta, info.yy, equations, active)?;
     stats.residual_sigma_into(&solution, weights, sigma, dof)?;
     pool_small_groups(sigma, dof);
     let noise = Noise {
         sigma,
         estimated_from: estimated.then_some(&*dof),
     };
-    let middle = match ahead {
+    let mut middle = match ahead {
         Some(a) if next => {
             let (middle, ready) =
                 stats.middle_and_next(weights, noise, a.weight, &mut a.info, &mut a.weights)?;
@@ -248,7 +250,8 @@ where
             stats.middle_upper(weights, noise)?
         }
     };
-    Ok((solution, symmetric(&middle)))
+    middle.fill_lower_triangle_with_upper_triangle();
+    Ok((solution, middle))
 }
 
 /// The next fit's weights and `Λ`, `η`, … computed ahead: `ready` when
