@@ -103,6 +103,19 @@ fn pieces(data: &mut Vec<f64>, m: usize, n: usize, per: usize) -> Vec<Vec<&mut [
     pieces
 }
 
+/// A design's vectors, reused by the next design (each a fresh
+/// allocation was page faults: at 10⁶ rows 300 MB of columns, 24 MB of
+/// left-hand sides, 8 MB of groups).
+#[derive(Default)]
+struct Storage {
+    /// The columns (`Design::b`'s data).
+    b: Vec<f64>,
+    /// `Design::y`.
+    y: Vec<f64>,
+    /// `Design::group`.
+    group: Vec<usize>,
+}
+
 /// How the columns of some parameters are computed at a row.
 struct Columns<'a> {
     params: &'a [Param],
@@ -180,7 +193,7 @@ impl Design {
         names: &super::names::Names,
     ) -> Result<Self, Error> {
         let threads = super::parallel::for_rows(all.rows.len());
-        Self::build(all, params, lin, names, threads, old.b.data.into())
+        Self::build(all, params, lin, names, threads, old.into_storage())
     }
 
     /// [`Design::new`] on `threads` threads: the same design whatever their
@@ -195,23 +208,27 @@ impl Design {
         names: &super::names::Names,
         threads: usize,
     ) -> Result<Self, Error> {
-        Self::build(all, params, lin, names, threads, Vec::new())
+        Self::build(all, params, lin, names, threads, Storage::default())
     }
 
-    /// [`Design::new_on`] in `storage` (cleared; every element written).
+    /// [`Design::new_on`] in `storage` (every element written).
     fn build(
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
         names: &super::names::Names,
         threads: usize,
-        storage: Vec<f64>,
+        storage: Storage,
     ) -> Result<Self, Error> {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
         let columns = Columns::new(params, lin, names);
         let per = m.div_ceil(threads.max(1)).max(1);
-        let mut data = storage;
+        let Storage {
+            b: mut data,
+            y,
+            group,
+        } = storage;
         let pieces = pieces(&mut data, m, n, per);
         let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
         super::parallel::for_runs_mut(&mut { runs }, threads, |_, runs| {
@@ -224,7 +241,7 @@ impl Design {
             }
             Ok::<_, Error>(())
         })?;
-        Ok(Self::finish(all, params, data))
+        Ok(Self::finish(all, params, Storage { b: data, y, group }))
     }
 
     /// The rows of `all` relinearised at `geometry` and `lin`
@@ -265,7 +282,11 @@ impl Design {
     ) -> Result<Result<Self, Error>, super::settings::CalibrationError> {
         let m = all.rows.len();
         let per = m.div_ceil(threads.max(1)).max(1);
-        let mut data = old.map(|d| Vec::from(d.b.data)).unwrap_or_default();
+        let Storage {
+            b: mut data,
+            y,
+            group,
+        } = old.map(Self::into_storage).unwrap_or_default();
         let columns = Columns::new(params, lin, names);
         let pieces = pieces(&mut data, m, params.len(), per);
         let columns = &columns;
@@ -276,18 +297,33 @@ impl Design {
             pieces,
             |piece, k, row, frames, g| columns.write(row, frames, g, piece, k),
         )?;
-        Ok(done.map(|()| Self::finish(all, params, data)))
+        Ok(done.map(|()| Self::finish(all, params, Storage { b: data, y, group })))
     }
 
-    /// The design of `params` at `all` from its columns in `data`
+    /// A design no longer needed as storage for the next one.
+    fn into_storage(self) -> Storage {
+        Storage {
+            b: self.b.data.into(),
+            y: self.y,
+            group: self.group,
+        }
+    }
+
+    /// The design of `params` at `all` from its columns in `storage.b`
     /// (column-major `3·rows × params`): the left-hand sides, the groups,
-    /// the instrument's σ.
-    fn finish(all: &Rows, params: &[Param], data: Vec<f64>) -> Self {
+    /// the instrument's σ (into `storage`'s other vectors).
+    fn finish(all: &Rows, params: &[Param], storage: Storage) -> Self {
         let (rows, groups) = (&all.rows[..], all.configs.len());
-        let b = DMatrix::from_vec(3 * rows.len(), params.len(), data);
+        let Storage {
+            b,
+            mut y,
+            mut group,
+        } = storage;
+        let b = DMatrix::from_vec(3 * rows.len(), params.len(), b);
         // (A `flat_map` has no exact size: it grew the vector push by push,
         // at 10⁶ rows a tenth of a second per design.)
-        let mut y = Vec::with_capacity(3 * rows.len());
+        y.clear();
+        y.reserve_exact(3 * rows.len());
         for r in rows {
             y.extend_from_slice(r.y.as_slice());
         }
@@ -309,7 +345,11 @@ impl Design {
             params: params.to_vec(),
             b,
             y,
-            group: rows.iter().map(|r| r.group).collect(),
+            group: {
+                group.clear();
+                group.extend(rows.iter().map(|r| r.group));
+                group
+            },
             groups,
             instrument_sigma,
         }
