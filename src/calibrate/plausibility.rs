@@ -200,18 +200,18 @@ pub fn check_units(
         AngleUnit::Deg => (180.0 / core::f64::consts::PI, "rad"),
         AngleUnit::Rad => (core::f64::consts::PI / 180.0, "deg"),
     };
-    for (j, kind) in job
-        .robot
-        .chain
-        .joints()
-        .iter()
-        .map(|jt| jt.kind)
-        .enumerate()
-    {
-        if kind != crate::robot::JointKind::Revolute {
-            continue;
-        }
-        let alt = registered_rms(job, &pairs(job, data, stride, Some((j, factor))));
+    // Each revolute joint's column read in the other unit, on worker
+    // threads (each a forward kinematics of every checked point and a
+    // registration); the first joint in order that fits better is the error.
+    let revolute: Vec<usize> = (job.robot.chain.joints().iter().enumerate())
+        .filter(|(_, jt)| jt.kind == crate::robot::JointKind::Revolute)
+        .map(|(j, _)| j)
+        .collect();
+    let threads = super::parallel::threads();
+    let alts = super::parallel::map(revolute.len(), threads, |k| {
+        registered_rms(job, &pairs(job, data, stride, Some((revolute[k], factor))))
+    });
+    for (&j, alt) in revolute.iter().zip(alts) {
         if alt * policy.unit_fit_ratio < declared {
             return Err(CalibrationError::Data(format!(
                 "{file}: column '{}': its values fit {other} far better than the declared \
