@@ -467,6 +467,62 @@ fn batched_updates_give_the_same_bits_as_one_block_at_a_time() {
     }
 }
 
+/// Long runs of rows without σ, many buffers' worth: `update_rows` flushes
+/// after fewer rows than `update` at some N (`ROWS_BYTES` in `wide.rs`).
+/// Every N from 0 to 130 (every width of the last panel and chunk, every
+/// buffer size), every instruction set: the same bits as `update` one
+/// block at a time, in calls of many sizes, around a short run with σ, and
+/// mixed with `update` (whose buffer can hold more rows than
+/// `update_rows` fills: the rows find it fuller than their own limit).
+#[test]
+fn update_rows_in_long_runs_gives_the_same_bits_as_update() {
+    for n in 0..=130 {
+        let mut rng = Rng::new(9000 + n as u64);
+        let blocks: Vec<_> = (0..150)
+            .map(|k| {
+                let mut blk = block(&mut rng, n, k);
+                if !(60..64).contains(&k) {
+                    blk.sigma = None;
+                }
+                blk
+            })
+            .collect();
+        let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(n));
+        for blk in &blocks {
+            core.update(blk).unwrap();
+        }
+        for one in instruction_sets(n) {
+            let what = one.instructions();
+            let mut one = one;
+            for blk in &blocks {
+                one.update(blk).unwrap();
+            }
+            let expected = one.accumulator();
+            same_statistics(&expected, &core);
+            for step in [1, 50, 64, 97, 1000] {
+                let mut rows = one.clone();
+                rows.reset();
+                feed_rows(&mut rows, &blocks, step);
+                assert_eq!(rows.accumulator(), expected, "{what} n {n} step {step}");
+            }
+            // Blocks through `update` and runs of rows through
+            // `update_rows`, in turn.
+            let mut mixed = one.clone();
+            mixed.reset();
+            for (k, part) in blocks.chunks(40).enumerate() {
+                if k % 2 == 0 {
+                    for blk in part {
+                        mixed.update(blk).unwrap();
+                    }
+                } else {
+                    feed_rows(&mut mixed, part, 1000);
+                }
+            }
+            assert_eq!(mixed.accumulator(), expected, "{what} n {n} mixed");
+        }
+    }
+}
+
 #[test]
 fn update_many_stops_at_a_bad_block_with_its_index() {
     for n in [3, 9, 30] {
@@ -530,18 +586,27 @@ fn one_row(b: &[f64], dp: f64, w: f64, sigma: Option<f64>) -> Block<f64, Dyn> {
 
 #[test]
 fn update_rows_stops_at_a_bad_row_with_the_error_of_update() {
-    for n in [3, 9, 30] {
+    // Row 61 of 120: in the first buffer; row 300 of 420: several
+    // flushes later.
+    for (blocks, bad) in [(40, 61), (140, 300)] {
+        bad_row(blocks, bad);
+    }
+}
+
+/// `blocks` blocks' rows with row `bad` made bad in every way, at N = 3,
+/// 9, 30, 60, with and without σ.
+fn bad_row(blocks: usize, bad: usize) {
+    for n in [3, 9, 30, 60] {
         for sigma in [false, true] {
             let mut rng = Rng::new(77 + n as u64);
             let mut data = RowData::new(n, sigma);
-            for k in 0..40 {
+            for k in 0..blocks {
                 // 7k + 1: never a block of fewer rows (poisoned past them).
                 let mut blk = block(&mut rng, n, 7 * k + 1);
                 assert_eq!(blk.rows, 3);
                 blk.sigma = sigma.then(|| Vector3::from_fn(|_, _| rng.range(1e-4, 1e-2)));
                 data.push(&blk);
             }
-            let bad = 61;
             let edits: Vec<Edit> = vec![
                 Box::new(move |d| d.b[bad * n + n / 2] = f64::NAN),
                 Box::new(move |d| d.b[bad * n] = f64::INFINITY),
@@ -686,7 +751,6 @@ fn update_rows_checks_the_weights_of_every_row_position() {
     // one: a bad weight or σ at each of the 20 positions of a call (two
     // vectors and a tail of four), and zero weights, which count no
     // equation, at each position.
-    type Weights = fn(&mut f64, &mut f64);
     let edits: [Weights; 7] = [
         |w, _| *w = -0.5,
         |w, _| *w = f64::NAN,
@@ -698,25 +762,53 @@ fn update_rows_checks_the_weights_of_every_row_position() {
         |w, s| (*w, *s) = (1e80, 1e10),
     ];
     for n in [9, 30] {
+        weights_at_every_position(n, &edits, true, 0);
+        // Without σ, after 2016 rows (a multiple of 48, 63, 72 and 96:
+        // the buffer full), so that the call starts with a flush.
+        weights_at_every_position(n, &edits[..4], false, 2016);
+    }
+}
+
+type Weights = fn(&mut f64, &mut f64);
+
+/// Each of `edits` at each of the 20 rows of one call, after `before`
+/// good rows without σ.
+fn weights_at_every_position(n: usize, edits: &[Weights], sigma: bool, before: usize) {
+    {
         let mut rng = Rng::new(31 + n as u64);
-        let mut data = RowData::new(n, true);
+        let mut good = RowData::new(n, false);
+        for k in 0..before / 3 {
+            let mut blk = block(&mut rng, n, 7 * k + 1);
+            blk.sigma = None;
+            good.push(&blk);
+        }
+        let mut data = RowData::new(n, sigma);
         for k in 0..7 {
             let mut blk = block(&mut rng, n, 7 * k + 1);
             blk.sigma = Some(Vector3::from_fn(|_, _| rng.range(1e-4, 1e-2)));
+            if !sigma {
+                blk.sigma = None;
+            }
             data.push(&blk);
         }
         data.w.iter_mut().for_each(|w| *w = w.max(0.25));
         for edit in edits {
             for bad in 0..20 {
                 let mut data = data.clone();
-                let (mut w, mut s) = (data.w[bad], data.sigma.as_ref().unwrap()[bad]);
+                let mut s = data.sigma.as_ref().map_or(1.0, |s| s[bad]);
+                let mut w = data.w[bad];
                 edit(&mut w, &mut s);
                 data.w[bad] = w;
-                data.sigma.as_mut().unwrap()[bad] = s;
+                if let Some(sig) = data.sigma.as_mut() {
+                    sig[bad] = s;
+                }
                 for instructions in [Instructions::Detected, Instructions::Scalar] {
                     let Some(mut wide) = WideAccumulator::with_instructions(n, instructions) else {
                         continue;
                     };
+                    if before > 0 {
+                        wide.update_rows(good.rows()).unwrap();
+                    }
                     let mut expected = wide.clone();
                     let got = wide.update_rows(data.slice(0, 20));
                     let mut refused = None;

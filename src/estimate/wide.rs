@@ -91,8 +91,10 @@ pub struct WideAccumulator {
     /// `n + 1` rounded up to [`PAD`]: the row length of the buffers, the
     /// side of `C`.
     mp: usize,
-    /// Rows the buffers hold.
+    /// Rows the buffers hold; at most `rows_cap` of them in
+    /// [`Self::update_rows`] ([`ROWS_BYTES`]).
     cap: usize,
+    rows_cap: usize,
     /// The instruction set and its `f64` lanes (the buffers' chunk width).
     arch: pulp::Arch,
     lanes: usize,
@@ -124,6 +126,15 @@ pub struct WideAccumulator {
 /// The bytes of `U` the buffer is sized to (half of a 48 KiB first-level
 /// cache: the rows stay there between the block's copy and the kernel).
 const BUFFER_BYTES: usize = 24 * 1024;
+
+/// The bytes of `U` [`WideAccumulator::update_rows`] fills before a flush,
+/// but at least 48 rows and at most the buffer: 72 rows instead of 96 at
+/// N = 23 … 30, fewer also at N = 31 … 54; the other N unchanged. Its copy of
+/// a row is cheaper than `update`'s, and with less of the first-level
+/// cache taken (which the other hyperthread shares) it was 3–5 % faster at
+/// N = 30 (measured: 63, 72, 84, 96 rows), which `update` is not.
+/// Where a flush falls does not change the sums.
+const ROWS_BYTES: usize = 18 * 1024;
 
 /// `v[..len]` from the first 64-byte boundary (`v` has `PAD` spare values).
 fn aligned(v: &[f64], len: usize) -> &[f64] {
@@ -188,6 +199,7 @@ impl WideAccumulator {
             n,
             mp,
             cap,
+            rows_cap: (ROWS_BYTES / (8 * mp) / 3 * 3).max(48).min(cap),
             arch,
             lanes: kernel::lanes(arch),
             u: vec![0.0; cap * mp + PAD],

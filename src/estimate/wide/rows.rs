@@ -83,12 +83,15 @@ impl WideAccumulator {
                 },
             });
         }
+        // At most `rows_cap` rows in the buffer here: fewer than `update`
+        // buffers at some N (see `ROWS_BYTES`).
+        let cap = self.rows_cap;
         let mut done = 0;
         while done < count {
-            if self.rows == self.cap {
+            if self.rows >= cap {
                 self.flush();
             }
-            let take = (count - done).min(self.cap - self.rows);
+            let take = (count - done).min(cap - self.rows);
             let part = Rows {
                 b: &rows.b[done * n..(done + take) * n],
                 dp: &rows.dp[done..done + take],
@@ -447,11 +450,16 @@ impl Chunks<'_> {
         // no bounds check in the loop (they were a third of its
         // instructions).
         let cols: [&[[f64; 8]]; G] = core::array::from_fn(|g| rs[g * n..][..n].as_chunks().0);
-        for (c, col) in d.chunks_exact_mut(cap).take(full).enumerate() {
+        // The buffer's chunks split off one by one (`chunks_exact_mut`
+        // divides by `cap` to start).
+        let mut rest = &mut d[at..];
+        for c in 0..full {
+            let (col, next) = rest.split_at_mut(cap.min(rest.len()));
+            rest = next;
             for g in 0..G {
                 x[g] = pulp::cast(cols[g][c]);
             }
-            let dst = &mut col[at..at + G];
+            let dst = &mut col[..G];
             for g in 0..G {
                 let y = v4.mul_f64s(k[g], x[g]);
                 dst[g] = y;
