@@ -100,10 +100,20 @@ pub struct WrittenCells(String);
 impl WrittenCells {
     const SEPARATOR: char = '\u{1f}';
 
-    /// The cells, in order.
-    pub fn new<'a>(cells: impl IntoIterator<Item = &'a str>) -> Self {
-        let mut s = String::new();
-        for (k, c) in cells.into_iter().enumerate() {
+    /// The cells, in order (their length summed first: the string grown
+    /// push by push was five reallocations per row).
+    pub fn new<'a, I>(cells: I) -> Self
+    where
+        I: IntoIterator<Item = &'a str>,
+        I::IntoIter: Clone,
+    {
+        let cells = cells.into_iter();
+        let len = cells
+            .clone()
+            .map(|c| c.len() + Self::SEPARATOR.len_utf8())
+            .sum();
+        let mut s = String::with_capacity(len);
+        for (k, c) in cells.enumerate() {
             if k > 0 {
                 s.push(Self::SEPARATOR);
             }
