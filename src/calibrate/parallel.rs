@@ -338,6 +338,83 @@ mod tests {
         assert!(part_way > 0, "no relinearisation failed part way");
     }
 
+    /// Rows built on worker threads (more rows than one thread takes) are
+    /// the rows built on one (inside a worker), in the same order: the
+    /// KR-270's data sixteen times, each copy its own configurations, every
+    /// other copy's in decreasing order (the group hints then miss).
+    #[test]
+    fn rows_built_on_threads_are_the_serial_ones() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/kr270");
+        let job = crate::io::Job::load(format!("{dir}/setup.toml")).expect("job");
+        let data =
+            crate::io::read_measurements(format!("{dir}/measurements.csv"), &job.robot, &job.setup)
+                .expect("data");
+        let n = data.observations.len();
+        let mut big = data.clone();
+        let config = |c: i64, r: i64| {
+            if r % 2 == 0 {
+                c + 1000 * r
+            } else {
+                1_000_000 - c - 1000 * r
+            }
+        };
+        for r in 1..16 {
+            for o in &data.observations {
+                let mut o = o.clone();
+                o.config = config(o.config, r);
+                big.observations.push(o);
+            }
+            for d in &data.deflections {
+                let mut d = d.clone();
+                d.config = config(d.config, r);
+                d.rows = d.rows.map(|i| i + r as usize * n);
+                big.deflections.push(d);
+            }
+        }
+        let build = || {
+            let mut names = Names {
+                joints: job.robot.joint_names.clone(),
+                kinds: job.robot.chain.joints().iter().map(|j| j.kind).collect(),
+                markers: job
+                    .setup
+                    .markers
+                    .iter()
+                    .map(|m| (m.id, Vector3::from(m.xyz)))
+                    .collect(),
+                bins: Default::default(),
+            };
+            let policy = crate::calibrate::Policy::default();
+            let rows = Rows::new(&job, &big, true, &mut names, &policy).expect("rows");
+            rows.rows
+                .iter()
+                .map(|r| {
+                    (
+                        r.kind,
+                        r.group,
+                        r.config,
+                        r.marker,
+                        r.q.clone(),
+                        r.measured,
+                        r.line,
+                        r.y,
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        let threads = build();
+        assert!(
+            threads.len() >= 2 * MIN_ROWS_PER_THREAD,
+            "{} rows",
+            threads.len()
+        );
+        let serial = map(2, 2, |k| (k == 0).then(build))
+            .into_iter()
+            .flatten()
+            .next()
+            .expect("serial");
+        assert!(threads == serial);
+    }
+
     #[test]
     fn the_first_error_in_item_order() {
         for t in [1, 2, 5] {
