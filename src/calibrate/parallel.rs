@@ -213,18 +213,19 @@ mod tests {
     use crate::calibrate::{declared, DeflectionModel, Geometry, Linearisation, Names, Rows};
     use nalgebra::Vector3;
 
-    /// The KR-270 job's rows (loaded: the exact model's equilibria) and its
-    /// declared design, relinearised and built on 1 and on 3 threads at a
-    /// joint law with every compliance at 1 (the reported unit): the same
-    /// bits.
-    #[test]
-    fn rows_and_design_do_not_depend_on_the_threads() {
+    /// The KR-270 job and its measurements (`data/kr270`).
+    fn kr270() -> (crate::io::Job, crate::io::Measurements) {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/kr270");
         let job = crate::io::Job::load(format!("{dir}/setup.toml")).expect("job");
         let data =
             crate::io::read_measurements(format!("{dir}/measurements.csv"), &job.robot, &job.setup)
                 .expect("data");
-        let mut names = Names {
+        (job, data)
+    }
+
+    /// The contract names of `job` (no angle bins yet).
+    fn names_of(job: &crate::io::Job) -> Names {
+        Names {
             joints: job.robot.joint_names.clone(),
             kinds: job.robot.chain.joints().iter().map(|j| j.kind).collect(),
             markers: job
@@ -234,7 +235,17 @@ mod tests {
                 .map(|m| (m.id, Vector3::from(m.xyz)))
                 .collect(),
             bins: Default::default(),
-        };
+        }
+    }
+
+    /// The KR-270 job's rows (loaded: the exact model's equilibria) and its
+    /// declared design, relinearised and built on 1 and on 3 threads at a
+    /// joint law with every compliance at 1 (the reported unit): the same
+    /// bits.
+    #[test]
+    fn rows_and_design_do_not_depend_on_the_threads() {
+        let (job, data) = kr270();
+        let mut names = names_of(&job);
         let policy = crate::calibrate::Policy::default();
         let mut rows = Rows::new(
             &job,
@@ -344,11 +355,7 @@ mod tests {
     /// other copy's in decreasing order (the group hints then miss).
     #[test]
     fn rows_built_on_threads_are_the_serial_ones() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/kr270");
-        let job = crate::io::Job::load(format!("{dir}/setup.toml")).expect("job");
-        let data =
-            crate::io::read_measurements(format!("{dir}/measurements.csv"), &job.robot, &job.setup)
-                .expect("data");
+        let (job, data) = kr270();
         let n = data.observations.len();
         let mut big = data.clone();
         let config = |c: i64, r: i64| {
@@ -372,17 +379,7 @@ mod tests {
             }
         }
         let build = || {
-            let mut names = Names {
-                joints: job.robot.joint_names.clone(),
-                kinds: job.robot.chain.joints().iter().map(|j| j.kind).collect(),
-                markers: job
-                    .setup
-                    .markers
-                    .iter()
-                    .map(|m| (m.id, Vector3::from(m.xyz)))
-                    .collect(),
-                bins: Default::default(),
-            };
+            let mut names = names_of(&job);
             let policy = crate::calibrate::Policy::default();
             let rows = Rows::new(&job, &big, true, &mut names, &policy).expect("rows");
             rows.rows
