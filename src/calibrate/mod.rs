@@ -12,6 +12,7 @@
 //!   Engine ─ design   columns of the parameters at every row (B of eq. 4)
 //!          ─ fit      OLS | WLS | IRLS through the core's Reweightable   (eq. 6, 10, 14)
 //!          ─ geometry Gauss–Newton: apply the geometric step, relinearise
+//!                     (the next design built in the same pass over the rows)
 //!          ─ heldout  leave-one-configuration-out prediction RMS
 //!     │
 //!   diagnosis  lack of fit (residuals) → every candidate of the effect
@@ -27,7 +28,7 @@
 //! | [`names`] | contract names of parameters, joints, markers, angle bins |
 //! | [`rows`] | [`Row`]s from the measurements, recomputed at the current geometry |
 //! | [`declared`] | the setup's `[model]` as parameters |
-//! | [`design`] | the stacked columns of some parameters; the independence test |
+//! | [`design`] | the stacked columns of some parameters (or built in a relinearisation's pass, `Design::relinearised`); the independence test |
 //! | [`fit`] | the core's fits and nested test on a design, at the exact size |
 //! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
@@ -35,7 +36,7 @@
 //! | [`engine`] | one model fitted to convergence, and its held-out error |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
-//! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
+//! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; building the rows; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
