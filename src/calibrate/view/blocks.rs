@@ -1,0 +1,81 @@
+//! How a [`View`]'s rows reach its passes: copied a block at a time into
+//! the layout the kernels of [`super::terms`] stream (each row's three
+//! axes as three contiguous runs of its columns), and the triangle's
+//! columns shared between worker threads.
+
+use super::terms::column_shares;
+use super::View;
+
+impl View<'_> {
+    /// The columns of the included rows `first..first + len`: row `k`'s
+    /// axis `a` at `[(3k + a) n..(3k + a + 1) n]`.
+    pub(super) fn copy(&self, first: usize, len: usize) -> Vec<f64> {
+        let mut b = Vec::new();
+        self.copy_into(first, len, self.cols.len(), &mut b);
+        b
+    }
+
+    /// [`View::copy`]'s first `upto` columns into `b` (resized; the other
+    /// columns of each run are left as they were). Row by row, a run of
+    /// each axis written in order: the copy went column by column, writing
+    /// one value in `n` of the whole block on every pass over it (7 % of a
+    /// million rows' run).
+    fn copy_into(&self, first: usize, len: usize, upto: usize, b: &mut Vec<f64>) {
+        let n = self.cols.len();
+        let m3 = self.d.b.nrows();
+        let data = self.d.b.as_slice();
+        let columns: Vec<&[f64]> = self.cols[..upto]
+            .iter()
+            .map(|&c| &data[c * m3..(c + 1) * m3])
+            .collect();
+        b.resize(3 * n * len, 0.0);
+        for (r, &i) in self.rows[first..first + len].iter().enumerate() {
+            for a in 0..3 {
+                let run = &mut b[(3 * r + a) * n..(3 * r + a) * n + upto];
+                for (v, column) in run.iter_mut().zip(&columns) {
+                    *v = column[3 * i + a];
+                }
+            }
+        }
+    }
+
+    /// `f(rows, b)` for the included rows in runs of at most `block`, in
+    /// order: `rows` the run's design rows, `b` their columns as
+    /// [`View::copy`] lays them out, the first `upto` of them (the others
+    /// are not to be read).
+    pub(super) fn each_block(&self, upto: usize, mut f: impl FnMut(&[usize], &[f64])) {
+        if self.rows.len() <= self.block {
+            f(&self.rows, &self.b);
+            return;
+        }
+        let mut b = Vec::new();
+        for first in (0..self.rows.len()).step_by(self.block) {
+            let len = self.block.min(self.rows.len() - first);
+            self.copy_into(first, len, upto, &mut b);
+            f(&self.rows[first..first + len], &b);
+        }
+    }
+
+    /// `f(t, columns)` for each share `t` of the triangle's columns
+    /// ([`column_shares`]), on worker threads when the rows are many
+    /// ([`super::super::parallel::for_rows`]), with the shares: each element of
+    /// the triangle is summed by one share, over every row in order, as a
+    /// pass on one thread sums it (the same bits on any number of threads).
+    pub(super) fn by_columns<T: Send>(
+        &self,
+        f: impl Fn(usize, std::ops::Range<usize>) -> T + Sync,
+    ) -> Vec<(std::ops::Range<usize>, T)> {
+        let n = self.cols.len();
+        let shares = column_shares(n, super::super::parallel::for_rows(self.rows.len()));
+        let parts =
+            super::super::parallel::map(shares.len(), shares.len(), |t| f(t, shares[t].clone()));
+        shares.into_iter().zip(parts).collect()
+    }
+
+    /// The three axes of row `k` of a copy `b`.
+    pub(super) fn row_of<'b>(&self, b: &'b [f64], k: usize) -> [&'b [f64]; 3] {
+        let n = self.cols.len();
+        let at = |a: usize| &b[(3 * k + a) * n..(3 * k + a + 1) * n];
+        [at(0), at(1), at(2)]
+    }
+}
