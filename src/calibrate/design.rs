@@ -300,6 +300,18 @@ impl Design {
         Ok(done.map(|()| Self::finish(all, params, Storage { b: data, y, group })))
     }
 
+    /// The design of the first `n` parameters only: its leading columns,
+    /// in place (the storage stays, for the next design).
+    pub fn keep_leading(&mut self, n: usize) {
+        let n = n.min(self.params.len());
+        let m3 = self.b.nrows();
+        let b = std::mem::replace(&mut self.b, DMatrix::zeros(0, 0));
+        let mut data: Vec<f64> = b.data.into();
+        data.truncate(m3 * n);
+        self.b = DMatrix::from_vec(m3, n, data);
+        self.params.truncate(n);
+    }
+
     /// A design no longer needed as storage for the next one.
     fn into_storage(self) -> Storage {
         Storage {

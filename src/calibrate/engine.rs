@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
 use super::design::Design;
-use super::fit::{fit, fit_moments, information, FitOut, FitSettings, Method};
+use super::fit::{fit, fit_moments, information, leading, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
 use super::heldout::ols_heldout;
 use super::linearisation::Linearisation;
@@ -18,6 +18,7 @@ use super::report::{Absorbed, LeftOut, Parameter};
 use super::residuals::{rms_um, SquareSum};
 use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy, Progress};
+use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
 
@@ -182,16 +183,37 @@ impl Engine<'_> {
     /// [`CalibrationError::Core`] from the estimator;
     /// [`CalibrationError::Cancelled`] when [`Engine::cancel`] says so.
     pub fn fit(&mut self, params: &[Param]) -> Result<Fitted, CalibrationError> {
+        self.fit_carrying(params, &[]).map(|(f, _)| f)
+    }
+
+    /// [`Engine::fit`] of `params` with the columns of `carried` in every
+    /// design after theirs, not fitted: at the fitted geometry the design
+    /// of `params` then `carried` is [`Engine::design`]'s last one (for a
+    /// test of `carried` there without a design more; at 10⁶ rows a
+    /// design is a pass of forward kinematics and 300 MB). With OLS, also
+    /// the unit-weight sums of all those columns there ([`information`]),
+    /// of which the fit's own `Λ` is the leading block, bit for bit.
+    ///
+    /// # Errors
+    /// As [`Engine::fit`] (a carried column takes no part in the
+    /// independence test of the fit).
+    pub fn fit_carrying(
+        &mut self,
+        params: &[Param],
+        carried: &[Param],
+    ) -> Result<(Fitted, Option<Accumulator<f64, nalgebra::Dyn>>), CalibrationError> {
         let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
         let iterates = self.lin.iterates(params);
         let mut relinearisations = 0;
         let mut settled = true;
         let cols: Vec<usize> = (0..params.len()).collect();
+        let all: Vec<Param> = params.iter().chain(carried).copied().collect();
+        let every: Vec<usize> = (0..all.len()).collect();
         loop {
             if self.cancel.is_some_and(|c| c()) {
                 return Err(CalibrationError::Cancelled);
             }
-            let d = self.design(params)?;
+            let d = self.design(&all)?;
             // The one independence test at every linearisation: a step can
             // turn a kept parameter into a combination of the others (the
             // columns move with the geometry); the solver never sees it.
@@ -200,10 +222,14 @@ impl Engine<'_> {
             // estimate `Λ⁻¹η` alone does: a step that is not the last needs
             // neither the residuals' σ nor the sandwich (two passes over the
             // rows fewer; 10⁶ rows: ~0.3 s each).
-            let ols = if self.fit_settings.method == Method::Ols && !cols.is_empty() {
-                Some(information(&d, &cols).map_err(|e| CalibrationError::Core("fit", e))?)
+            let info = if self.fit_settings.method == Method::Ols && !cols.is_empty() {
+                Some(information(&d, &every).map_err(|e| CalibrationError::Core("fit", e))?)
             } else {
                 None
+            };
+            let ols = match &info {
+                Some(acc) if !carried.is_empty() => Some(leading(acc, params.len())),
+                other => other.clone(),
             };
             let rank = match &ols {
                 Some(acc) => acc.identifiable().ok(),
@@ -262,7 +288,7 @@ impl Engine<'_> {
                     drop(d);
                     self.geometry.apply(params, &x);
                     let to = Linearisation::of(self.lin.model, params, &x, &self.names);
-                    self.step_towards(&to, params)?;
+                    self.step_towards(&to, &all)?;
                     relinearisations += 1;
                     continue;
                 }
@@ -275,7 +301,7 @@ impl Engine<'_> {
             let residuals: Vec<Vector3<f64>> = (0..d.rows())
                 .map(|i| d.residual(&cols, &out.x, i))
                 .collect();
-            return Ok(Fitted {
+            let fitted = Fitted {
                 params: params.to_vec(),
                 rms_um: rms_um(&residuals),
                 converged: settled && out.converged,
@@ -285,7 +311,29 @@ impl Engine<'_> {
                 relinearisations,
                 heldout_rms_um: None,
                 residuals,
-            });
+            };
+            return Ok((fitted, info.filter(|_| !carried.is_empty())));
+        }
+    }
+
+    /// After [`Engine::fit_carrying`]: the last design without the carried
+    /// columns, as the design of `params` (its leading columns; nothing is
+    /// copied), so that what follows the fit finds it.
+    pub fn drop_carried(&mut self, params: &[Param]) {
+        let mut last = self
+            .last_design
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some((p, at, d)) = last.take() else {
+            return;
+        };
+        if p.len() <= params.len() || p[..params.len()] != *params {
+            *last = Some((p, at, d));
+            return;
+        }
+        if let Ok(mut d) = Arc::try_unwrap(d) {
+            d.keep_leading(params.len());
+            *last = Some((params.to_vec(), at, Arc::new(d)));
         }
     }
 

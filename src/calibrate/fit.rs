@@ -100,6 +100,22 @@ pub fn information(d: &Design, cols: &[usize]) -> Result<Accumulator<f64, Dyn>, 
     View::new(d, cols, None, None).weighted(&vec![Vector3::repeat(1.0); d.groups], None)
 }
 
+/// The sums of the leading `n` columns of `acc` (`Λ`'s leading block, `η`'s
+/// leading part; `Σ Δpᵀ W² Δp` and the equations as they are): what the
+/// same rows streamed on those columns alone give, bit for bit (each sum of
+/// the view is one element's, in row order).
+pub fn leading(acc: &Accumulator<f64, Dyn>, n: usize) -> Accumulator<f64, Dyn> {
+    // The view's sums hold the upper triangle, the rest zero.
+    let mut info = acc.information().view((0, 0), (n, n)).into_owned();
+    for j in 0..n {
+        for i in j + 1..n {
+            info[(i, j)] = 0.0;
+        }
+    }
+    let eta = acc.eta().rows(0, n).into_owned();
+    Accumulator::from_sums(info, eta, acc.weighted_yy(), acc.equations())
+}
+
 /// [`fit`] of all the columns of `m` (the moments of the columns `cols` of
 /// `d`, [`DesignMoments::new`]) without the configuration `skip_group`: the
 /// same fit from the moments per configuration and axis, equal to the
@@ -232,9 +248,62 @@ pub fn test(
     let mut cols = model.to_vec();
     cols.extend_from_slice(candidate);
     let view = View::new(d, &cols, None, None);
-    let acc = view.weighted(weights, None)?;
-    let m: Vec<bool> = (0..cols.len()).map(|i| i < model.len()).collect();
+    test_sums(&view.weighted(weights, None)?, model.len())
+}
+
+/// [`test`] from the sums `acc` of the model's columns (its first `model`)
+/// then the candidate's.
+///
+/// # Errors
+/// As [`nested_test`].
+pub fn test_sums(acc: &Accumulator<f64, Dyn>, model: usize) -> Result<NestedTest, Error> {
+    let m: Vec<bool> = (0..acc.parameters()).map(|i| i < model).collect();
     let c: Vec<bool> = m.iter().map(|v| !v).collect();
     let sol = acc.solve_active(&m)?;
-    nested_test(&acc, &m, &sol, &c)
+    nested_test(acc, &m, &sol, &c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    /// The sums of the leading columns of a view are those of a view of
+    /// those columns alone, bit for bit (what [`leading`] promises the fit
+    /// that carries columns): more rows than a block, both threads.
+    #[test]
+    fn leading_sums_are_the_sums_of_those_columns_alone() {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (rows, n, extra) = (9000, 13, 2);
+        let d = Design {
+            params: Vec::new(),
+            b: DMatrix::from_fn(3 * rows, n + extra, |_, _| next()),
+            y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
+            group: (0..rows).collect(),
+            groups: rows,
+            instrument_sigma: None,
+        };
+        let every: Vec<usize> = (0..n + extra).collect();
+        let all = information(&d, &every).expect("sums");
+        let alone = information(&d, &every[..n]).expect("sums");
+        let lead = leading(&all, n);
+        let bits = |m: &OMatrix<f64, Dyn, Dyn>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&lead.information()), bits(&alone.information()));
+        assert_eq!(
+            lead.eta().iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            alone.eta().iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(lead.weighted_yy().to_bits(), alone.weighted_yy().to_bits());
+        assert_eq!(lead.equations(), alone.equations());
+        // And differ from the leading block of another column order.
+        let swapped: Vec<usize> = (1..n + extra).chain([0]).collect();
+        let other = leading(&information(&d, &swapped).expect("sums"), n);
+        assert_ne!(bits(&other.information()), bits(&alone.information()));
+    }
 }
