@@ -10,12 +10,14 @@ use super::report::{
     Unexplained,
 };
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
+use super::retest;
 use super::rows::RowKind;
 use super::settings::{CalibrationError, Settings};
 use super::trial::{self, Outcome};
+use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
-use nalgebra::Vector3;
+use nalgebra::{Dyn, Vector3};
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -41,18 +43,20 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
 /// dependent on the others (at the geometry the step reached) is left out
 /// with the parameters that absorb it there, and the fit goes on from there
 /// without it; a declared compliance that becomes dependent is an error, as
-/// at the nominal robot.
+/// at the nominal robot. `carried` and what is returned beside the fit as
+/// in [`Engine::fit_carrying`].
 ///
 /// # Errors
 /// [`CalibrationError::Data`] when a compliance or every parameter is
 /// left out; as [`Engine::fit`].
-fn first_fit(
+pub(super) fn first_fit(
     e: &mut Engine<'_>,
     mut params: Vec<Param>,
     left_out: &mut Vec<LeftOut>,
-) -> Result<Fitted, CalibrationError> {
+    carried: &[Param],
+) -> Result<(Fitted, Option<Accumulator<f64, Dyn>>), CalibrationError> {
     loop {
-        match e.fit(&params) {
+        match e.fit_carrying(&params, carried) {
             Err(CalibrationError::Dependent(_)) => {}
             other => return other,
         }
@@ -218,12 +222,14 @@ pub fn run(
     mut e: Engine<'_>,
     declared: Vec<Param>,
     mut left_out: Vec<LeftOut>,
+    carried: &[Param],
     settings: &Settings,
     mut notes: Vec<String>,
 ) -> Result<Report, CalibrationError> {
     let alpha = e.policy.alpha;
     (e.progress)("fitting the declared model");
-    let first = first_fit(&mut e, declared, &mut left_out)?;
+    let (first, info) = first_fit(&mut e, declared, &mut left_out, carried)?;
+    let first = retest::revive(&mut e, first, info, carried, &mut left_out, &mut notes)?;
     let mut current = e.with_heldout(first)?;
     let declared_rms = (current.rms_um, current.heldout_rms_um);
     let declared_structure = lack_of_fit(

@@ -33,7 +33,8 @@
 //! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
-//! | [`engine`] | one model fitted to convergence, and its held-out error |
+//! | [`engine`] | one model fitted to convergence (optionally carrying unfitted columns), and its held-out error |
+//! | [`retest`] | the parameters left out at the nominal robot, tested again at the fitted one |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
 //! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; building the rows; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
@@ -76,6 +77,7 @@ pub mod plausibility;
 pub mod predict;
 pub mod report;
 pub mod residuals;
+pub mod retest;
 pub mod rows;
 pub mod settings;
 pub mod trial;
@@ -223,7 +225,10 @@ fn calibrate_rows(
     let declared: Vec<Param> = kept.iter().map(|&i| model[i]).collect();
     // Then the tracker frame (when declared), by a rigid registration; the
     // rows there, every parameter zero, are the nominal error.
-    e.register_base(&declared)?;
+    // (With the design of the declared parameters then the left-out ones:
+    // the declared fit's first, `diagnosis::run`.)
+    let with_dropped: Vec<Param> = declared.iter().chain(&dropped).copied().collect();
+    e.register_base(&with_dropped)?;
     let nominal = Nominal::of(&e.rows.rows.iter().map(|r| r.y).collect::<Vec<_>>());
     // A declared compliance the data cannot identify is too few
     // configurations (or markers, or a load that does not load the joint)
@@ -283,7 +288,7 @@ fn calibrate_rows(
         }
     }
     let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
-    let mut report = diagnosis::run(e, declared, left_out, &settings, notes)?;
+    let mut report = diagnosis::run(e, declared, left_out, &dropped, &settings, notes)?;
     report.nominal = nominal;
     for (r, n) in report.row_errors.iter_mut().zip(nominal_rows) {
         r.nominal_um = n;
