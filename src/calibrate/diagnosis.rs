@@ -104,9 +104,13 @@ pub(super) fn first_fit(
 /// # Errors
 /// As [`Engine::design`].
 fn near_dependent(e: &Engine<'_>, f: &Fitted) -> Result<Vec<NearDependent>, CalibrationError> {
-    let d = e.design(&f.params)?;
     let all: Vec<usize> = (0..f.params.len()).collect();
-    let Some(rank) = d.identifiability(&[], &all) else {
+    // (The fit's own unit-weight sums when it made them: the same test.)
+    let rank = match &f.information {
+        Some(acc) => acc.identifiable().ok(),
+        None => e.design(&f.params)?.identifiability(&[], &all),
+    };
+    let Some(rank) = rank else {
         return Ok(Vec::new());
     };
     let mut out: Vec<NearDependent> = all

@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 
 use super::calibrated::CalibratedModel;
 use super::design::Design;
-use super::fit::{fit, fit_moments, information, leading, FitOut, FitSettings, Method};
+use super::fit::{fit, fit_known, fit_moments, information, leading, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
 use super::heldout::ols_heldout;
 use super::linearisation::Linearisation;
@@ -46,6 +46,10 @@ pub struct Fitted {
     pub heldout_rms_um: Option<f64>,
     /// Residual \[m\] of every row.
     pub residuals: Vec<Vector3<f64>>,
+    /// The unit-weight sums of the columns of `params` at `geometry`
+    /// ([`information`]) when the fit made them (OLS): the independence
+    /// test of the final model needs no pass of its own.
+    pub information: Option<Accumulator<f64, nalgebra::Dyn>>,
 }
 
 /// The problem being solved: rows, names, the current linearisation, and
@@ -294,9 +298,12 @@ impl Engine<'_> {
                 }
                 settled = false;
             }
-            let out = match out {
-                Some(out) => out,
-                None => full_fit()?,
+            let out = match (out, &ols) {
+                (Some(out), _) => out,
+                // OLS: the fit's sums are the ones just made.
+                (None, Some(acc)) => fit_known(&d, &cols, acc.clone(), &self.fit_settings)
+                    .map_err(|e| CalibrationError::Core("fit", e))?,
+                (None, None) => full_fit()?,
             };
             let residuals: Vec<Vector3<f64>> = (0..d.rows())
                 .map(|i| d.residual(&cols, &out.x, i))
@@ -311,6 +318,7 @@ impl Engine<'_> {
                 relinearisations,
                 heldout_rms_um: None,
                 residuals,
+                information: ols,
             };
             return Ok((fitted, info.filter(|_| !carried.is_empty())));
         }

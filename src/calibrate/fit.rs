@@ -90,6 +90,24 @@ pub fn fit(
     fit_source(&view, cols, instrument, s)
 }
 
+/// [`fit`] of `cols` without a configuration left out, where `known` are
+/// the sums of those columns at unit weights ([`information`], made
+/// before): an OLS fit makes no pass for them (the same fit, bit for bit).
+///
+/// # Errors
+/// As [`fit`].
+pub fn fit_known(
+    d: &Design,
+    cols: &[usize],
+    known: Accumulator<f64, Dyn>,
+    s: &FitSettings,
+) -> Result<FitOut, Error> {
+    let instrument = d.instrument_sigma.as_deref();
+    let floor = instrument.filter(|_| s.weighting == Weighting::Both);
+    let view = View::new(d, cols, None, floor).knowing(known);
+    fit_source(&view, cols, instrument, s)
+}
+
 /// `Λ = Σ BᵀB` and `η = Σ BᵀΔp` of the columns `cols` of `d` at unit
 /// weights: the sums the OLS [`fit`] solves, bit for bit (and the
 /// information of the independence test, [`Design::identifiability`]).
@@ -251,7 +269,7 @@ pub fn test(
     test_sums(&view.weighted(weights, None)?, model.len())
 }
 
-/// [`test`] from the sums `acc` of the model's columns (its first `model`)
+/// [`test()`] from the sums `acc` of the model's columns (its first `model`)
 /// then the candidate's.
 ///
 /// # Errors
@@ -266,29 +284,64 @@ pub fn test_sums(acc: &Accumulator<f64, Dyn>, model: usize) -> Result<NestedTest
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimate::RobustWeight;
     use nalgebra::DMatrix;
 
-    /// The sums of the leading columns of a view are those of a view of
-    /// those columns alone, bit for bit (what [`leading`] promises the fit
-    /// that carries columns): more rows than a block, both threads.
-    #[test]
-    fn leading_sums_are_the_sums_of_those_columns_alone() {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    /// `rows` rows (each its own configuration) on `n` pseudo-random columns.
+    fn design(rows: usize, n: usize, seed: u64) -> Design {
+        let mut state = seed;
         let mut next = move || {
             state = state
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        let (rows, n, extra) = (9000, 13, 2);
-        let d = Design {
+        Design {
             params: Vec::new(),
-            b: DMatrix::from_fn(3 * rows, n + extra, |_, _| next()),
+            b: DMatrix::from_fn(3 * rows, n, |_, _| next()),
             y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
             group: (0..rows).collect(),
             groups: rows,
             instrument_sigma: None,
+        }
+    }
+
+    /// An OLS fit given its sums is the fit that makes them, bit for bit;
+    /// and it does use them (other sums, another fit).
+    #[test]
+    fn an_ols_fit_given_its_sums_is_the_fit_that_makes_them() {
+        let d = design(9000, 13, 7);
+        let cols: Vec<usize> = (0..13).collect();
+        let s = FitSettings {
+            method: Method::Ols,
+            weight: RobustWeight::new(1e-5, 0.0).expect("valid weight"),
+            max_iterations: 1,
+            tolerance: 0.1,
+            weighting: Weighting::Estimated,
         };
+        let bits = |f: &FitOut| {
+            let mut v: Vec<u64> = f.x.iter().chain(&f.std).map(|v| v.to_bits()).collect();
+            v.extend(f.covariance.iter().map(|v| v.to_bits()));
+            v
+        };
+        let made = fit(&d, &cols, None, &s).expect("fit");
+        let known = information(&d, &cols).expect("sums");
+        let given = fit_known(&d, &cols, known, &s).expect("fit");
+        assert_eq!(bits(&given), bits(&made));
+        let other = information(&design(9000, 13, 8), &cols).expect("sums");
+        assert_ne!(
+            bits(&fit_known(&d, &cols, other, &s).expect("fit")),
+            bits(&made)
+        );
+    }
+
+    /// The sums of the leading columns of a view are those of a view of
+    /// those columns alone, bit for bit (what [`leading`] promises the fit
+    /// that carries columns): more rows than a block, both threads.
+    #[test]
+    fn leading_sums_are_the_sums_of_those_columns_alone() {
+        let (rows, n, extra) = (9000, 13, 2);
+        let d = design(rows, n + extra, 0x9e37_79b9_7f4a_7c15);
         let every: Vec<usize> = (0..n + extra).collect();
         let all = information(&d, &every).expect("sums");
         let alone = information(&d, &every[..n]).expect("sums");

@@ -53,6 +53,8 @@ pub(super) struct View<'a> {
     /// Their columns when there are at most `block` rows (else empty):
     /// row `k`'s axis `a` at `b[(3k + a) n..(3k + a + 1) n]`.
     b: Vec<f64>,
+    /// The sums at unit weights when already made ([`View::knowing`]).
+    known: Option<Accumulator<f64, Dyn>>,
 }
 
 /// Rows a view copies at a time ([`View`]).
@@ -92,11 +94,19 @@ impl<'a> View<'a> {
             rows,
             block,
             b: Vec::new(),
+            known: None,
         };
         if view.rows.len() <= block {
             view.b = view.copy(0, view.rows.len());
         }
         view
+    }
+
+    /// The view whose sums at unit weights ([`View::information`]) are
+    /// `known`: an OLS fit on it makes no pass for them.
+    pub(super) fn knowing(mut self, known: Accumulator<f64, Dyn>) -> Self {
+        self.known = Some(known);
+        self
     }
 
     /// Column `k` of axis `a` of design row `i`.
@@ -296,12 +306,15 @@ impl Reweightable<f64, Dyn> for View<'_> {
                 what: "one weight per group",
             });
         }
-        match noise {
-            None => match self.sums(weights) {
+        match (noise, &self.known) {
+            (None, Some(known)) if weights.iter().all(|w| *w == Vector3::repeat(1.0)) => {
+                Ok(known.clone())
+            }
+            (None, _) => match self.sums(weights) {
                 Some(acc) => Ok(acc),
                 None => self.streamed(weights, None),
             },
-            Some(noise) => self.streamed(weights, Some(noise)),
+            (Some(noise), _) => self.streamed(weights, Some(noise)),
         }
     }
 
