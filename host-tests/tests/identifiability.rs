@@ -351,6 +351,7 @@ proptest! {
                 r.rms_um < 1.5 * expected
                     || r.warnings.iter().any(|w| w.contains("first order")
                         || w.contains("did not converge")
+                    || w.contains("worse than the nominal robot")
                     || w.contains("barely move")),
                 "seed {seed}: RMS {} um, the noise {expected} um\n{}\n{}",
                 r.rms_um, c.setup, c.chain.urdf()
@@ -364,25 +365,44 @@ fn a_dependence_only_at_the_nominal_robot_is_tested_again_at_the_fitted_one() {
     // Seed 4106693272553127489 of the property above: the marker exactly on
     // j1's axis at the nominal robot, about 0.5 mm off it on the true one.
     // At the nominal robot base.ry and j1.ry move it alike and are left
-    // out; at the fitted geometry they are independent, and adding them is
-    // significant (F = 558.9 on (2, 75)), so they are re-added. Left out,
-    // the declared model's RMS was 364.6 µm against 33 µm of noise, with
-    // no warning.
+    // out; at the fitted geometry both are independent. base.ry is
+    // significant (F = 1075.9 on (1, 76)) and re-added; j1.ry, given
+    // base.ry, is not (p = 0.058 before Bonferroni) and stays out. Left
+    // out, the declared model's RMS was 364.6 µm against 33 µm of noise,
+    // with no warning.
     let c = case(4106693272553127489);
     let r = calibrate_case(&c).expect("calibrated");
     assert!(
-        r.notes
-            .iter()
-            .any(|n| n.starts_with("base.ry, j1.ry re-added")),
+        r.notes.iter().any(|n| n.starts_with("base.ry re-added")),
         "{:?}",
         r.notes
     );
     assert!(
-        r.left_out
-            .iter()
-            .all(|l| l.name != "base.ry" && l.name != "j1.ry"),
+        r.left_out.iter().all(|l| l.name != "base.ry"),
         "{:?}",
         r.left_out
+    );
+    assert!(
+        r.left_out.iter().any(|l| l.name == "j1.ry"),
+        "{:?}",
+        r.left_out
+    );
+    assert!(r.declared_rms_um < 40.0, "{}", r.declared_rms_um);
+}
+
+#[test]
+fn a_parameter_left_out_on_the_way_is_tested_again_at_the_fitted_geometry() {
+    // Seed 14554966693631364839 of the property above: a Gauss–Newton step
+    // makes j4.rx and j4.ry dependent on the others, and they were left out
+    // for good: RMS 60.1 µm against 33 µm of noise, no warning. At the
+    // fitted geometry j4.ry is independent and significant (F = 408.3 on
+    // (1, 213)), and re-added.
+    let c = case(14554966693631364839);
+    let r = calibrate_case(&c).expect("calibrated");
+    assert!(
+        r.notes.iter().any(|n| n.starts_with("j4.ry re-added")),
+        "{:?}",
+        r.notes
     );
     assert!(r.declared_rms_um < 40.0, "{}", r.declared_rms_um);
 }

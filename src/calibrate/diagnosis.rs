@@ -44,7 +44,9 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
 /// with the parameters that absorb it there, and the fit goes on from there
 /// without it; a declared compliance that becomes dependent is an error, as
 /// at the nominal robot. `carried` and what is returned beside the fit as
-/// in [`Engine::fit_carrying`].
+/// in [`Engine::fit_carrying`]; a parameter left out on the way is carried
+/// from there on (added to `carried`), to be tested again at the fitted
+/// geometry ([`super::retest`]).
 ///
 /// # Errors
 /// [`CalibrationError::Data`] when a compliance or every parameter is
@@ -53,7 +55,7 @@ pub(super) fn first_fit(
     e: &mut Engine<'_>,
     mut params: Vec<Param>,
     left_out: &mut Vec<LeftOut>,
-    carried: &[Param],
+    carried: &mut Vec<Param>,
 ) -> Result<(Fitted, Option<Accumulator<f64, Dyn>>), CalibrationError> {
     loop {
         match e.fit_carrying(&params, carried) {
@@ -89,6 +91,7 @@ pub(super) fn first_fit(
             left_out.push(l);
         }
         params.retain(|p| !out.contains(p));
+        carried.extend_from_slice(&out);
         if params.is_empty() {
             return Err(CalibrationError::Data(
                 "the declared model has no parameter these data can identify".into(),
@@ -226,14 +229,31 @@ pub fn run(
     mut e: Engine<'_>,
     declared: Vec<Param>,
     mut left_out: Vec<LeftOut>,
-    carried: &[Param],
+    model: &[Param],
     settings: &Settings,
     mut notes: Vec<String>,
 ) -> Result<Report, CalibrationError> {
     let alpha = e.policy.alpha;
     (e.progress)("fitting the declared model");
-    let (first, info) = first_fit(&mut e, declared, &mut left_out, carried)?;
-    let first = retest::revive(&mut e, first, info, carried, &mut left_out, &mut notes)?;
+    // What the nominal robot left out (and what the fit leaves out on the
+    // way), tested again at the fitted one.
+    let mut carried: Vec<Param> = model
+        .iter()
+        .filter(|p| !declared.contains(p))
+        .copied()
+        .collect();
+    let (first, info) = first_fit(&mut e, declared, &mut left_out, &mut carried)?;
+    let mut warnings = Vec::new();
+    let first = retest::revive(
+        &mut e,
+        first,
+        info,
+        &carried,
+        model,
+        &mut left_out,
+        &mut notes,
+        &mut warnings,
+    )?;
     let mut current = e.with_heldout(first)?;
     let declared_rms = (current.rms_um, current.heldout_rms_um);
     let declared_structure = lack_of_fit(
@@ -473,6 +493,6 @@ pub fn run(
             .collect(),
         model: e.calibrated(&current),
         notes,
-        warnings: Vec::new(),
+        warnings,
     })
 }

@@ -3,7 +3,7 @@
 //! the core at the exact number of parameters, `Dyn`) or on its moments
 //! per configuration and axis ([`super::moments`]).
 
-use nalgebra::{Dyn, OMatrix, Vector3};
+use nalgebra::{DMatrix, Dyn, OMatrix, Vector3};
 
 use super::design::Design;
 use super::moments::DesignMoments;
@@ -123,14 +123,24 @@ pub fn information(d: &Design, cols: &[usize]) -> Result<Accumulator<f64, Dyn>, 
 /// same rows streamed on those columns alone give, bit for bit (each sum of
 /// the view is one element's, in row order).
 pub fn leading(acc: &Accumulator<f64, Dyn>, n: usize) -> Accumulator<f64, Dyn> {
-    // The view's sums hold the upper triangle, the rest zero.
-    let mut info = acc.information().view((0, 0), (n, n)).into_owned();
-    for j in 0..n {
-        for i in j + 1..n {
-            info[(i, j)] = 0.0;
+    let cols: Vec<usize> = (0..n).collect();
+    columns_of(acc, &cols)
+}
+
+/// The sums of the columns `cols` of `acc`, in that order ([`leading`];
+/// with unit weights, those of the same rows streamed on those columns
+/// alone in any order, bit for bit: `bᵢ bⱼ = bⱼ bᵢ`).
+pub fn columns_of(acc: &Accumulator<f64, Dyn>, cols: &[usize]) -> Accumulator<f64, Dyn> {
+    let all = acc.information();
+    // The sums hold the upper triangle, the rest zero.
+    let info = DMatrix::from_fn(cols.len(), cols.len(), |i, j| {
+        if i <= j {
+            all[(cols[i], cols[j])]
+        } else {
+            0.0
         }
-    }
-    let eta = acc.eta().rows(0, n).into_owned();
+    });
+    let eta = nalgebra::DVector::from_fn(cols.len(), |i, _| acc.eta()[cols[i]]);
     Accumulator::from_sums(info, eta, acc.weighted_yy(), acc.equations())
 }
 
@@ -285,7 +295,6 @@ pub fn test_sums(acc: &Accumulator<f64, Dyn>, model: usize) -> Result<NestedTest
 mod tests {
     use super::*;
     use crate::estimate::RobustWeight;
-    use nalgebra::DMatrix;
 
     /// `rows` rows (each its own configuration) on `n` pseudo-random columns.
     fn design(rows: usize, n: usize, seed: u64) -> Design {
@@ -354,6 +363,19 @@ mod tests {
         );
         assert_eq!(lead.weighted_yy().to_bits(), alone.weighted_yy().to_bits());
         assert_eq!(lead.equations(), alone.equations());
+        // Any columns in any order, with unit weights.
+        let some = [3, 0, 14, 7];
+        let picked = columns_of(&all, &some);
+        let streamed = information(&d, &some).expect("sums");
+        assert_eq!(bits(&picked.information()), bits(&streamed.information()));
+        assert_eq!(
+            picked.eta().iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            streamed
+                .eta()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        );
         // And differ from the leading block of another column order.
         let swapped: Vec<usize> = (1..n + extra).chain([0]).collect();
         let other = leading(&information(&d, &swapped).expect("sums"), n);

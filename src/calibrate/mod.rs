@@ -288,11 +288,13 @@ fn calibrate_rows(
         }
     }
     let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
-    let mut report = diagnosis::run(e, declared, left_out, &dropped, &settings, notes)?;
+    let mut report = diagnosis::run(e, declared, left_out, &model, &settings, notes)?;
     report.nominal = nominal;
     for (r, n) in report.row_errors.iter_mut().zip(nominal_rows) {
         r.nominal_um = n;
     }
+    // The input's, the run's (`diagnosis::run`), then the result's.
+    warnings.append(&mut report.warnings);
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     Ok(report)

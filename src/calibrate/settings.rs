@@ -71,6 +71,12 @@ pub struct Policy {
     /// Share of the excess lack-of-fit sum of squares an effect must explain
     /// to be named when the lack of fit is significant. 0.1.
     pub min_share: f64,
+    /// Share of the drop in the residual sum of squares that the nested
+    /// tests of re-added parameters predict (at the first fit's
+    /// linearisation, [`super::retest`]) that the new fit must realise in
+    /// its RMS (`1 − (RMS after / RMS before)²`); else the first fit
+    /// stands. 0.5.
+    pub min_realised: f64,
     /// At most this many effects are added. 8.
     pub max_effects: usize,
     /// Fewest rows per configuration for IRLS/WLS: each configuration's σ
@@ -173,6 +179,7 @@ impl Default for Policy {
         Self {
             alpha: 0.01,
             min_share: 0.1,
+            min_realised: 0.5,
             max_effects: 8,
             min_rows_per_group: 2,
             irls_tolerance: 1e-3,
