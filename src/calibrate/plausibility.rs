@@ -19,6 +19,7 @@
 //! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
 //! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`super::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
+//! | the calibrated model fits worse than the nominal robot | final RMS above the nominal robot's (base registered): the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point | warning |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
 //! The scale and unit checks read at most [`Policy::unit_check_points`]
@@ -298,5 +299,37 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
             report.iterations, report.relinearisations
         ));
     }
+    warnings.extend(worse_than_nominal(report.rms_um, report.nominal.rms_um));
     Ok(warnings)
+}
+
+/// The warning when the calibrated model's RMS `rms_um` is above the
+/// nominal robot's `nominal_um`: every parameter zero is the nominal robot,
+/// so a least-squares fit ends at least as close, unless Gauss–Newton
+/// stopped at another stationary point.
+fn worse_than_nominal(rms_um: f64, nominal_um: f64) -> Option<String> {
+    (rms_um > nominal_um).then(|| {
+        format!(
+            "the calibrated model fits the measurements worse than the nominal robot \
+             (RMS {rms_um:.1} um against {nominal_um:.1} um): Gauss-Newton ended at a \
+             wrong stationary point; check the setup (markers, base frame, units) or \
+             declare fewer parameters"
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fit that ended worse than the nominal robot is a warning (a random
+    /// chain once ended, "converged", at 12 432 µm against the nominal
+    /// robot's 803 µm); one that improved on it is not.
+    #[test]
+    fn a_fit_worse_than_the_nominal_robot_is_a_warning() {
+        let w = worse_than_nominal(12432.4, 803.1).expect("a warning");
+        assert!(w.contains("RMS 12432.4 um against 803.1 um"), "{w}");
+        assert!(worse_than_nominal(33.2, 803.1).is_none());
+        assert!(worse_than_nominal(803.1, 803.1).is_none());
+    }
 }
