@@ -231,9 +231,11 @@ impl Engine<'_> {
             } else {
                 None
             };
-            let ols = match &info {
-                Some(acc) if !carried.is_empty() => Some(leading(acc, params.len())),
-                other => other.clone(),
+            // The fit's own sums, and those of every column when some are
+            // carried.
+            let (ols, info) = match info {
+                Some(acc) if !carried.is_empty() => (Some(leading(&acc, params.len())), Some(acc)),
+                other => (other, None),
             };
             let rank = match &ols {
                 Some(acc) => acc.identifiable().ok(),
@@ -320,7 +322,7 @@ impl Engine<'_> {
                 residuals,
                 information: ols,
             };
-            return Ok((fitted, info.filter(|_| !carried.is_empty())));
+            return Ok((fitted, info));
         }
     }
 

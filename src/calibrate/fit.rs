@@ -294,25 +294,12 @@ pub fn test_sums(acc: &Accumulator<f64, Dyn>, model: usize) -> Result<NestedTest
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calibrate::design::testing;
     use crate::estimate::RobustWeight;
 
-    /// `rows` rows (each its own configuration) on `n` pseudo-random columns.
+    /// `rows` rows, each its own configuration, on `n` pseudo-random columns.
     fn design(rows: usize, n: usize, seed: u64) -> Design {
-        let mut state = seed;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        Design {
-            params: Vec::new(),
-            b: DMatrix::from_fn(3 * rows, n, |_, _| next()),
-            y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
-            group: (0..rows).collect(),
-            groups: rows,
-            instrument_sigma: None,
-        }
+        testing::design(rows, 1, n, seed)
     }
 
     /// An OLS fit given its sums is the fit that makes them, bit for bit;

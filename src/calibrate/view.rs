@@ -415,6 +415,7 @@ impl Reweightable<f64, Dyn> for View<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calibrate::design::testing::{design, rng};
 
     /// The leverage of one row and axis as [`crate::estimate::leverage`]
     /// sums it.
@@ -430,16 +431,6 @@ mod tests {
         q
     }
 
-    fn rng(seed: u64) -> impl FnMut() -> f64 {
-        let mut s = seed;
-        move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        }
-    }
-
     #[test]
     fn batched_leverages_are_the_row_by_row_ones_bit_for_bit() {
         let mut next = rng(7);
@@ -453,20 +444,6 @@ mod tests {
                     assert_eq!(q[a * LANES + j].to_bits(), want.to_bits());
                 }
             }
-        }
-    }
-
-    /// `groups` groups of `per` rows on `n` columns, pseudo-random.
-    fn design(groups: usize, per: usize, n: usize, seed: u64) -> Design {
-        let mut next = rng(seed);
-        let rows = groups * per;
-        Design {
-            params: Vec::new(),
-            b: DMatrix::from_fn(3 * rows, n, |_, _| next()),
-            y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
-            group: (0..rows).map(|i| i / per).collect(),
-            groups,
-            instrument_sigma: None,
         }
     }
 
