@@ -5,7 +5,9 @@ mod model_common;
 
 use model_common::*;
 use nalgebra::{Const, SMatrix, SVector, Vector3, U1};
-use robcal::estimate::{identifiability, IdentifiabilitySettings, Pivoting};
+use robcal::estimate::{
+    identifiability, identifiability_excluding, IdentifiabilitySettings, Pivoting,
+};
 use robcal::model::{angle_urad, compliance_columns, Layout, Marker, Param, Sample};
 use robcal::robot::{joint_torques, PointLoad};
 use robcal::{Accumulator, Block, Chain, Error, Solution};
@@ -493,4 +495,39 @@ fn linear_model_under_the_full_paper_load() {
     // Observed 0.26 %; bounded at 1 % so a real regression still shows.
     assert!(worst < 0.01, "worst relative linearisation error {worst}");
     eprintln!("worst relative linearisation error at 270 kg: {worst:.2e}");
+}
+
+#[test]
+fn an_excluded_column_is_left_out_with_its_absorbers() {
+    // Column 2 is columns 0 and 1 summed plus 1 % of its own: a pivot of
+    // ~1e-4, kept by Λ; a caller whose test of the columns themselves found
+    // it dependent excludes it, and it is reported left out, absorbed by
+    // the two it leans on, the others kept.
+    let cols = [
+        [1.0, 0.2, 0.0, 0.3],
+        [0.1, 1.0, 0.4, 0.0],
+        [1.1, 1.2, 0.41, 0.3],
+    ];
+    let mut b = SMatrix::<f64, 4, 3>::zeros();
+    for (j, c) in cols.iter().enumerate() {
+        for (i, v) in c.iter().enumerate() {
+            b[(i, j)] = *v;
+        }
+    }
+    b[(3, 2)] += 0.01;
+    let lambda = b.transpose() * b;
+    let s = IdentifiabilitySettings::default();
+    let plain = identifiability(&lambda, &[true; 3], &s).unwrap();
+    assert_eq!(plain.rank(), 3);
+    let none = identifiability_excluding(&lambda, &[true; 3], &[], &s).unwrap();
+    assert_eq!(none, plain);
+    let r = identifiability_excluding(&lambda, &[true; 3], &[false, false, true], &s).unwrap();
+    assert_eq!(r.rank(), 2);
+    assert_eq!(r.left_out().collect::<Vec<_>>(), [2]);
+    let by: Vec<usize> = r.absorbed_by(2).iter().map(|a| a.param).collect();
+    assert!(by.contains(&0) && by.contains(&1), "{by:?}");
+    assert!(matches!(
+        identifiability_excluding(&lambda, &[true; 3], &[true], &s),
+        Err(Error::Mismatch { .. })
+    ));
 }

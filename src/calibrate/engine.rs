@@ -238,7 +238,7 @@ impl Engine<'_> {
                 other => (other, None),
             };
             let rank = match &ols {
-                Some(acc) => acc.identifiable().ok(),
+                Some(acc) => d.identifiability_of(&cols, acc),
                 None => d.identifiability(&[], &cols),
             };
             if let Some(rank) = rank {

@@ -183,9 +183,9 @@ fn choose(
     let mut left = match info {
         // The same test on the same sums (`Design::independent`'s are the
         // unit-weight sums of these columns in this order).
-        Some(acc) => match acc.identifiable() {
-            Ok(rank) => extra.iter().copied().filter(|&c| rank.kept[c]).collect(),
-            Err(_) => Vec::new(),
+        Some(acc) => match d.identifiability_of(&(0..all.len()).collect::<Vec<_>>(), acc) {
+            Some(rank) => extra.iter().copied().filter(|&c| rank.kept[c]).collect(),
+            None => Vec::new(),
         },
         None => d.independent(&model, &extra),
     };

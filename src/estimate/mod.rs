@@ -83,7 +83,7 @@ pub use irls::{
 };
 pub use nested::{nested_test, NestedTest};
 pub use rank::{
-    identifiability, independence_tolerance, independent, Absorber, Identifiability,
-    IdentifiabilitySettings, Pivoting,
+    identifiability, identifiability_excluding, independence_tolerance, independent, Absorber,
+    Identifiability, IdentifiabilitySettings, Pivoting,
 };
 pub use weights::{inverse_sigma, RobustWeight};

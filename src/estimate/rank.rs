@@ -35,11 +35,12 @@ use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
 use super::accumulator::Accumulator;
-use super::factor::{
-    cholesky_in_place, pivot_tolerance, solve_lower_in_place, solve_upper_t_in_place,
-};
+use super::factor::{solve_lower_in_place, solve_upper_t_in_place};
 use super::linalg::dot;
 use crate::Error;
+
+mod kept;
+use kept::{kept_factor, verify_kept};
 
 /// Margin of [`independence_tolerance`] over the solver's `√ε`.
 pub const INDEPENDENCE_MARGIN: f64 = 64.0;
@@ -291,10 +292,34 @@ pub fn identifiability<T: RealField + Copy, D: Dim>(
 where
     DefaultAllocator: Alloc<D>,
 {
+    identifiability_excluding(lambda, candidates, &[], settings)
+}
+
+/// [`identifiability`] with the candidates flagged in `excluded` (empty:
+/// none) left out whatever their pivot, with their absorbers: for a caller
+/// that tested the columns more accurately than `Λ`, whose pivots carry
+/// rounding of about `ε·κ(Λ)` (`calibrate::design`, std).
+///
+/// # Errors
+/// As [`identifiability`]; [`Error::Mismatch`] for a wrong `excluded` length.
+pub fn identifiability_excluding<T: RealField + Copy, D: Dim>(
+    lambda: &OMatrix<T, D, D>,
+    candidates: &[bool],
+    excluded: &[bool],
+    settings: &IdentifiabilitySettings<T>,
+) -> Result<Identifiability<T, D>, Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
     let n = lambda.nrows();
     if candidates.len() != n {
         return Err(Error::Mismatch {
             what: "one candidate flag per parameter",
+        });
+    }
+    if !excluded.is_empty() && excluded.len() != n {
+        return Err(Error::Mismatch {
+            what: "one excluded flag per parameter",
         });
     }
     if !lambda.iter().all(|v| v.is_finite()) {
@@ -309,7 +334,7 @@ where
         a,
         dmin,
         dmax,
-    } = pivot(lambda, candidates, settings);
+    } = pivot(lambda, candidates, excluded, settings);
     let dim = lambda.shape_generic().0;
     // Regression of each left-out column on all kept columns: plain
     // Cholesky of the kept block (every positive pivot accepted).
@@ -383,6 +408,7 @@ where
 fn pivot<T: RealField + Copy, D: Dim>(
     lambda: &OMatrix<T, D, D>,
     candidates: &[bool],
+    excluded: &[bool],
     settings: &IdentifiabilitySettings<T>,
 ) -> Pivoted<T, D>
 where
@@ -432,7 +458,8 @@ where
         let Some(p) = pick else { break };
         open[p] = false;
         let d = r[(p, p)];
-        if d.partial_cmp(&settings.tolerance) != Some(core::cmp::Ordering::Greater) {
+        let dependent = excluded.get(p).copied().unwrap_or(false);
+        if dependent || d.partial_cmp(&settings.tolerance) != Some(core::cmp::Ordering::Greater) {
             left_out[p] = true;
             continue;
         }
@@ -455,97 +482,6 @@ where
         a,
         dmin,
         dmax,
-    }
-}
-
-/// The kept block of the scaled `a` (identity elsewhere), factored by a
-/// plain Cholesky in layout order with pivot tolerance `tol`.
-fn kept_factor<T: RealField + Copy, D: Dim>(
-    a: &OMatrix<T, D, D>,
-    kept: &OVector<bool, D>,
-    tol: T,
-) -> Result<OMatrix<T, D, D>, Error>
-where
-    DefaultAllocator: Alloc<D>,
-{
-    let dim = a.shape_generic().0;
-    let mut l = OMatrix::<T, D, D>::from_fn_generic(dim, dim, |i, j| {
-        if kept[i] && kept[j] {
-            a[(i, j)]
-        } else if i == j {
-            T::one()
-        } else {
-            T::zero()
-        }
-    });
-    cholesky_in_place(&mut l, tol)?;
-    Ok(l)
-}
-
-/// The greedy pivots bound each kept column's `1 − R²` on the columns kept
-/// *before it in pivot order*, not on all the others. On rare near-dependent
-/// sets (a random 6R chain with 24 geometric parameters and 21 poses:
-/// every greedy pivot ≥ 5e-6 of the largest) the kept block is nevertheless
-/// numerically singular, and the solver ([`super::Factor`], a plain
-/// Cholesky in layout order with [`pivot_tolerance`]) would refuse it. When
-/// the kept block does not factor as the solver factors it (with twice its
-/// tolerance), the criterion is applied as stated — `1 − R² = 1/VIF` of
-/// every kept column on all the other kept ones above the tolerance — by
-/// leaving out the most inflated column (the later one on a tie) until it
-/// holds. Sets the greedy pivots got right are untouched.
-fn verify_kept<T: RealField + Copy, D: Dim>(
-    a: &OMatrix<T, D, D>,
-    kept: &mut OVector<bool, D>,
-    left_out: &mut OVector<bool, D>,
-    tolerance: T,
-) where
-    DefaultAllocator: Alloc<D>,
-{
-    let two = T::one() + T::one();
-    if kept_factor(a, kept, two * pivot_tolerance::<T>()).is_ok() {
-        return;
-    }
-    let (n, dim) = (a.nrows(), a.shape_generic().0);
-    // Each round leaves one column out: at most n rounds.
-    for _ in 0..n {
-        let worst = match kept_factor(a, kept, T::zero()) {
-            Err(Error::NotIdentifiable { column, .. }) => Some(column),
-            Err(_) => None,
-            Ok(l) => {
-                let mut worst: Option<(usize, T)> = None;
-                for d in (0..n).filter(|&d| kept[d]) {
-                    let mut x = OVector::<T, D>::zeros_generic(dim, Const::<1>);
-                    x[d] = T::one();
-                    solve_lower_in_place(&l, &mut x);
-                    solve_upper_t_in_place(&l, &mut x);
-                    let vif = x[d];
-                    let fine = vif.is_finite() && vif > T::zero() && T::one() / vif > tolerance;
-                    if fine {
-                        continue;
-                    }
-                    let score = if vif.is_finite() {
-                        vif
-                    } else {
-                        T::max_value().unwrap_or(vif)
-                    };
-                    let replace = match worst {
-                        None => true,
-                        Some((_, w)) => score >= w,
-                    };
-                    if replace {
-                        worst = Some((d, score));
-                    }
-                }
-                worst.map(|(d, _)| d)
-            }
-        };
-        match worst {
-            Some(d) if d < n && kept[d] => {
-                kept[d] = false;
-                left_out[d] = true;
-            }
-            _ => return,
-        }
     }
 }
 
@@ -573,7 +509,7 @@ where
             what: "information",
         });
     }
-    Ok(pivot(lambda, candidates, &IdentifiabilitySettings::default()).kept)
+    Ok(pivot(lambda, candidates, &[], &IdentifiabilitySettings::default()).kept)
 }
 
 impl<T: RealField + Copy, D: Dim> Accumulator<T, D>
