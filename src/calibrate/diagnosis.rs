@@ -60,6 +60,11 @@ pub(super) fn first_fit(
     loop {
         match e.fit_carrying(&params, carried) {
             Err(CalibrationError::Dependent(_)) => {}
+            // The solver's refusal, by name (a candidate's is its rejection,
+            // `super::trial`).
+            Err(CalibrationError::Core("fit", err)) => {
+                return Err(CalibrationError::of_fit(err, &params, &e.names))
+            }
             other => return other,
         }
         let now = e.left_out(&params)?;

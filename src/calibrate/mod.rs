@@ -267,6 +267,21 @@ fn calibrate_rows(
              before calibration: {nominal}); declare one in [model]"
         )));
     }
+    // As many identifiable parameters as equations: the fit reproduces
+    // every measurement, and no residual is left to estimate the noise
+    // from (eq. 14; the estimator's error was "sigma must be positive").
+    let equations = 3 * e.rows.rows.len();
+    if equations <= declared.len() {
+        return Err(CalibrationError::Data(format!(
+            "{}: too few measurements for the declared model: {} row(s) give {equations} \
+             equations for {} identifiable parameters, which leaves no residual to estimate \
+             the noise from; measure more configurations (or markers), or remove parameters \
+             from [model]",
+            file.display(),
+            e.rows.rows.len(),
+            declared.len()
+        )));
+    }
     let mut settings = *settings;
     let mut notes = Vec::new();
     if let Some(m) = setup.assumed_link_mass_kg {

@@ -1,6 +1,8 @@
 //! What a calibration is told: the user's [`Settings`], the engine's
 //! [`Policy`] (every decision constant, stated once), and how it fails.
 
+use super::names::Names;
+use crate::model::Param;
 use crate::Error;
 
 /// Estimation method (data contract §4).
@@ -77,6 +79,13 @@ pub struct Policy {
     /// its RMS (`1 − (RMS after / RMS before)²`); else the first fit
     /// stands. 0.5.
     pub min_realised: f64,
+    /// A calibrated model is reported as fitting worse than the nominal
+    /// robot ([`super::plausibility`]) when its root weighted sum of squares
+    /// (the fit's weights; unweighted for OLS) exceeds the nominal robot's
+    /// by more than this share. 0.01: a fit that only rounds to the nominal
+    /// robot (a base-only model, whose registration is already the least
+    /// squares one) is not one.
+    pub worse_than_nominal: f64,
     /// At most this many effects are added. 8.
     pub max_effects: usize,
     /// Fewest rows per configuration for IRLS/WLS: each configuration's σ
@@ -180,6 +189,7 @@ impl Default for Policy {
             alpha: 0.01,
             min_share: 0.1,
             min_realised: 0.5,
+            worse_than_nominal: 0.01,
             max_effects: 8,
             min_rows_per_group: 2,
             irls_tolerance: 1e-3,
@@ -237,6 +247,28 @@ pub enum CalibrationError {
     /// A candidate's trial abandoned because an earlier candidate of the
     /// same step was admissible ([`super::trial`]): never the run's error.
     Cancelled,
+}
+
+impl CalibrationError {
+    /// An error of the estimator in the declared model's fit of `params`:
+    /// a parameter the solver finds not identifiable, named (the
+    /// independence test passed it on the unweighted columns; at the
+    /// weights of the fit it is a combination of the others, e.g. when
+    /// configurations of very different scatter weigh very differently),
+    /// else the core's error.
+    pub fn of_fit(e: Error, params: &[Param], names: &Names) -> Self {
+        match e {
+            Error::NotIdentifiable { column, rcond } if column < params.len() => {
+                CalibrationError::Data(format!(
+                    "fit: {} cannot be told apart from the other parameters at the weights of \
+                     the fit (reciprocal condition {rcond:.1e}); check the data for outliers, \
+                     or declare fewer parameters",
+                    names.name(&params[column])
+                ))
+            }
+            e => CalibrationError::Core("fit", e),
+        }
+    }
 }
 
 impl core::fmt::Display for CalibrationError {
