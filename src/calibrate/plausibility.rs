@@ -306,11 +306,15 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
 
 /// The warning when the calibrated model fits the rows worse than the
 /// nominal robot by more than the share `margin`, with the weights of the
-/// fit per configuration and axis ([`Report::noise`]; unit for OLS): every
+/// fit per configuration and axis ([`Report::noise`]; for OLS the RMS
+/// themselves, without a pass over the rows): every
 /// parameter zero is the nominal robot, so the fit ends at least as close
 /// in its own (weighted) sum of squares, unless Gauss–Newton stopped at
 /// another stationary point.
 fn worse_than_nominal(report: &Report, margin: f64) -> Option<String> {
+    if report.method == "ols" {
+        return worse_message(report.rms_um, report.nominal.rms_um, None, margin);
+    }
     let weights: std::collections::HashMap<i64, [f64; 3]> =
         report.noise.iter().map(|n| (n.config, n.weight)).collect();
     let (mut fitted, mut nominal) = (0.0, 0.0);
@@ -322,9 +326,8 @@ fn worse_than_nominal(report: &Report, margin: f64) -> Option<String> {
         }
     }
     let rows = report.row_errors.len().max(1) as f64;
-    let weighted =
-        (report.method != "ols").then(|| ((fitted / rows).sqrt(), (nominal / rows).sqrt()));
-    worse_message(report.rms_um, report.nominal.rms_um, weighted, margin)
+    let weighted = ((fitted / rows).sqrt(), (nominal / rows).sqrt());
+    worse_message(report.rms_um, report.nominal.rms_um, Some(weighted), margin)
 }
 
 /// [`worse_than_nominal`]'s rule on the RMS `rms_um` and the nominal
