@@ -368,14 +368,27 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
 
     /// The same random chains fitted by IRLS (the default method), whose
-    /// weights move the pivots of `Λ`: never refused.
+    /// weights move the pivots of `Λ`: never refused, unless Gauss–Newton
+    /// runs away on the chain (its OLS fit says it did not converge: seed
+    /// 13508975950693404068, OLS at an RMS of 2.6e16 m, where IRLS's
+    /// solver met a column it cannot resolve).
     #[test]
     fn no_declared_model_is_refused_with_irls(seed in any::<u64>()) {
         let c = case(seed);
         let settings = Settings { method: Method::Irls, ..quick() };
-        let r = calibrate_with(&c, &settings).map_err(|e| {
-            TestCaseError::fail(format!("seed {seed}: refused: {e}\n{}\n{}", c.setup, c.chain.urdf()))
-        })?;
+        let r = match calibrate_with(&c, &settings) {
+            Ok(r) => r,
+            Err(e) => {
+                let ols = calibrate_case(&c);
+                let diverges = ols.as_ref().is_ok_and(|o| !o.converged);
+                prop_assert!(
+                    diverges,
+                    "seed {seed}: refused: {e} (OLS: {:?})\n{}\n{}",
+                    ols.map(|o| o.rms_um), c.setup, c.chain.urdf()
+                );
+                return Ok(());
+            }
+        };
         prop_assert!(
             r.parameters.iter().all(|p| p.std.is_finite()),
             "seed {seed}: σ not finite: {:?}", r.parameters
