@@ -299,6 +299,16 @@ fn case(seed: u64) -> Case {
     }
 }
 
+/// That the report's notes say `name` was re-added (`calibrate::retest`).
+fn assert_readded(r: &Report, name: &str) {
+    let note = format!("{name} re-added");
+    assert!(
+        r.notes.iter().any(|n| n.starts_with(&note)),
+        "{:?}",
+        r.notes
+    );
+}
+
 fn calibrate_case(c: &Case) -> Result<Report, String> {
     calibrate_with(c, &quick())
 }
@@ -408,11 +418,7 @@ fn a_dependence_only_at_the_nominal_robot_is_tested_again_at_the_fitted_one() {
     // with no warning.
     let c = case(4106693272553127489);
     let r = calibrate_case(&c).expect("calibrated");
-    assert!(
-        r.notes.iter().any(|n| n.starts_with("base.ry re-added")),
-        "{:?}",
-        r.notes
-    );
+    assert_readded(&r, "base.ry");
     assert!(
         r.left_out.iter().all(|l| l.name != "base.ry"),
         "{:?}",
@@ -435,11 +441,7 @@ fn a_parameter_left_out_on_the_way_is_tested_again_at_the_fitted_geometry() {
     // (1, 213)), and re-added.
     let c = case(14554966693631364839);
     let r = calibrate_case(&c).expect("calibrated");
-    assert!(
-        r.notes.iter().any(|n| n.starts_with("j4.ry re-added")),
-        "{:?}",
-        r.notes
-    );
+    assert_readded(&r, "j4.ry");
     assert!(r.declared_rms_um < 40.0, "{}", r.declared_rms_um);
 }
 
@@ -524,11 +526,7 @@ fn an_exactly_dependent_column_is_left_out_whatever_the_rounding_of_its_sums() {
     let r = calibrate_with(&c, &settings).expect("calibrated, not refused");
     // Left out at the nominal robot, where it is dependent; independent
     // and significant at the fitted geometry, where it is re-added.
-    assert!(
-        r.notes.iter().any(|n| n.starts_with("j4.ry re-added")),
-        "{:?}",
-        r.notes
-    );
+    assert_readded(&r, "j4.ry");
     assert!(r.converged && r.rms_um.is_finite(), "{}", r.rms_um);
 }
 
