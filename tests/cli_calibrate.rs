@@ -472,3 +472,63 @@ fn quiet_and_verbose() {
         "{err}"
     );
 }
+
+/// A measurement error in one row is named by the outlier rule
+/// (`calibrate::plausibility`): a loaded point of KR-270 moved by 3 mm
+/// (the deflections' median residual is ~90 µm, their largest 343 µm),
+/// where the clean file gives no such warning.
+#[test]
+fn a_point_off_by_millimetres_is_named_as_a_likely_measurement_error() {
+    let run = |data: &str| {
+        json(&robcal(&[
+            "calibrate",
+            "--setup",
+            "data/kr270/setup.toml",
+            "--data",
+            data,
+            "--no-diagnose",
+            "--json",
+        ]))
+    };
+    let named = |v: &Value| -> Vec<String> {
+        v["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_str().unwrap().to_string())
+            .filter(|w| w.contains("times the median row's"))
+            .collect()
+    };
+    assert!(named(&run("data/kr270/measurements.csv")).is_empty());
+    let text = std::fs::read_to_string(root().join("data/kr270/measurements.csv")).unwrap();
+    let mut moved = 0;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            // config 7, repetition 2, marker 1, loaded: x + 3 mm.
+            if f[..3] == ["7", "2", "1"] && f[3] != "0" {
+                moved += 1;
+                let x: f64 = f[10].parse().unwrap();
+                let mut g: Vec<String> = f.iter().map(|s| s.to_string()).collect();
+                g[10] = format!("{}", x + 3.0);
+                return g.join(",");
+            }
+            l.to_string()
+        })
+        .collect();
+    assert_eq!(moved, 1);
+    let dir = temp_dir("outlier");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("measurements.csv");
+    std::fs::write(&file, lines.join("\n") + "\n").unwrap();
+    let w = named(&run(file.to_str().unwrap()));
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].starts_with("1 of 270 deflection rows has a residual above 20 times"),
+        "{}",
+        w[0]
+    );
+    assert!(w[0].contains(": config 7 marker 1 "), "{}", w[0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

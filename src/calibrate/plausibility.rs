@@ -21,6 +21,7 @@
 //! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`super::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
 //! | the calibrated model fits worse than the nominal robot | the final residuals' root sum of squares, weighted by the fit's weights (eq. 14; unit for OLS), above the nominal robot's (base registered) with the same weights by more than [`Policy::worse_than_nominal`]: the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point. (The unweighted RMS of a weighted fit may legitimately end above the nominal robot's: the fit minimises the weighted sum) | warning |
+//! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
 //! The scale and unit checks read at most [`Policy::unit_check_points`]
@@ -34,7 +35,7 @@ use nalgebra::Vector3;
 
 use super::geometry::Geometry;
 use super::names::Names;
-use super::report::Report;
+use super::report::{Report, RowError};
 use super::rows::Rows;
 use super::settings::{CalibrationError, Policy};
 use crate::io::{AngleUnit, Job, Measurements};
@@ -301,7 +302,69 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
         ));
     }
     warnings.extend(worse_than_nominal(report, policy.worse_than_nominal));
+    warnings.extend(outliers(&report.row_errors, policy));
     Ok(warnings)
+}
+
+/// Rows listed by name in [`outliers`]' warning, at most (the largest).
+const OUTLIERS_LISTED: usize = 5;
+
+/// The warning when some rows' final residuals are far out of line with
+/// the others': a norm above [`Policy::outlier_ratio`] times the median
+/// row's of the same kind (absolute positions and deflections apart) and
+/// above [`Policy::outlier_floor_um`], among at least
+/// [`Policy::outlier_min_rows`] rows of the kind. The largest
+/// [`OUTLIERS_LISTED`] are named by configuration and marker.
+fn outliers(rows: &[RowError], policy: &Policy) -> Option<String> {
+    let mut parts = Vec::new();
+    for deflection in [false, true] {
+        let of_kind = || rows.iter().filter(move |r| r.deflection == deflection);
+        // The norms alone (8 MB at 10⁶ rows), for the median: the middle
+        // one, the upper of the two middle ones for an even count.
+        let mut v: Vec<f64> = of_kind().map(|r| r.final_um.norm()).collect();
+        let count = v.len();
+        if count < policy.outlier_min_rows.max(1) {
+            continue;
+        }
+        let median = *v.select_nth_unstable_by(count / 2, f64::total_cmp).1;
+        drop(v);
+        let bound = (policy.outlier_ratio * median).max(policy.outlier_floor_um);
+        let mut far: Vec<(f64, &RowError)> = of_kind()
+            .map(|r| (r.final_um.norm(), r))
+            .filter(|(n, _)| *n > bound || n.is_nan())
+            .collect();
+        if far.is_empty() {
+            continue;
+        }
+        far.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let kind = if deflection { "deflection" } else { "position" };
+        let named: Vec<String> = far
+            .iter()
+            .take(OUTLIERS_LISTED)
+            .map(|(n, r)| format!("config {} marker {} {n:.1} um", r.config, r.marker))
+            .collect();
+        let more = if far.len() > OUTLIERS_LISTED {
+            ", ..."
+        } else {
+            ""
+        };
+        let verb = if far.len() == 1 { "has" } else { "have" };
+        parts.push(format!(
+            "{} of {} {kind} rows {verb} a residual above {} times the median row's \
+             ({median:.1} um): {}{more}",
+            far.len(),
+            count,
+            policy.outlier_ratio,
+            named.join(", ")
+        ));
+    }
+    (!parts.is_empty()).then(|| {
+        format!(
+            "{}; a measurement error there (a tracker point lost or mistaken, a line of \
+             another pose) moves the whole fit: check those rows",
+            parts.join("; ")
+        )
+    })
 }
 
 /// The warning when the calibrated model fits the rows worse than the
@@ -379,5 +442,65 @@ mod tests {
             w.contains("with the weights of the fit 60.0 um against 52.4 um"),
             "{w}"
         );
+    }
+
+    fn row(config: i64, deflection: bool, um: f64) -> RowError {
+        RowError {
+            config,
+            marker: 1,
+            deflection,
+            nominal_um: Vector3::zeros(),
+            final_um: Vector3::new(um, 0.0, 0.0),
+        }
+    }
+
+    /// The outlier rule: above 20 times the median row's norm of its kind
+    /// and above 1 µm, among at least 10 rows; the largest five named.
+    #[test]
+    fn rows_far_out_of_line_with_the_others_are_named() {
+        let policy = Policy::default();
+        // 20 rows of 10..29 µm: the median (the 11th smallest) is 20 µm.
+        let mut rows: Vec<RowError> = (0..20).map(|i| row(i, false, 10.0 + i as f64)).collect();
+        assert!(outliers(&rows, &policy).is_none());
+        // 22 rows: the median is now 21 µm, the bound 420 µm (a norm: the
+        // sign of an axis does not matter).
+        rows.push(row(100, false, 421.0));
+        rows.push(row(101, false, -419.0));
+        let w = outliers(&rows, &policy).expect("a warning");
+        assert!(
+            w.starts_with("1 of 22 position rows has a residual above 20 times the median row's (21.0 um): config 100 marker 1 421.0 um;"),
+            "{w}"
+        );
+        // Deflections are judged apart: their own median, their own count.
+        let mut both = rows.clone();
+        both.extend((0..10).map(|i| row(200 + i, true, 1000.0 + i as f64)));
+        let w = outliers(&both, &policy).expect("a warning");
+        assert!(w.contains("1 of 22 position rows has"), "{w}");
+        assert!(!w.contains("deflection rows"), "{w}");
+        // 28 rows, median 24 µm: six far rows, the five largest named,
+        // then "..."; 421 µm is no longer far.
+        rows.extend((0..6).map(|i| row(300 + i, false, 1000.0 + i as f64)));
+        let w = outliers(&rows, &policy).expect("a warning");
+        assert!(w.starts_with("6 of 28 position rows have"), "{w}");
+        assert!(
+            w.contains("config 305 marker 1 1005.0 um, config 304"),
+            "{w}"
+        );
+        assert!(w.contains("config 301 marker 1 1001.0 um, ...;"), "{w}");
+        assert!(!w.contains("config 100 "), "{w}");
+        // Fewer than ten rows of a kind: no median to judge by.
+        let few: Vec<RowError> = rows[..9]
+            .iter()
+            .copied()
+            .chain([row(9, false, 1e6)])
+            .collect();
+        assert!(outliers(&few[1..], &policy).is_none());
+        assert!(outliers(&few, &policy).is_some());
+        // Rounding is not an outlier: nothing below 1 µm.
+        let exact: Vec<RowError> = (0..20)
+            .map(|i| row(i, false, 1e-9))
+            .chain([row(20, false, 0.5)])
+            .collect();
+        assert!(outliers(&exact, &policy).is_none());
     }
 }

@@ -181,6 +181,21 @@ pub struct Policy {
     /// A compliance or backlash below zero by more than this many σ is an
     /// error; within it, a warning (consistent with zero). 3.
     pub negative_sigmas: f64,
+    /// A row whose final residual (its norm) exceeds this many times the
+    /// median row's of its kind (absolute positions, deflections) is
+    /// reported as a likely measurement error ([`super::plausibility`]).
+    /// 20: for Gaussian noise the median norm is 1.54 σ (3 axes), so the
+    /// bound is 31 σ, and still 6 σ for a configuration five times
+    /// noisier than the median one (the paper's premise: the noise varies
+    /// over the workspace); the largest ratio on the bundled and real data
+    /// sets is in `docs/numerics.md`.
+    pub outlier_ratio: f64,
+    /// … and this \[µm\]: no residual below it is called an outlier
+    /// (noise-free synthetic data has a median of rounding). 1.
+    pub outlier_floor_um: f64,
+    /// … among at least this many rows of the kind (a median of fewer
+    /// says little about the noise). 10.
+    pub outlier_min_rows: usize,
 }
 
 impl Default for Policy {
@@ -212,6 +227,9 @@ impl Default for Policy {
             unit_check_points: 4096,
             min_spread_m: 0.01,
             negative_sigmas: 3.0,
+            outlier_ratio: 20.0,
+            outlier_floor_um: 1.0,
+            outlier_min_rows: 10,
         }
     }
 }
