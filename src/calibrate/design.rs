@@ -342,11 +342,11 @@ impl Design {
         for r in rows {
             y.extend_from_slice(r.y.as_slice());
         }
-        let instrument_sigma = rows.iter().all(|r| r.sigma.is_some()).then(|| {
+        let instrument_sigma = rows.iter().all(|r| r.sigma().is_some()).then(|| {
             let mut ss = vec![Vector3::<f64>::zeros(); groups];
             let mut n = vec![0.0_f64; groups];
             for r in rows {
-                if let (Some(s), Some(g)) = (r.sigma, ss.get_mut(r.group)) {
+                if let (Some(s), Some(g)) = (r.sigma(), ss.get_mut(r.group)) {
                     *g += s.component_mul(&s);
                     n[r.group] += 1.0;
                 }

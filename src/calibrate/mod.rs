@@ -329,7 +329,7 @@ fn weighting(
     file: &std::path::Path,
 ) -> Result<fit::Weighting, CalibrationError> {
     use fit::Weighting;
-    let with = rows.rows.iter().filter(|r| r.sigma.is_some()).count();
+    let with = rows.rows.iter().filter(|r| r.sigma().is_some()).count();
     let all = with == rows.rows.len();
     if with > 0 && !all {
         return Err(CalibrationError::Data(format!(

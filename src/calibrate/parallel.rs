@@ -272,7 +272,7 @@ mod tests {
             let state = |rows: &Rows| -> Vec<_> {
                 rows.rows
                     .iter()
-                    .map(|r| (r.y, r.p, r.tau.clone(), r.twists.clone()))
+                    .map(|r| (r.y, r.p, r.tau.clone(), r.twists().to_vec()))
                     .collect()
             };
             let r = state(&rows);

@@ -179,7 +179,7 @@ fn variables(rows: &Rows, names: &Names) -> Vec<Variable> {
     if rows.kinds.time {
         out.push(var(
             "t".into(),
-            r.iter().map(|r| r.dt.unwrap_or(0.0)).collect(),
+            r.iter().map(|r| r.dt().unwrap_or(0.0)).collect(),
             false,
         ));
     }
@@ -319,7 +319,7 @@ pub fn traced_variable(rows: &Rows, names: &Names, c: &Candidate) -> (String, Ve
         None => match c.effect {
             super::effects::Effect::Drift => (
                 "t [s]".into(),
-                r.iter().map(|r| r.dt.unwrap_or(0.0)).collect(),
+                r.iter().map(|r| r.dt().unwrap_or(0.0)).collect(),
             ),
             super::effects::Effect::LoadCom => {
                 ("load_kg".into(), r.iter().map(|r| r.load_kg).collect())

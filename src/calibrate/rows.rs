@@ -59,18 +59,11 @@ pub struct Row {
     pub load_kg: f64,
     /// Joint values \[rad or m\].
     pub q: Vec<f64>,
-    /// Time \[s\] relative to the data's mean time (absolute rows) or between
-    /// the unloaded and the loaded measurement (deflection rows).
-    pub dt: Option<f64>,
     /// What was measured \[m\]: the position (absolute rows, measurement
     /// frame) or the deflection.
     pub measured: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
-    /// The instrument's σ of what was measured, per axis \[m\] (data
-    /// contract 7.2): the point's, or for a deflection the root sum of
-    /// squares of its two points'.
-    pub sigma: Option<Vector3<f64>>,
     /// Where the frames of the current model in the measurement frame are,
     /// at the pose the row's point is at: `q`, or with the exact deflection
     /// model the equilibrium (the loaded one for a deflection); see
@@ -81,6 +74,29 @@ pub struct Row {
     /// Joint torques behind the row at `frames`: the load's (deflection
     /// rows) or the links' own weight (absolute rows) \[N·m or N\].
     pub tau: Vec<f64>,
+    /// What only some rows have ([`RowExtra`]), boxed: absent (8 B) for an
+    /// absolute row without time, instrument σ or the exact model's
+    /// columns, where it was 152 B a row inline (152 MB at 10⁶ rows).
+    pub extra: Option<Box<RowExtra>>,
+    /// The row's left-hand side \[m\], linearised at the current model
+    /// ([`super::linearisation`]): measured minus predicted plus the
+    /// linearised joint-law part, `measured − f(x₀) + B(x₀) x₀`. With the
+    /// first-order model, the measured deflection, or the measured minus
+    /// the rigid forward kinematics.
+    pub y: Vector3<f64>,
+}
+
+/// The fields of a [`Row`] that only some rows have; each read through
+/// [`Row`]'s accessor of the same name (none, zero or empty without it).
+#[derive(Debug, Clone, Default)]
+pub struct RowExtra {
+    /// Time \[s\] relative to the data's mean time (absolute rows) or between
+    /// the unloaded and the loaded measurement (deflection rows).
+    pub dt: Option<f64>,
+    /// The instrument's σ of what was measured, per axis \[m\] (data
+    /// contract 7.2): the point's, or for a deflection the root sum of
+    /// squares of its two points'.
+    pub sigma: Option<Vector3<f64>>,
     /// The load's wrench at `frames` (deflection rows).
     pub load: Option<Wrench<f64>>,
     /// With the exact model, the column of each joint's yield at the
@@ -92,12 +108,6 @@ pub struct Row {
     /// row's, when the exact model's law has a gravity compliance (`frames`
     /// are then at the equilibrium, not at `q`); else empty.
     pub gravity_q: Vec<[f64; 2]>,
-    /// The row's left-hand side \[m\], linearised at the current model
-    /// ([`super::linearisation`]): measured minus predicted plus the
-    /// linearised joint-law part, `measured − f(x₀) + B(x₀) x₀`. With the
-    /// first-order model, the measured deflection, or the measured minus
-    /// the rigid forward kinematics.
-    pub y: Vector3<f64>,
 }
 
 /// A run of rows in [`Rows::relinearise_with`], with its state and its
@@ -128,6 +138,45 @@ impl RowFrames {
 }
 
 impl Row {
+    /// [`RowExtra::dt`].
+    pub fn dt(&self) -> Option<f64> {
+        self.extra.as_ref().and_then(|e| e.dt)
+    }
+
+    /// [`RowExtra::sigma`].
+    pub fn sigma(&self) -> Option<Vector3<f64>> {
+        self.extra.as_ref().and_then(|e| e.sigma)
+    }
+
+    /// [`RowExtra::load`].
+    pub fn load(&self) -> Option<Wrench<f64>> {
+        self.extra.as_ref().and_then(|e| e.load)
+    }
+
+    /// [`RowExtra::twists`].
+    pub fn twists(&self) -> &[Vector3<f64>] {
+        self.extra.as_ref().map_or(&[], |e| &e.twists)
+    }
+
+    /// [`RowExtra::gravity_q`].
+    pub fn gravity_q(&self) -> &[[f64; 2]] {
+        self.extra.as_ref().map_or(&[], |e| &e.gravity_q)
+    }
+
+    /// The row's [`RowExtra`], made (empty) when it has none.
+    fn extra_mut(&mut self) -> &mut RowExtra {
+        self.extra.get_or_insert_with(Box::default)
+    }
+
+    /// Sets [`RowExtra::load`] (no [`RowExtra`] made for `None`).
+    fn set_load(&mut self, load: Option<Wrench<f64>>) {
+        match (load, &mut self.extra) {
+            (None, None) => {}
+            (None, Some(e)) => e.load = None,
+            (Some(l), _) => self.extra_mut().load = Some(l),
+        }
+    }
+
     /// The row as a [`Sample`] for the columns at `frames` (the row's own,
     /// [`Rows::frames`]), with the effective compliance of each joint
     /// (may be empty) and the unit direction of gravity \[measurement
@@ -143,20 +192,20 @@ impl Row {
         Sample {
             frames,
             q: &self.q,
-            twists: &self.twists,
+            twists: self.twists(),
             point_m: self.p,
             marker: self.marker,
             tau: &self.tau,
-            load: self.load,
+            load: self.load(),
             absolute,
-            dt_s: self.dt.unwrap_or(0.0),
+            dt_s: self.dt().unwrap_or(0.0),
             compliance,
             gravity: if absolute {
                 gravity_unit
             } else {
                 Vector3::zeros()
             },
-            gravity_q: &self.gravity_q,
+            gravity_q: self.gravity_q(),
         }
     }
 }
@@ -308,13 +357,18 @@ impl Rows {
                     e => CalibrationError::Core(what, e),
                 }
             };
-            row.gravity_q.clear();
+            if let Some(e) = &mut row.extra {
+                e.gravity_q.clear();
+            }
             if absolute && lin.model == super::DeflectionModel::Exact && lin.needs_gravity() {
                 // The gravity compliance's deflection at the commanded pose.
                 let at_q = chain.frames(&row.q).map_err(core("forward kinematics"))?;
-                row.gravity_q = lin.gravity_at(&at_q, &g_unit);
+                let g = lin.gravity_at(&at_q, &g_unit);
+                if !g.is_empty() || row.extra.is_some() {
+                    row.extra_mut().gravity_q = g;
+                }
             }
-            match lin.law(&row.q, absolute, &row.gravity_q) {
+            match lin.law(&row.q, absolute, row.gravity_q()) {
                 None => {
                     chain
                         .frames_into(&row.q, rigid)
@@ -323,10 +377,12 @@ impl Rows {
                     loading
                         .torques(chain, rigid, &mut row.tau)
                         .map_err(core("torques"))?;
-                    row.load = loading.load.map(|l| l.wrench(rigid));
+                    row.set_load(loading.load.map(|l| l.wrench(rigid)));
                     row.frames.theta.clear();
                     row.p = p_rigid;
-                    row.twists.clear();
+                    if let Some(e) = &mut row.extra {
+                        e.twists.clear();
+                    }
                     row.y = if absolute {
                         row.measured - p_rigid
                     } else {
@@ -373,18 +429,21 @@ impl Rows {
                         )));
                     }
                     let p = eq.frames.point_m(&m);
-                    row.twists = (0..dof)
+                    let twists: Vec<Vector3<f64>> = (0..dof)
                         .map(|j| eq.twist_column(j, &p))
                         .collect::<Result<_, _>>()
                         .map_err(core("equilibrium"))?;
+                    if !twists.is_empty() || row.extra.is_some() {
+                        row.extra_mut().twists = twists;
+                    }
                     let linear: Vector3<f64> = row
-                        .twists
+                        .twists()
                         .iter()
                         .zip(&eq.deflection)
                         .map(|(t, d)| t * *d)
                         .sum();
                     row.tau.copy_from_slice(&eq.tau[..dof]);
-                    row.load = loading.load.map(|l| l.wrench(&eq.frames));
+                    row.set_load(loading.load.map(|l| l.wrench(&eq.frames)));
                     row.y = if absolute {
                         row.measured - p + linear
                     } else {

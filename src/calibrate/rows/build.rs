@@ -4,7 +4,7 @@
 
 use nalgebra::Vector3;
 
-use super::{DataKinds, Row, RowFrames, RowKind, Rows};
+use super::{DataKinds, Row, RowExtra, RowFrames, RowKind, Rows};
 use crate::calibrate::names::Names;
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
@@ -118,7 +118,7 @@ impl Rows {
                    marker,
                    load_kg,
                    q: &[f64],
-                   dt,
+                   dt: Option<f64>,
                    measured: [f64; 3],
                    line,
                    sigma: Option<[f64; 3]>,
@@ -129,16 +129,18 @@ impl Rows {
             marker: index_of(marker),
             load_kg,
             q: q.to_vec(),
-            dt,
             measured: Vector3::from(measured),
             line,
-            sigma: sigma.map(Vector3::from),
             frames: RowFrames::default(),
             p: Vector3::zeros(),
             tau: vec![0.0; dof],
-            load: None,
-            twists: Vec::new(),
-            gravity_q: Vec::new(),
+            extra: (dt.is_some() || sigma.is_some()).then(|| {
+                Box::new(RowExtra {
+                    dt,
+                    sigma: sigma.map(Vector3::from),
+                    ..RowExtra::default()
+                })
+            }),
             y: Vector3::from(measured),
         };
         // Row `k`: the deflections first, then the absolute positions.
