@@ -438,6 +438,24 @@ pub fn run(
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
         .take();
+    let model = e.calibrated(&current);
+    let rigid = super::export::rigid_urdf(&mut e, &current, &model);
+    if let Some(r) = rigid.as_ref().filter(|r| r.refit.is_some()) {
+        let others: Vec<String> = (current.params.iter())
+            .filter(|p| !p.is_geometric())
+            .map(|p| e.names.name(p))
+            .collect();
+        let listed = match others.len() {
+            n if n > 6 => format!("{} and {} more", others[..5].join(", "), n - 5),
+            _ => others.join(", "),
+        };
+        notes.push(format!(
+            "robot.urdf holds the geometric parameters refitted as a rigid robot (RMS {:.1} um \
+             over the absolute rows), since a URDF cannot hold {}: the model's own geometry \
+             alone gives {:.1} um; model.json holds the whole model",
+            r.rms_um, listed, r.own_rms_um
+        ));
+    }
     Ok(Report {
         method: e.fit_settings.method.name(),
         weights: if e.fit_settings.method == Method::Ols {
@@ -496,8 +514,9 @@ pub fn run(
                 final_um: res * 1e6,
             })
             .collect(),
-        model: e.calibrated(&current),
+        model,
         notes,
+        rigid,
         warnings,
     })
 }

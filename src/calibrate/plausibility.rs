@@ -22,6 +22,7 @@
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
 //! | the calibrated model fits worse than the nominal robot | the final residuals' root sum of squares, weighted by the fit's weights (eq. 14; unit for OLS), above the nominal robot's (base registered) with the same weights by more than [`Policy::worse_than_nominal`]: the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point. (The unweighted RMS of a weighted fit may legitimately end above the nominal robot's: the fit minimises the weighted sum) | warning |
 //! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker |
+//! | `robot.urdf` predicts the measured points worse than the nominal robot | the RMS over the absolute rows of what it holds (the geometric parameters refitted as a rigid robot when the model has parameters a URDF cannot hold, `export::rigid_urdf`; the model's own geometry when that refit fails) above the nominal robot's by more than [`Policy::worse_than_nominal`] | warning |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
 //!
 //! The scale and unit checks read at most [`Policy::unit_check_points`]
@@ -303,7 +304,47 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
     }
     warnings.extend(worse_than_nominal(report, policy.worse_than_nominal));
     warnings.extend(outliers(&report.row_errors, policy));
+    warnings.extend(urdf_worse(report, policy.worse_than_nominal));
     Ok(warnings)
+}
+
+/// RMS \[µm\] of the nominal robot and of the final model over the
+/// absolute rows ([`Report::row_errors`]).
+fn absolute_rms_um(report: &Report) -> (f64, f64) {
+    let (mut n, mut nominal, mut fitted) = (0_usize, 0.0, 0.0);
+    for r in report.row_errors.iter().filter(|r| !r.deflection) {
+        n += 1;
+        nominal += r.nominal_um.norm_squared();
+        fitted += r.final_um.norm_squared();
+    }
+    let n = n.max(1) as f64;
+    ((nominal / n).sqrt(), (fitted / n).sqrt())
+}
+
+/// The warning when `robot.urdf` ([`Report::rigid`]) predicts the
+/// absolute rows worse than the nominal robot by more than the share
+/// `margin`: a rigid refit that ended at a wrong stationary point, or, when
+/// that refit could not be made, the model's own geometry, which the
+/// parameters only `model.json` holds absorbed in part.
+fn urdf_worse(report: &Report, margin: f64) -> Option<String> {
+    let rigid = report.rigid.as_ref()?;
+    let (nominal, fitted) = absolute_rms_um(report);
+    if rigid.rms_um <= nominal * (1.0 + margin) {
+        return None;
+    }
+    let what = if rigid.refit.is_some() {
+        "its geometric parameters refitted as a rigid robot ended at a wrong stationary point"
+    } else {
+        "the rigid refit of its geometric parameters failed, and it holds the model's own \
+         geometry, part of which the parameters only model.json holds absorbed"
+    };
+    Some(format!(
+        "robot.urdf predicts the measured points worse than the nominal robot (RMS {:.1} um \
+         against {nominal:.1} um over the absolute rows; the whole model {fitted:.1} um): \
+         {what}; a controller that loads only the URDF needs a geometric calibration (a \
+         geometric [model] with --no-diagnose)",
+        rigid.rms_um
+    ))
 }
 
 /// Rows listed by name in [`outliers`]' warning, at most (the largest).

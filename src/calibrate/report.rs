@@ -294,6 +294,10 @@ pub struct Report {
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
     /// configuration has too few rows to estimate its σ).
     pub notes: Vec<String>,
+    /// What `robot.urdf` holds when the final model has parameters a URDF
+    /// cannot hold (`export::rigid_urdf`); `None` when the URDF
+    /// predicts what the model does, or without absolute rows.
+    pub rigid: Option<super::export::RigidUrdf>,
     /// Plausibility findings that did not stop the run
     /// ([`super::plausibility`]), the input readers' warnings included.
     pub warnings: Vec<String>,
@@ -301,6 +305,15 @@ pub struct Report {
 
 impl Report {
     /// The final model's error per point over the calibration data, as
+    /// The model whose geometry `robot.urdf` holds: the rigid refit of
+    /// [`Report::rigid`] when there is one, else [`Report::model`].
+    pub fn urdf_model(&self) -> &CalibratedModel {
+        self.rigid
+            .as_ref()
+            .and_then(|r| r.refit.as_ref())
+            .unwrap_or(&self.model)
+    }
+
     /// [`Nominal`] is before calibration: RMS, mean and max of the norm of
     /// each row's 3-D residual \[µm\].
     pub fn final_error(&self) -> Nominal {
@@ -559,6 +572,14 @@ impl fmt::Display for Report {
             "error per point after calibration: mean {:.1} um, max {:.1} um (before: mean {:.1} um, max {:.1} um)",
             e.mean_um, e.max_um, self.nominal.mean_um, self.nominal.max_um
         )?;
+        if let Some(r) = &self.rigid {
+            writeln!(
+                f,
+                "robot.urdf (a rigid robot, none of model.json's other parameters): RMS {:.1} \
+                 um over the absolute rows",
+                r.rms_um
+            )?;
+        }
         if let Some(v) = &self.validation {
             write!(f, "validation: RMS {:.4} mm", v.rms_mm)?;
             for (m, r) in &v.per_marker_rms_mm {

@@ -25,6 +25,10 @@ pub struct ReportJson<'a> {
     parameters: Vec<ParameterJson<'a>>,
     rms_um: f64,
     heldout_rms_um: Option<f64>,
+    /// `robot.urdf` alone over the absolute rows (an extension of §7.5);
+    /// absent when the URDF predicts what the model does.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    urdf_rms_um: Option<f64>,
     effects: Vec<EffectJson<'a>>,
     unexplained: Option<UnexplainedJson<'a>>,
     validation: Option<ValidationJson<'a>>,
@@ -140,6 +144,7 @@ impl<'a> ReportJson<'a> {
                 .collect(),
             rms_um: r.rms_um,
             heldout_rms_um: r.heldout_rms_um,
+            urdf_rms_um: r.rigid.as_ref().map(|u| u.rms_um),
             effects: r.effects.iter().map(EffectJson::of).collect(),
             unexplained: r.unexplained.as_ref().map(UnexplainedJson::of),
             validation: r.validation.as_ref().map(ValidationJson::of),

@@ -145,8 +145,11 @@ struct CalibrateArgs {
     #[arg(long)]
     json: bool,
     /// Write the calibrated robot here, all or nothing: `robot.urdf` (the
-    /// input URDF with the geometry folded in, a `measurement_frame` root
-    /// and `marker_<id>` links) and `model.json` (the report's JSON with
+    /// input URDF with the geometry folded in, refitted as a rigid robot
+    /// when the model has parameters a URDF cannot hold; a
+    /// `measurement_frame` root and `marker_<id>` links, or
+    /// `marker_<id>_calibrated` where the URDF has a `marker_<id>`) and
+    /// `model.json` (the report's JSON with
     /// the full covariance, and the `predictor` that `robcal predict` and
     /// `robcal compensate` read).
     #[arg(long)]
@@ -348,8 +351,8 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         write_dir(dir, files, &inputs)?;
     }
     if let Some(dir) = &a.output {
-        let urdf =
-            calibrate::export::calibrated_urdf(&report.model, &job).map_err(|e| e.to_string())?;
+        let urdf = calibrate::export::calibrated_urdf(report.urdf_model(), &job)
+            .map_err(|e| e.to_string())?;
         let robot = calibrate::predict::Predictor::new(&report.model, &job);
         let model = json::ModelJson::of(&report, calibrate::model_file::ModelFile::of(&robot));
         let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
