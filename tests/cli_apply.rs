@@ -225,6 +225,41 @@ fn compensated_commands_put_the_markers_on_their_targets() {
         out2.to_str().unwrap(),
     ]);
     rejected(&o, "bad.csv:2: column 'load_kg': negative mass");
+    // Values no robot has (a second reading got a point 2.5 m away for
+    // 1e7 kg, and an ordinary-looking one for a joint at 1e300 rad).
+    let rows: Vec<&str> = targets.lines().collect();
+    let header: Vec<&str> = rows[0].split(',').collect();
+    for (column, value, expect) in [
+        (
+            "load_kg",
+            "1e7",
+            "column 'load_kg': 1e7 kg is beyond 1e5 kg in magnitude",
+        ),
+        (
+            "a2_rad",
+            "1e300",
+            "column 'a2_rad': 1e300 rad is beyond 1e4 rad in magnitude",
+        ),
+        (
+            "com_z_m",
+            "-2e4",
+            "column 'com_z_m': -2e4 m is beyond 1e4 m in magnitude",
+        ),
+    ] {
+        let mut cells: Vec<String> = rows[1].split(',').map(String::from).collect();
+        cells[header.iter().position(|h| *h == column).expect(column)] = value.into();
+        std::fs::write(&bad, format!("{}\n{}\n", rows[0], cells.join(","))).unwrap();
+        let o = robcal(&[
+            "compensate",
+            "--model",
+            m,
+            "--targets",
+            bad.to_str().unwrap(),
+            "--output",
+            out2.to_str().unwrap(),
+        ]);
+        rejected(&o, &format!("bad.csv:2: {expect}"));
+    }
     // A target 10 m away cannot be reached.
     let far: Vec<&str> = targets.lines().collect();
     let mut cells: Vec<String> = far[1].split(',').map(String::from).collect();

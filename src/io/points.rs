@@ -13,12 +13,20 @@
 //! | `rx_rad`, `ry_rad`, `rz_rad` | the target orientation of the tip frame, a rotation vector (axis × angle) \[rad, measurement frame\]: a pose target | `compensate`, optional |
 //!
 //! Any other column is an error; so is a non-finite or malformed cell,
-//! with its line and column.
+//! with its line and column, and a value no robot has: a payload above
+//! [`MAX_LOAD_KG`], a length (centre of mass, target, prismatic joint)
+//! beyond ±[`MAX_POSITION_M`], an angle beyond ±[`MAX_JOINT_RAD`] (the
+//! measurement reader's bounds, [`super::measurements`]).
 
 use std::path::Path;
 
+use super::measurements::{MAX_LOAD_KG, MAX_POSITION_M};
 use super::{ErrorKind, InputError};
 use crate::robot::JointKind;
+
+/// Largest joint angle \[rad\] read (1 591 turns: a continuous joint's
+/// count of turns, not an angle's unit mistaken).
+pub const MAX_JOINT_RAD: f64 = 1e4;
 
 /// One row.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,8 +64,8 @@ pub fn joint_column(name: &str, kind: JointKind) -> String {
 ///
 /// # Errors
 /// [`InputError`] with the line and column: a missing, unknown or repeated
-/// column, a malformed or non-finite cell, a negative mass, a payload
-/// without its centre of mass, no row.
+/// column, a malformed or non-finite cell, a negative mass, a value beyond
+/// its bound (module docs), a payload without its centre of mass, no row.
 pub fn parse_points(
     text: &str,
     file: &Path,
@@ -173,9 +181,28 @@ pub fn parse_points(
                     .in_column(&header[c]))
             }
         };
-        let three = |cols: &[usize]| -> Result<[f64; 3], InputError> {
-            Ok([real(cols[0])?, real(cols[1])?, real(cols[2])?])
+        // A value beyond `limit` in magnitude is not one of a robot's
+        // (the measurement reader's bounds): an error, not a prediction.
+        let within = |c: usize, limit: f64, unit: &str| -> Result<f64, InputError> {
+            let v = real(c)?;
+            if v.abs() <= limit {
+                return Ok(v);
+            }
+            Err(err(
+                ErrorKind::InvalidValue,
+                format!("{v:e} {unit} is beyond {limit:e} {unit} in magnitude: not a robot's"),
+            )
+            .at_line(line)
+            .in_column(&header[c]))
         };
+        let three = |cols: &[usize], limit: f64, unit: &str| -> Result<[f64; 3], InputError> {
+            Ok([
+                within(cols[0], limit, unit)?,
+                within(cols[1], limit, unit)?,
+                within(cols[2], limit, unit)?,
+            ])
+        };
+        let (length, angle) = (MAX_POSITION_M, MAX_JOINT_RAD);
         let marker = match marker_col {
             Some(c) => Some(cell(c).parse::<u32>().map_err(|_| {
                 err(
@@ -188,7 +215,7 @@ pub fn parse_points(
             None => None,
         };
         let load_kg = match load_col {
-            Some(c) => real(c)?,
+            Some(c) => within(c, MAX_LOAD_KG, "kg")?,
             None => 0.0,
         };
         if load_kg < 0.0 {
@@ -199,7 +226,9 @@ pub fn parse_points(
             .at_line(line)
             .in_column("load_kg"));
         }
-        let com_m = com_cols.as_deref().map(three).transpose()?;
+        let com_m = (com_cols.as_deref())
+            .map(|c| three(c, length, "m"))
+            .transpose()?;
         if load_kg > 0.0 && com_m.is_none() {
             return Err(err(
                 ErrorKind::MissingColumn,
@@ -213,9 +242,18 @@ pub fn parse_points(
             marker,
             load_kg,
             com_m,
-            q: q_cols.iter().map(|&c| real(c)).collect::<Result<_, _>>()?,
-            target_m: target_cols.as_deref().map(three).transpose()?,
-            target_rotation_rad: rot_cols.as_deref().map(three).transpose()?,
+            q: (q_cols.iter().zip(joints))
+                .map(|(&c, (_, kind))| match kind {
+                    JointKind::Revolute => within(c, angle, "rad"),
+                    JointKind::Prismatic => within(c, length, "m"),
+                })
+                .collect::<Result<_, _>>()?,
+            target_m: (target_cols.as_deref())
+                .map(|c| three(c, length, "m"))
+                .transpose()?,
+            target_rotation_rad: (rot_cols.as_deref())
+                .map(|c| three(c, angle, "rad"))
+                .transpose()?,
         });
     }
     if rows.is_empty() {
