@@ -47,9 +47,16 @@ pub fn check_target(path: &Path, inputs: &[&Path]) -> std::io::Result<()> {
         Ok(_) => {
             for input in inputs {
                 if same_file(input, path) {
+                    // The input by another name is named; by the same one,
+                    // not twice.
+                    let which = if *input == path {
+                        "an input of this command".to_string()
+                    } else {
+                        format!("the input {}", input.display())
+                    };
                     return Err(refuse(
                         path,
-                        format!("is the input {}: refusing to overwrite it", input.display()),
+                        format!("is {which}: refusing to overwrite it"),
                     ));
                 }
             }
@@ -58,6 +65,17 @@ pub fn check_target(path: &Path, inputs: &[&Path]) -> std::io::Result<()> {
         Err(e) => return Err(e),
     }
     Ok(())
+}
+
+/// `e` as a message about `path`: prefixed with it, unless the message
+/// already starts with it (this module's refusals name their file).
+pub fn about(path: &Path, e: &std::io::Error) -> String {
+    let (p, m) = (path.display().to_string(), e.to_string());
+    if m.starts_with(&p) {
+        m
+    } else {
+        format!("{p}: {m}")
+    }
 }
 
 /// Whether `a` and `b` name the same existing file.
@@ -152,7 +170,7 @@ mod tests {
         std::fs::write(&input, "x").expect("input");
         let same = d.join(".").join("in.csv");
         let e = write_all_atomic(&[(same, b"y".to_vec())], &[&input]).unwrap_err();
-        assert!(e.to_string().contains("is the input"), "{e}");
+        assert!(e.to_string().contains("is an input of this command"), "{e}");
         assert_eq!(std::fs::read_to_string(&input).expect("read"), "x");
         let _ = std::fs::remove_dir_all(&d);
     }

@@ -173,7 +173,7 @@ fn emit(out: &str, output: Option<&Path>, inputs: &[&Path]) -> Result<(), String
     match output {
         Some(path) => {
             robcal::io::write_all_atomic(&[(path.to_path_buf(), out.as_bytes().to_vec())], inputs)
-                .map_err(|e| format!("{}: {e}", path.display()))
+                .map_err(|e| robcal::io::atomic::about(path, &e))
         }
         None => {
             use std::io::Write as _;
