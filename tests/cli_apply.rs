@@ -289,3 +289,74 @@ fn compensated_commands_put_the_markers_on_their_targets() {
     rejected(&o, "no 'predictor' section");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A hand-edited `model.json` that robcal would read otherwise than meant
+/// is an error (a second reading: a misspelt key was read as zero, a unit
+/// changed to µrad read as rad, two records of one joint summed).
+#[test]
+fn a_model_file_edited_out_of_its_format_is_refused() {
+    let dir = std::env::temp_dir().join(format!("robcal-apply-strict-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let m = model(&dir);
+    let text = std::fs::read_to_string(&m).unwrap();
+    let poses = "data/kr270/poses.csv";
+    // The file as written reads.
+    ok(&robcal(&[
+        "predict",
+        "--model",
+        m.to_str().unwrap(),
+        "--poses",
+        poses,
+    ]));
+    let law = "\"units\":{\"backlash\":\"rad\",\"compliance\":\"rad/(N*m)\"";
+    let compact: String = text.split_whitespace().collect();
+    assert!(compact.contains(law), "the writer's units moved");
+    let record = |c: &str| -> String {
+        let i = c.find("\"joint_law\":[").unwrap() + "\"joint_law\":[".len();
+        let mut depth = 0;
+        for (k, ch) in c[i..].char_indices() {
+            match ch {
+                '{' => depth += 1,
+                '}' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        return c[i..=i + k].to_string();
+                    }
+                }
+                _ => {}
+            }
+        }
+        panic!("no joint_law record")
+    };
+    let first = record(&compact);
+    let cases = [
+        (
+            compact.replacen(law, &law.replace("\"rad/(N*m)\"", "\"urad/(N*m)\""), 1),
+            "joint_law of 'a2': unit of compliance 'urad/(N*m)', where robcal writes and reads 'rad/(N*m)'",
+        ),
+        (
+            compact.replacen("\"compliance\":0.0,\"compliance_table\"", "\"complianse\":0.0,\"compliance_table\"", 1),
+            "unknown field `complianse`",
+        ),
+        (
+            compact.replacen(&first, &format!("{first},{first}"), 1),
+            "joint_law of 'a2': listed twice",
+        ),
+    ];
+    for (edited, expect) in cases {
+        assert_ne!(edited, compact, "{expect}: the edit did not apply");
+        let bad = dir.join("edited.json");
+        std::fs::write(&bad, edited).unwrap();
+        rejected(
+            &robcal(&[
+                "predict",
+                "--model",
+                bad.to_str().unwrap(),
+                "--poses",
+                poses,
+            ]),
+            expect,
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

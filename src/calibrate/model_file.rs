@@ -50,8 +50,12 @@ use super::predict::Predictor;
 use crate::model::{angle_urad, Param};
 use crate::robot::{Chain, End, Joint, JointKind, LinkInertia};
 
+mod strict;
+use strict::units;
+
 /// One movable joint of the calibrated chain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct JointRecord {
     /// The URDF joint name.
     pub name: String,
@@ -79,6 +83,7 @@ pub struct JointRecord {
 
 /// A marker (tool point) on the tip link, or on another link of a tree.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct MarkerRecord {
     /// Its id in the measurement CSV.
     pub id: u32,
@@ -93,6 +98,7 @@ pub struct MarkerRecord {
 /// Where a marker's link is fixed: a joint's frame and the transform from
 /// it, as the tip is.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LinkRecord {
     /// The joint whose frame the link is fixed to, `""` for the measurement
     /// frame.
@@ -105,6 +111,7 @@ pub struct LinkRecord {
 
 /// One angle of a compensator table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TableEntry {
     /// The calibrated joint angle \[rad\].
     pub angle_rad: f64,
@@ -115,6 +122,7 @@ pub struct TableEntry {
 
 /// The joint law of one joint (SI units, named in `units`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LawRecord {
     /// The joint's name.
     pub joint: String,
@@ -153,6 +161,7 @@ fn is_zero(v: &f64) -> bool {
 
 /// A link's bending under the payload (first order).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BendingRecord {
     /// The joint whose link bends.
     pub joint: String,
@@ -164,6 +173,7 @@ pub struct BendingRecord {
 
 /// The `predictor` section of `model.json` (see the [module docs](self)).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ModelFile {
     /// The frame positions are given in: `"measurement_frame"`.
     pub frame: String,
@@ -197,22 +207,6 @@ pub struct ModelFile {
 fn quat(q: &UnitQuaternion<f64>) -> [f64; 4] {
     let c = q.coords;
     [c.x, c.y, c.z, c.w]
-}
-
-fn units(kind: JointKind) -> BTreeMap<String, String> {
-    let (k, c, b) = match kind {
-        JointKind::Revolute => ("rad/(N*m)", "rad/(N*m)^2", "rad"),
-        JointKind::Prismatic => ("m/N", "m/N^2", "m"),
-    };
-    [
-        ("compliance", k),
-        ("nonlinear_stiffness", c),
-        ("backlash", b),
-        ("gear_cyclic", b),
-    ]
-    .into_iter()
-    .map(|(a, b)| (a.to_string(), b.to_string()))
-    .collect()
 }
 
 impl ModelFile {
@@ -336,8 +330,11 @@ impl ModelFile {
     /// One line saying what is wrong: a non-finite number, an unknown
     /// joint type or joint name, a rotation that is not a unit quaternion,
     /// a zero axis, a negative mass, a repeated marker id, more than
-    /// [`crate::io::MAX_JOINTS`] joints.
+    /// [`crate::io::MAX_JOINTS`] joints, a unit other than the one written
+    /// or a joint's law or bending listed twice ([`strict`]). (An unknown
+    /// key is the reader's error: serde's `deny_unknown_fields`.)
     pub fn predictor(&self) -> Result<Predictor, String> {
+        strict::check(self)?;
         let finite = |what: &str, v: &[f64]| {
             if v.iter().all(|x| x.is_finite()) {
                 Ok(())
