@@ -331,7 +331,7 @@ impl ModelFile {
     /// joint type or joint name, a rotation that is not a unit quaternion,
     /// a zero axis, a negative mass, a repeated marker id, more than
     /// [`crate::io::MAX_JOINTS`] joints, a unit other than the one written
-    /// or a joint's law or bending listed twice ([`strict`]). (An unknown
+    /// or a joint's law or bending listed twice (`model_file/strict.rs`). (An unknown
     /// key is the reader's error: serde's `deny_unknown_fields`.)
     pub fn predictor(&self) -> Result<Predictor, String> {
         strict::check(self)?;
