@@ -164,19 +164,20 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
     let data = |m: String| CalibrationError::Data(format!("{}: {m}", path.display()));
     let text = crate::io::input::read_text(&path, "the URDF", crate::io::input::MAX_URDF_BYTES)
         .map_err(|e| CalibrationError::Data(e.to_string()))?;
-    let mut urdf = crate::io::urdf::read_urdf(&text).map_err(data)?;
+    let urdf = crate::io::urdf::read_urdf(&text).map_err(data)?;
     let g = final_geometry(model);
     let robot = &job.robot;
     let nominal = robot.chain.joints();
     let calibrated = g.chain.joints();
+    let mut origins = Vec::new();
     for (j, name) in robot.joint_names.iter().enumerate() {
         let d = nominal[j].origin.inverse() * calibrated[j].origin;
         let joint = urdf
             .joints
-            .iter_mut()
+            .iter()
             .find(|u| &u.name == name)
             .ok_or_else(|| data(format!("joint '{name}' not found again")))?;
-        joint.origin = to_pose(&(pose(&joint.origin) * d));
+        origins.push((name.clone(), pose(&joint.origin) * d));
     }
     if urdf.links.iter().any(|l| l.name == MEASUREMENT_FRAME) {
         return Err(data(format!("already has a link '{MEASUREMENT_FRAME}'")));
@@ -202,36 +203,26 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
         link = j.parent.link.clone();
     }
     let root = link;
-    let fixed = |name: String, parent: &str, child: &str, origin: urdf_rs::Pose| urdf_rs::Joint {
-        name,
-        joint_type: urdf_rs::JointType::Fixed,
-        origin,
-        parent: urdf_rs::LinkName {
-            link: parent.into(),
-        },
-        child: urdf_rs::LinkName { link: child.into() },
-        axis: urdf_rs::Axis::default(),
-        limit: urdf_rs::JointLimit::default(),
-        calibration: None,
-        dynamics: None,
-        mimic: None,
-        safety_controller: None,
+    // A new link and the fixed joint that places it or hangs from it.
+    let fixed = |link: &str, name: &str, parent: &str, child: &str, origin: &Isometry3<f64>| {
+        format!(
+            "  <link name=\"{l}\"/>\n  <joint name=\"{n}\" type=\"fixed\">\n    \
+             <parent link=\"{p}\"/>\n    <child link=\"{c}\"/>\n    {o}\n  </joint>\n",
+            l = escape(link),
+            n = escape(name),
+            p = escape(parent),
+            c = escape(child),
+            o = origin_element(origin)
+        )
     };
-    let link = |name: &str| urdf_rs::Link {
-        name: name.into(),
-        inertial: urdf_rs::Inertial::default(),
-        visual: Vec::new(),
-        collision: Vec::new(),
-    };
-    urdf.links.push(link(MEASUREMENT_FRAME));
-    urdf.joints.push(fixed(
-        format!("{MEASUREMENT_FRAME}_joint"),
+    let mut added = fixed(
+        MEASUREMENT_FRAME,
+        &format!("{MEASUREMENT_FRAME}_joint"),
         MEASUREMENT_FRAME,
         &root,
-        to_pose(&(g.base * root_to_base.inverse())),
-    ));
+        &(g.base * root_to_base.inverse()),
+    );
     for (m, name) in marker_links.iter().enumerate() {
-        urdf.links.push(link(name));
         let p = g.markers[m];
         // The marker's own link (data contract 7.1), tip_link by default.
         let on = job
@@ -240,15 +231,163 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             .get(m)
             .and_then(|s| s.link.as_deref())
             .unwrap_or(&robot.tip_link);
-        urdf.joints.push(fixed(
-            format!("{name}_joint"),
-            on,
-            name,
-            urdf_rs::Pose {
-                xyz: urdf_rs::Vec3([p.x, p.y, p.z]),
-                rpy: urdf_rs::Vec3([0.0; 3]),
-            },
-        ));
+        let at = Isometry3::translation(p.x, p.y, p.z);
+        added.push_str(&fixed(name, &format!("{name}_joint"), on, name, &at));
     }
-    urdf_rs::write_to_string(&urdf).map_err(|e| data(format!("cannot write the URDF: {e}")))
+    splice(&text, &origins, &added).map_err(data)
+}
+
+/// `name` escaped for an XML attribute.
+fn escape(name: &str) -> String {
+    quick_xml::escape::escape(name).into_owned()
+}
+
+/// `<origin xyz=".." rpy=".."/>` of `t` (each number the shortest text
+/// that reads back to the same `f64`).
+fn origin_element(t: &Isometry3<f64>) -> String {
+    let p = to_pose(t);
+    // (`+ 0.0`: no "-0".)
+    let [x, y, z] = p.xyz.0.map(|v| v + 0.0);
+    let [r, q, w] = p.rpy.0.map(|v| v + 0.0);
+    format!("<origin xyz=\"{x} {y} {z}\" rpy=\"{r} {q} {w}\"/>")
+}
+
+/// `text` (a URDF) with the `<origin>` of each joint of `origins` replaced
+/// (or added, for a joint without one) and `added` put before `</robot>`;
+/// every other byte of `text` kept (comments, `<gazebo>`, `<transmission>`,
+/// formatting), and no element added that the input did not have.
+///
+/// # Errors
+/// The XML reader's error, or a joint of `origins` not in `text`.
+fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Result<String, String> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(text);
+    // (start, end, replacement) byte ranges of `text`, in order.
+    let mut edits: Vec<(usize, usize, String)> = Vec::new();
+    let mut done = vec![false; origins.len()];
+    // The joint being read: its index in `origins`, the end of its start
+    // tag, its depth; and where an `<origin>` with children started.
+    let mut joint: Option<(usize, usize, usize)> = None;
+    let mut open_origin: Option<usize> = None;
+    let (mut depth, mut robot_end) = (0_usize, None);
+    let name_of = |e: &quick_xml::events::BytesStart<'_>| -> Option<String> {
+        let a = e.try_get_attribute("name").ok()??;
+        a.unescape_value().ok().map(|v| v.into_owned())
+    };
+    loop {
+        let before = usize::try_from(reader.buffer_position()).map_err(|e| e.to_string())?;
+        let event = reader
+            .read_event()
+            .map_err(|e| format!("cannot read the URDF again: {e}"))?;
+        let after = usize::try_from(reader.buffer_position()).map_err(|e| e.to_string())?;
+        match event {
+            Event::Start(e) => {
+                depth += 1;
+                let tag = e.name();
+                if tag.as_ref() == b"joint" && depth == 2 {
+                    let k = name_of(&e).and_then(|n| origins.iter().position(|o| o.0 == n));
+                    joint = k.map(|k| (k, after, depth));
+                } else if tag.as_ref() == b"origin"
+                    && joint.is_some_and(|j| depth == j.2 + 1 && !done[j.0])
+                {
+                    open_origin = Some(before);
+                }
+            }
+            Event::Empty(e) => {
+                if let Some((k, _, _)) = joint.filter(|j| depth == j.2 && !done[j.0]) {
+                    if e.name().as_ref() == b"origin" {
+                        edits.push((before, after, origin_element(&origins[k].1)));
+                        done[k] = true;
+                    }
+                }
+            }
+            Event::End(e) => {
+                let tag = e.name();
+                if tag.as_ref() == b"origin" {
+                    if let (Some(start), Some((k, _, _))) = (open_origin.take(), joint) {
+                        edits.push((start, after, origin_element(&origins[k].1)));
+                        done[k] = true;
+                    }
+                } else if tag.as_ref() == b"joint" {
+                    if let Some((k, start_tag, _)) = joint.filter(|j| j.2 == depth) {
+                        if !done[k] {
+                            // No origin: the identity, now the calibrated one.
+                            let o = format!("\n    {}", origin_element(&origins[k].1));
+                            edits.push((start_tag, start_tag, o));
+                            done[k] = true;
+                        }
+                        joint = None;
+                    }
+                } else if tag.as_ref() == b"robot" && depth == 1 {
+                    robot_end = Some(before);
+                }
+                depth = depth.saturating_sub(1);
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    if let Some(k) = done.iter().position(|d| !d) {
+        return Err(format!("joint '{}' not found again", origins[k].0));
+    }
+    let end = robot_end.ok_or("no </robot> to add the links before")?;
+    edits.push((end, end, added.to_string()));
+    edits.sort_by_key(|e| e.0);
+    let mut out = String::with_capacity(text.len() + added.len());
+    let mut at = 0;
+    for (start, stop, with) in edits {
+        out.push_str(&text[at..start]);
+        out.push_str(&with);
+        at = stop;
+    }
+    out.push_str(&text[at..]);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Only the chain joints' origins change and the new links are added:
+    /// comments, unknown elements, a joint without `<limit>`, a link
+    /// without `<inertial>` and the formatting stay as they were; an
+    /// origin with children and a missing origin are handled.
+    #[test]
+    fn the_urdf_keeps_every_byte_but_the_origins_it_changes() {
+        let text = "<?xml version=\"1.0\"?>\n<robot name=\"r\">\n  <!-- kept -->\n  \
+            <link name=\"a\"/>\n  <link name=\"b\"/>\n  <link name=\"c\"/>\n  <link name=\"d\"/>\n  \
+            <joint name=\"j1\" type=\"continuous\">\n    <parent link=\"a\"/>\n    \
+            <child link=\"b\"/>\n    <origin xyz=\"1 2 3\" rpy=\"0 0 0\"/>\n  </joint>\n  \
+            <joint name=\"j2\" type=\"revolute\">\n    <parent link=\"b\"/>\n    \
+            <child link=\"c\"/>\n    <origin xyz=\"0 0 1\"></origin>\n    \
+            <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/>\n  </joint>\n  \
+            <joint name=\"j3\" type=\"revolute\">\n    <parent link=\"c\"/>\n    \
+            <child link=\"d\"/>\n  </joint>\n  <gazebo reference=\"a\"><x/></gazebo>\n</robot>\n";
+        let t = |x: f64| Isometry3::translation(x, 0.0, 0.0);
+        let origins = vec![
+            ("j1".into(), t(0.5)),
+            ("j2".into(), t(-0.25)),
+            ("j3".into(), t(2.0)),
+        ];
+        let out = splice(text, &origins, "  <link name=\"new\"/>\n").expect("spliced");
+        let expect = text
+            .replace(
+                "<origin xyz=\"1 2 3\" rpy=\"0 0 0\"/>",
+                "<origin xyz=\"0.5 0 0\" rpy=\"0 0 0\"/>",
+            )
+            .replace(
+                "<origin xyz=\"0 0 1\"></origin>",
+                "<origin xyz=\"-0.25 0 0\" rpy=\"0 0 0\"/>",
+            )
+            .replace(
+                "<joint name=\"j3\" type=\"revolute\">",
+                "<joint name=\"j3\" type=\"revolute\">\n    <origin xyz=\"2 0 0\" rpy=\"0 0 0\"/>",
+            )
+            .replace("</robot>", "  <link name=\"new\"/>\n</robot>");
+        assert_eq!(out, expect);
+        // A joint it should change and cannot find is an error.
+        let missing = vec![("j9".to_string(), t(1.0))];
+        let e = splice(text, &missing, "").expect_err("no j9");
+        assert!(e.contains("joint 'j9' not found again"), "{e}");
+    }
 }
