@@ -327,7 +327,10 @@ fn outputs_never_replace_inputs_links_fifos_or_devices() {
         .unwrap()
         .success());
     for (out, says) in [
-        ("in.csv", "in.csv: cannot write: is an input of this command"),
+        (
+            "in.csv",
+            "in.csv: cannot write: is an input of this command",
+        ),
         ("./in.csv", "./in.csv: cannot write: is the input in.csv"),
         ("link.csv", "symbolic link"),
         ("ofifo", "refusing to replace"),
