@@ -50,13 +50,16 @@ fn urdf_cycle_is_an_error_not_a_hang() {
 }
 
 /// Two fixed origins of 1e308 m compose to +∞: the chain held a non-finite
-/// joint origin and the parse succeeded.
+/// joint origin and the parse succeeded. (Since, an origin beyond 1e4 m is
+/// refused on its own, before any composition.)
 #[test]
 fn urdf_origin_overflow_is_rejected() {
     let e = urdf_err(include_bytes!("fuzz_regressions/urdf-origin-overflow.bin"));
-    assert_eq!(e.kind, ErrorKind::NonFinite);
-    assert_eq!(e.line, Some(3), "{e}");
-    assert!(e.to_string().contains("joint 'j'"), "{e}");
+    assert_eq!(e.kind, ErrorKind::InvalidValue);
+    assert!(e.to_string().contains("beyond 1e4 m"), "{e}");
+    // The first of the two, a fixed joint before `j`.
+    assert_eq!(e.line, Some(2), "{e}");
+    assert!(e.to_string().contains("joint 'f'"), "{e}");
 }
 
 /// An axis of `1e300 1e300 0` is a valid direction, but its norm overflows

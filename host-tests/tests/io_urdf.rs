@@ -387,6 +387,17 @@ fn malformed_urdfs_are_errors() {
     assert_eq!(e.kind, ErrorKind::NonFinite);
     assert!(e.message.starts_with("joint 'n': origin"), "{e}");
 
+    let far = robot(&joint(
+        "f",
+        "continuous",
+        r#"<origin xyz="0 1e308 0"/>"#,
+        "a",
+        "b",
+    ));
+    let e = parse(&far, "a", "b").unwrap_err();
+    assert_eq!(e.kind, ErrorKind::InvalidValue);
+    assert!(e.message.contains("beyond 1e4 m, not a robot's"), "{e}");
+
     let dangling = robot(&joint("d", "fixed", "", "a", "nowhere"));
     let e = parse(&dangling, "a", "b").unwrap_err();
     assert!(

@@ -31,7 +31,8 @@
 //! `base_link`/`tip_link`, no path from base to tip, a planar, floating or
 //! spherical joint on the path, a mimic joint on the path, a zero axis, more
 //! than [`MAX_JOINTS`] movable joints, no movable joint at all, a non-finite
-//! number (origin, axis, limit, mass, centre of mass) or a negative mass.
+//! number (origin, axis, limit, mass, centre of mass), an origin beyond
+//! [`crate::io::measurements::MAX_POSITION_M`] or a negative mass.
 
 use std::path::{Path, PathBuf};
 

@@ -266,6 +266,22 @@ impl<'u> Tree<'u> {
                         format!("origin xyz {:?} rpy {:?}", o.xyz.0, o.rpy.0),
                     ));
                 }
+                // As the measurement reader's positions: a length no robot
+                // has (1e308 m read as a joint's origin made every column
+                // infinite, and the run said "parameter 0 is not
+                // identifiable").
+                let far = crate::io::measurements::MAX_POSITION_M;
+                if o.xyz.0.iter().any(|v| v.abs() > far) {
+                    return Err(ctx.err_at(
+                        "joint",
+                        name,
+                        ErrorKind::InvalidValue,
+                        format!(
+                            "origin xyz {:?} m: beyond {far:e} m, not a robot's",
+                            o.xyz.0
+                        ),
+                    ));
+                }
                 let kind = match joint.joint_type {
                     urdf_rs::JointType::Fixed => {
                         pending *= pose(o);
