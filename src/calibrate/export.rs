@@ -261,6 +261,14 @@ fn origin_element(t: &Isometry3<f64>) -> String {
 /// The XML reader's error, or a joint of `origins` not in `text`.
 fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Result<String, String> {
     use quick_xml::events::Event;
+    // A byte-order mark is kept, and not counted in the reader's positions.
+    let (bom, text) = match text.strip_prefix('\u{feff}') {
+        Some(rest) => ("\u{feff}", rest),
+        None => ("", text),
+    };
+    // The file's own line ends in what is added.
+    let nl = if text.contains("\r\n") { "\r\n" } else { "\n" };
+    let added = added.replace('\n', nl);
     let mut reader = quick_xml::Reader::from_str(text);
     // (start, end, replacement) byte ranges of `text`, in order.
     let mut edits: Vec<(usize, usize, String)> = Vec::new();
@@ -283,7 +291,9 @@ fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Resu
         match event {
             Event::Start(e) => {
                 depth += 1;
-                let tag = e.name();
+                // Local names, as urdf-rs reads them (`<u:origin>` is an
+                // origin).
+                let tag = e.local_name();
                 if tag.as_ref() == b"joint" && depth == 2 {
                     let k = name_of(&e).and_then(|n| origins.iter().position(|o| o.0 == n));
                     joint = k.map(|k| (k, after, depth));
@@ -295,14 +305,14 @@ fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Resu
             }
             Event::Empty(e) => {
                 if let Some((k, _, _)) = joint.filter(|j| depth == j.2 && !done[j.0]) {
-                    if e.name().as_ref() == b"origin" {
+                    if e.local_name().as_ref() == b"origin" {
                         edits.push((before, after, origin_element(&origins[k].1)));
                         done[k] = true;
                     }
                 }
             }
             Event::End(e) => {
-                let tag = e.name();
+                let tag = e.local_name();
                 if tag.as_ref() == b"origin" {
                     if let (Some(start), Some((k, _, _))) = (open_origin.take(), joint) {
                         edits.push((start, after, origin_element(&origins[k].1)));
@@ -312,7 +322,7 @@ fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Resu
                     if let Some((k, start_tag, _)) = joint.filter(|j| j.2 == depth) {
                         if !done[k] {
                             // No origin: the identity, now the calibrated one.
-                            let o = format!("\n    {}", origin_element(&origins[k].1));
+                            let o = format!("{nl}    {}", origin_element(&origins[k].1));
                             edits.push((start_tag, start_tag, o));
                             done[k] = true;
                         }
@@ -331,9 +341,10 @@ fn splice(text: &str, origins: &[(String, Isometry3<f64>)], added: &str) -> Resu
         return Err(format!("joint '{}' not found again", origins[k].0));
     }
     let end = robot_end.ok_or("no </robot> to add the links before")?;
-    edits.push((end, end, added.to_string()));
+    edits.push((end, end, added));
     edits.sort_by_key(|e| e.0);
-    let mut out = String::with_capacity(text.len() + added.len());
+    let mut out = String::with_capacity(bom.len() + text.len() + 4096);
+    out.push_str(bom);
     let mut at = 0;
     for (start, stop, with) in edits {
         out.push_str(&text[at..start]);
@@ -389,5 +400,27 @@ mod tests {
         let missing = vec![("j9".to_string(), t(1.0))];
         let e = splice(text, &missing, "").expect_err("no j9");
         assert!(e.contains("joint 'j9' not found again"), "{e}");
+    }
+
+    /// A byte-order mark stays and is not counted in the positions; a
+    /// file's CRLF line ends are those of what is added; a prefixed
+    /// `<u:origin>` is the joint's origin, as urdf-rs reads it (a second
+    /// reading found each written wrong, with exit 0).
+    #[test]
+    fn a_bom_crlf_and_prefixed_names_are_kept_as_the_file_has_them() {
+        let text = "\u{feff}<robot name=\"r\" xmlns:u=\"http://u\">\r\n  <link name=\"a\"/>\r\n  \
+            <u:joint name=\"j1\" type=\"revolute\">\r\n    <u:origin xyz=\"1 2 3\"/>\r\n  \
+            </u:joint>\r\n  <joint name=\"j2\" type=\"revolute\">\r\n  </joint>\r\n</robot>\r\n";
+        let t = |x: f64| Isometry3::translation(x, 0.0, 0.0);
+        let origins = vec![("j1".into(), t(0.5)), ("j2".into(), t(2.0))];
+        let out = splice(text, &origins, "  <link name=\"new\"/>\n").expect("spliced");
+        let expect = text
+            .replace("<u:origin xyz=\"1 2 3\"/>", "<origin xyz=\"0.5 0 0\" rpy=\"0 0 0\"/>")
+            .replace(
+                "<joint name=\"j2\" type=\"revolute\">",
+                "<joint name=\"j2\" type=\"revolute\">\r\n    <origin xyz=\"2 0 0\" rpy=\"0 0 0\"/>",
+            )
+            .replace("</robot>", "  <link name=\"new\"/>\r\n</robot>");
+        assert_eq!(out, expect);
     }
 }

@@ -304,7 +304,6 @@ pub struct Report {
 }
 
 impl Report {
-    /// The final model's error per point over the calibration data, as
     /// The model whose geometry `robot.urdf` holds: the rigid refit of
     /// [`Report::rigid`] when there is one, else [`Report::model`].
     pub fn urdf_model(&self) -> &CalibratedModel {
@@ -314,6 +313,7 @@ impl Report {
             .unwrap_or(&self.model)
     }
 
+    /// The final model's error per point over the calibration data, as
     /// [`Nominal`] is before calibration: RMS, mean and max of the norm of
     /// each row's 3-D residual \[µm\].
     pub fn final_error(&self) -> Nominal {

@@ -15,8 +15,9 @@
 //! Any other column is an error; so is a non-finite or malformed cell,
 //! with its line and column, and a value no robot has: a payload above
 //! [`MAX_LOAD_KG`], a length (centre of mass, target, prismatic joint)
-//! beyond ±[`MAX_POSITION_M`], an angle beyond ±[`MAX_JOINT_RAD`] (the
-//! measurement reader's bounds, [`super::measurements`]).
+//! beyond ±[`MAX_POSITION_M`] (the measurement reader's bounds,
+//! [`super::measurements`]), an angle beyond ±[`MAX_JOINT_RAD`] (this
+//! reader's own: the measurement reader bounds a limited joint by ±2π).
 
 use std::path::Path;
 
