@@ -203,32 +203,34 @@ fn compensated_commands_put_the_markers_on_their_targets() {
     // Bad files: one line, exit 1, nothing written.
     let bad = dir.join("bad.csv");
     let out2 = dir.join("out2.csv");
+    let compensate_bad = || {
+        robcal(&[
+            "compensate",
+            "--model",
+            m,
+            "--targets",
+            bad.to_str().unwrap(),
+            "--output",
+            out2.to_str().unwrap(),
+        ])
+    };
     std::fs::write(&bad, targets.replacen(",x_m,", ",x_mm,", 1)).unwrap();
-    let o = robcal(&[
-        "compensate",
-        "--model",
-        m,
-        "--targets",
-        bad.to_str().unwrap(),
-        "--output",
-        out2.to_str().unwrap(),
-    ]);
-    rejected(&o, "bad.csv:1: column 'x_mm'");
+    rejected(&compensate_bad(), "bad.csv:1: column 'x_mm'");
     std::fs::write(&bad, targets.replacen(",250,", ",-1,", 1)).unwrap();
-    let o = robcal(&[
-        "compensate",
-        "--model",
-        m,
-        "--targets",
-        bad.to_str().unwrap(),
-        "--output",
-        out2.to_str().unwrap(),
-    ]);
-    rejected(&o, "bad.csv:2: column 'load_kg': negative mass");
-    // Values no robot has (a second reading got a point 2.5 m away for
-    // 1e7 kg, and an ordinary-looking one for a joint at 1e300 rad).
+    rejected(
+        &compensate_bad(),
+        "bad.csv:2: column 'load_kg': negative mass",
+    );
+    // The first target with cell `i` set to `value`.
     let rows: Vec<&str> = targets.lines().collect();
     let header: Vec<&str> = rows[0].split(',').collect();
+    let with_cell = |i: usize, value: &str| {
+        let mut cells: Vec<String> = rows[1].split(',').map(String::from).collect();
+        cells[i] = value.into();
+        std::fs::write(&bad, format!("{}\n{}\n", rows[0], cells.join(","))).unwrap();
+    };
+    // Values no robot has (a second reading got a point 2.5 m away for
+    // 1e7 kg, and an ordinary-looking one for a joint at 1e300 rad).
     for (column, value, expect) in [
         (
             "load_kg",
@@ -246,34 +248,15 @@ fn compensated_commands_put_the_markers_on_their_targets() {
             "column 'com_z_m': -2e4 m is beyond 1e4 m in magnitude",
         ),
     ] {
-        let mut cells: Vec<String> = rows[1].split(',').map(String::from).collect();
-        cells[header.iter().position(|h| *h == column).expect(column)] = value.into();
-        std::fs::write(&bad, format!("{}\n{}\n", rows[0], cells.join(","))).unwrap();
-        let o = robcal(&[
-            "compensate",
-            "--model",
-            m,
-            "--targets",
-            bad.to_str().unwrap(),
-            "--output",
-            out2.to_str().unwrap(),
-        ]);
-        rejected(&o, &format!("bad.csv:2: {expect}"));
+        with_cell(
+            header.iter().position(|h| *h == column).expect(column),
+            value,
+        );
+        rejected(&compensate_bad(), &format!("bad.csv:2: {expect}"));
     }
     // A target 10 m away cannot be reached.
-    let far: Vec<&str> = targets.lines().collect();
-    let mut cells: Vec<String> = far[1].split(',').map(String::from).collect();
-    cells[6] = "10".into();
-    std::fs::write(&bad, format!("{}\n{}\n", far[0], cells.join(","))).unwrap();
-    let o = robcal(&[
-        "compensate",
-        "--model",
-        m,
-        "--targets",
-        bad.to_str().unwrap(),
-        "--output",
-        out2.to_str().unwrap(),
-    ]);
+    with_cell(6, "10");
+    let o = compensate_bad();
     rejected(&o, "bad.csv:2: cannot reach the target");
     assert!(!out2.exists());
     // A report JSON is not a model file.

@@ -142,6 +142,21 @@ fn ur10_calibrated_urdf_reproduces_the_model_and_reads_back_without_correction()
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// TIAGo's static postures of `day` (FIGAROH's mocap file in `shared`)
+/// imported into a measurement file in the temporary directory.
+fn tiago_day(shared: &Path, job: &Job, day: &str, tag: &str) -> PathBuf {
+    let out = std::env::temp_dir().join(format!("robcal-{tag}-{day}-{}.csv", std::process::id()));
+    robcal::io::figaroh::import_mocap(
+        shared.join(format!(
+            "datasets/tiago-mocap/qualisys_{day}_static_postures.csv"
+        )),
+        &out,
+        Some(&job.robot),
+    )
+    .expect("import a TIAGo day");
+    out
+}
+
 #[test]
 fn tiago_calibrated_urdf_reproduces_the_model_on_the_validation_postures() {
     let Some(shared) = shared() else {
@@ -149,25 +164,8 @@ fn tiago_calibrated_urdf_reproduces_the_model_on_the_validation_postures() {
         return;
     };
     let job = Job::load(root().join("data/tiago/setup.toml")).expect("setup");
-    let tmp = std::env::temp_dir();
-    let pid = std::process::id();
-    let (train, check) = (
-        tmp.join(format!("robcal-urdf-d30-{pid}.csv")),
-        tmp.join(format!("robcal-urdf-d26-{pid}.csv")),
-    );
-    let sets = shared.join("datasets/tiago-mocap");
-    robcal::io::figaroh::import_mocap(
-        sets.join("qualisys_2021-11-30_static_postures.csv"),
-        &train,
-        Some(&job.robot),
-    )
-    .expect("import training day");
-    robcal::io::figaroh::import_mocap(
-        sets.join("qualisys_2021-11-26_static_postures.csv"),
-        &check,
-        Some(&job.robot),
-    )
-    .expect("import validation day");
+    let train = tiago_day(&shared, &job, "2021-11-30", "urdf");
+    let check = tiago_day(&shared, &job, "2021-11-26", "urdf");
     calibrate_and_check(&job, &train, &check);
     let _ = std::fs::remove_file(&train);
     let _ = std::fs::remove_file(&check);
@@ -188,13 +186,7 @@ fn a_urdf_cannot_hold_compliances_so_it_holds_the_rigid_refit() {
         return;
     };
     let job = Job::load(root().join("data/tiago/setup.toml")).expect("setup");
-    let train = std::env::temp_dir().join(format!("robcal-rigid-d30-{}.csv", std::process::id()));
-    robcal::io::figaroh::import_mocap(
-        shared.join("datasets/tiago-mocap/qualisys_2021-11-30_static_postures.csv"),
-        &train,
-        Some(&job.robot),
-    )
-    .expect("import training day");
+    let train = tiago_day(&shared, &job, "2021-11-30", "rigid");
     let data = read_measurements(&train, &job.robot, &job.setup).expect("data");
     let full = calibrate::calibrate(&job, &data, &Settings::default(), &mut |_| {}).expect("loop");
     let rigid = full

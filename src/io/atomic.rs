@@ -67,15 +67,17 @@ pub fn check_target(path: &Path, inputs: &[&Path]) -> std::io::Result<()> {
     Ok(())
 }
 
-/// `e` as a message about `path`: prefixed with it, unless the message
-/// already starts with it (this module's refusals name their file).
+/// `e`'s message without the `path: ` it may start with (this module's
+/// refusals name their file), for a caller that names the file itself.
+pub fn reason(path: &Path, e: &std::io::Error) -> String {
+    let m = e.to_string();
+    m.strip_prefix(&format!("{}: ", path.display()))
+        .map_or_else(|| m.clone(), str::to_string)
+}
+
+/// `e` as a message about `path`, the path named once.
 pub fn about(path: &Path, e: &std::io::Error) -> String {
-    let (p, m) = (path.display().to_string(), e.to_string());
-    if m.starts_with(&p) {
-        m
-    } else {
-        format!("{p}: {m}")
-    }
+    format!("{}: {}", path.display(), reason(path, e))
 }
 
 /// Whether `a` and `b` name the same existing file.

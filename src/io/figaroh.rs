@@ -318,11 +318,8 @@ pub fn import_mocap(
 ) -> Result<Imported, InputError> {
     let out = out_csv.as_ref();
     super::atomic::check_target(out, &[in_csv.as_ref()]).map_err(|e| {
-        let m = super::atomic::about(out, &e);
-        let m = m
-            .strip_prefix(&format!("{}: ", out.display()))
-            .unwrap_or(&m);
-        InputError::new(out, ErrorKind::Io, format!("cannot write: {m}"))
+        let why = format!("cannot write: {}", super::atomic::reason(out, &e));
+        InputError::new(out, ErrorKind::Io, why)
     })?;
     let mocap = read_mocap(in_csv)?;
     let rows = mocap.observations(robot.map(|r| r.joint_names.as_slice()))?;

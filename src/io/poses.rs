@@ -111,11 +111,8 @@ pub fn import_poses(
 ) -> Result<ImportedPoses, InputError> {
     let (input, out) = (in_csv.as_ref(), out_csv.as_ref());
     super::atomic::check_target(out, &[input]).map_err(|e| {
-        let m = super::atomic::about(out, &e);
-        let m = m
-            .strip_prefix(&format!("{}: ", out.display()))
-            .unwrap_or(&m);
-        InputError::new(out, ErrorKind::Io, format!("cannot write: {m}"))
+        let why = format!("cannot write: {}", super::atomic::reason(out, &e));
+        InputError::new(out, ErrorKind::Io, why)
     })?;
     let text = super::input::read_text(input, "the pose file", super::input::MAX_DATA_BYTES)?;
     let (csv_text, summary) = convert_poses(&text, input, options)?;
