@@ -343,3 +343,78 @@ fn a_model_file_edited_out_of_its_format_is_refused() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning() {
+    let dir = std::env::temp_dir().join(format!("robcal-payload-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let m = model(&dir);
+    let text = std::fs::read_to_string(&m).unwrap();
+    assert!(
+        text.contains("\"heaviest_payload_kg\": 275.8"),
+        "the paper's load"
+    );
+    let q = "1.38,-0.5,-0.1,0.89,-1.7,-1.6";
+    let head = "marker,load_kg,com_x_m,com_y_m,com_z_m,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad";
+    let predict = |loads: &[&str], model: &Path| {
+        let mut poses = format!("{head}\n");
+        for l in loads {
+            let _ = writeln!(poses, "1,{l},0.25,0,0.3,{q}");
+        }
+        let p = dir.join("p.csv");
+        std::fs::write(&p, poses).unwrap();
+        robcal(&[
+            "-q",
+            "predict",
+            "--model",
+            model.to_str().unwrap(),
+            "--poses",
+            p.to_str().unwrap(),
+        ])
+    };
+    let o = predict(&["0", "250", "551"], &m);
+    ok(&o);
+    assert!(
+        o.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // 25 kg read as 25 000: the point moves, exit 0, and it is said once.
+    let o = predict(&["250", "25000", "600"], &m);
+    let out = ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("2 of 3 rows carry a payload more than 2 times the heaviest of the calibration (275.8 kg), up to 25000 kg (line 3)"),
+        "{err}"
+    );
+    assert_eq!(out.lines().count(), 4);
+    // A file written before the key: read, nothing to compare with.
+    let old = dir.join("old.json");
+    let key = text
+        .find(",\n    \"heaviest_payload_kg\"")
+        .expect("the key");
+    let end = key + 2 + text[key + 2..].find('\n').unwrap();
+    std::fs::write(&old, format!("{}{}", &text[..key], &text[end..])).unwrap();
+    let o = predict(&["25000"], &old);
+    ok(&o);
+    assert!(
+        o.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let bad = dir.join("bad.json");
+    std::fs::write(
+        &bad,
+        text.replace(
+            "\"heaviest_payload_kg\": 275.8",
+            "\"heaviest_payload_kg\": -1",
+        ),
+    )
+    .unwrap();
+    rejected(
+        &predict(&["1"], &bad),
+        "heaviest_payload_kg: -1 kg is not a payload",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

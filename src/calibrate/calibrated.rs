@@ -31,4 +31,7 @@ pub struct CalibratedModel {
     pub policy: Policy,
     /// The covariance of `x` (sandwich, eq. 8 / 11), reported units.
     pub covariance: nalgebra::DMatrix<f64>,
+    /// The heaviest payload of the calibration's rows \[kg\] (0 without a
+    /// loaded row): the range its compliances were identified over.
+    pub heaviest_payload_kg: f64,
 }

@@ -580,6 +580,7 @@ impl Engine<'_> {
                 f.params.len(),
                 f.fit.covariance.iter().copied(),
             ),
+            heaviest_payload_kg: self.rows.rows.iter().fold(0.0, |m, r| r.load_kg.max(m)),
         }
     }
 }

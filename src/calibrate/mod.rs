@@ -45,7 +45,7 @@
 //! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
-//! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point) |
+//! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point); [`predict::payload`] warns about a payload beyond the calibration's |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
 //! user sets (method, λ, iterations, diagnose) is [`Settings`].

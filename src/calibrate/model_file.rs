@@ -202,6 +202,10 @@ pub struct ModelFile {
     /// The links' bending.
     #[serde(default)]
     pub link_compliance: Vec<BendingRecord>,
+    /// The heaviest payload of the calibration \[kg\] (0: none; absent in a
+    /// file written before it was recorded; [`super::predict::payload`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heaviest_payload_kg: Option<f64>,
 }
 
 fn quat(q: &UnitQuaternion<f64>) -> [f64; 4] {
@@ -321,6 +325,7 @@ impl ModelFile {
                     })
                 })
                 .collect(),
+            heaviest_payload_kg: p.heaviest_payload_kg(),
         }
     }
 
@@ -586,6 +591,7 @@ impl ModelFile {
             names,
         )
         .with_ends(&ends, marker_ends)
+        .map(|p| p.with_heaviest_payload_kg(self.heaviest_payload_kg))
         .map_err(|e| format!("markers: {e}"))
     }
 }

@@ -37,6 +37,8 @@ use crate::robot::{
 };
 use crate::Error;
 
+pub mod payload;
+
 /// A mass carried by the tool.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Payload {
@@ -69,6 +71,8 @@ pub struct Predictor {
     /// The calibration and its gravity \[m/s², robot base frame\], for
     /// [`Self::predict_covariance`] (absent when read from a model file).
     calibration: Option<(Box<CalibratedModel>, Vector3<f64>)>,
+    /// The heaviest payload of the calibration \[kg\] ([`payload`]).
+    heaviest_payload_kg: Option<f64>,
 }
 
 /// The equilibrium settings of a prediction (the rows' own).
@@ -124,6 +128,7 @@ impl Predictor {
                 .sum(),
             joint_names: model.names.joints.clone(),
             calibration: Some((Box::new(model.clone()), gravity_mps2)),
+            heaviest_payload_kg: Some(model.heaviest_payload_kg),
         }
     }
 
@@ -154,6 +159,7 @@ impl Predictor {
             load_com_shift_m,
             joint_names,
             calibration: None,
+            heaviest_payload_kg: None,
         }
     }
 

@@ -78,7 +78,14 @@ fn read_points(robot: &Predictor, path: &Path, target: bool) -> Result<Vec<Point
         .cloned()
         .zip(robot.chain().joints().iter().map(|j| j.kind))
         .collect();
-    parse_points(&text, path, &joints, target).map_err(|e| e.to_string())
+    let rows = parse_points(&text, path, &joints, target).map_err(|e| e.to_string())?;
+    // Not an error: the prediction is the model's (docs/apply.md). Printed
+    // also with --quiet: there is no report to hold it.
+    let loads: Vec<_> = rows.iter().map(|r| (r.line, r.load_kg)).collect();
+    if let Some(w) = robot.payload_warning(&loads) {
+        eprintln!("robcal: warning: {}: {w}", path.display());
+    }
+    Ok(rows)
 }
 
 /// The tool point and payload of a row.

@@ -32,6 +32,11 @@ pub(super) fn units(kind: JointKind) -> BTreeMap<String, String> {
 /// # Errors
 /// One line naming the record and what is wrong.
 pub(super) fn check(file: &ModelFile) -> Result<(), String> {
+    if let Some(kg) = file.heaviest_payload_kg {
+        if !(0.0..=crate::io::measurements::MAX_LOAD_KG).contains(&kg) {
+            return Err(format!("heaviest_payload_kg: {kg} kg is not a payload"));
+        }
+    }
     for (i, r) in file.joint_law.iter().enumerate() {
         let what = format!("joint_law of '{}'", r.joint);
         if file.joint_law[..i].iter().any(|o| o.joint == r.joint) {
