@@ -462,3 +462,52 @@ fn absurd_numbers_name_the_value_and_where() {
         assert!(err.contains(says), "{err}");
     }
 }
+
+#[test]
+fn a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line() {
+    for (args, expect) in [
+        (
+            &["calibrate", "--setup", "s.toml"][..],
+            "not provided: --data <DATA>",
+        ),
+        (
+            &[][..],
+            "a command is needed: calibrate, import, predict, compensate, init",
+        ),
+        (&["import"][..], "a command is needed: figaroh-mocap, poses"),
+        (
+            &["calibrate", "--setup", "s", "--data", "d", "--lambda", "-1"][..],
+            "'--lambda <LAMBDA>': must be a finite number >= 0",
+        ),
+        (
+            &[
+                "calibrate",
+                "--setup",
+                "s",
+                "--data",
+                "d",
+                "--max-iter",
+                "0",
+            ][..],
+            "must be a whole number >= 1",
+        ),
+        (
+            &[
+                "compensate",
+                "--model",
+                "m",
+                "--targets",
+                "t",
+                "--tolerance-um",
+                "nan",
+            ][..],
+            "must be a finite number > 0",
+        ),
+    ] {
+        let out = robcal(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.starts_with("robcal: ") && err.contains(expect), "{err}");
+    }
+}

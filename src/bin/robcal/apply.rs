@@ -44,10 +44,10 @@ pub struct CompensateArgs {
     #[arg(long)]
     output: Option<PathBuf>,
     /// Stop when the model puts the point within this of the target [µm].
-    #[arg(long = "tolerance-um", default_value_t = 0.1)]
+    #[arg(long = "tolerance-um", default_value_t = 0.1, allow_negative_numbers = true, value_parser = crate::finite_positive)]
     tolerance_um: f64,
     /// Newton steps at most per target.
-    #[arg(long = "max-iter", default_value_t = 20)]
+    #[arg(long = "max-iter", default_value_t = 20, value_parser = crate::at_least_one)]
     max_iter: usize,
 }
 
@@ -214,15 +214,6 @@ pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
 
 /// `robcal compensate`.
 pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
-    if !(a.tolerance_um.is_finite() && a.tolerance_um > 0.0) {
-        return Err(format!(
-            "--tolerance-um {}: must be a finite number > 0",
-            a.tolerance_um
-        ));
-    }
-    if a.max_iter == 0 {
-        return Err("--max-iter must be at least 1".into());
-    }
     let robot = load_model(&a.model)?;
     let rows = read_points(&robot, &a.targets, true)?;
     let settings = CompensateSettings {

@@ -122,10 +122,10 @@ struct CalibrateArgs {
     #[arg(long, value_enum, default_value = "irls")]
     method: MethodArg,
     /// λ of eq. 14 (default: the setup's `[noise] lambda`).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, allow_negative_numbers = true, value_parser = finite_non_negative)]
     lambda: Option<f64>,
     /// IRLS iterations at most.
-    #[arg(long = "max-iter", default_value_t = 100)]
+    #[arg(long = "max-iter", default_value_t = 100, value_parser = at_least_one)]
     max_iter: usize,
     /// Fit the declared model only.
     #[arg(long = "no-diagnose")]
@@ -165,6 +165,31 @@ struct CalibrateArgs {
 /// main thread by `resume_unwind`, which does not call the hook again.
 static FIRST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
 
+/// An argument that is a finite number ≥ 0 (a bad one is a usage error,
+/// exit 2, as any other).
+fn finite_non_negative(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err("must be a finite number >= 0".into()),
+    }
+}
+
+/// An argument that is a finite number > 0.
+fn finite_positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err("must be a finite number > 0".into()),
+    }
+}
+
+/// A count of at least 1.
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(v) if v >= 1 => Ok(v),
+        _ => Err("must be a whole number >= 1".into()),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -174,10 +199,36 @@ fn main() -> ExitCode {
                 let _ = e.print();
                 return ExitCode::SUCCESS;
             }
-            // The contract's one line: clap's first line, without the usage.
+            // The contract's one line: clap's message, its indented lines
+            // (the arguments it names) joined to it, without the usage.
             let text = e.to_string();
-            let first = text.lines().next().unwrap_or("bad arguments");
-            eprintln!("robcal: {}", first.trim_start_matches("error: ").trim());
+            if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+                // The help's command list, by name.
+                let commands: Vec<&str> = text
+                    .lines()
+                    .skip_while(|l| !l.starts_with("Commands:"))
+                    .skip(1)
+                    .take_while(|l| l.starts_with(' '))
+                    .filter_map(|l| l.split_whitespace().next())
+                    .filter(|c| *c != "help")
+                    .collect();
+                eprintln!(
+                    "robcal: a command is needed: {} (see --help)",
+                    commands.join(", ")
+                );
+                return ExitCode::from(2);
+            }
+            let mut lines = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty() && !l.starts_with("Usage:"));
+            let first = lines.next().unwrap_or("bad arguments");
+            let first = first.trim_start_matches("error: ").trim();
+            let named: Vec<&str> = lines.map(str::trim).collect();
+            if named.is_empty() {
+                eprintln!("robcal: {first}");
+            } else {
+                eprintln!("robcal: {} {}", first, named.join(", "));
+            }
             return ExitCode::from(2);
         }
     };
@@ -266,14 +317,6 @@ fn main() -> ExitCode {
 
 fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> {
     let start = std::time::Instant::now();
-    if let Some(l) = a.lambda {
-        if !(l.is_finite() && l >= 0.0) {
-            return Err(format!("--lambda {l}: must be a finite number >= 0"));
-        }
-    }
-    if a.max_iter == 0 {
-        return Err("--max-iter must be at least 1".into());
-    }
     let job = Job::load(&a.setup).map_err(|e| e.to_string())?;
     let max_bytes = a.max_data_mib.saturating_mul(1 << 20);
     let data = job
