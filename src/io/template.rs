@@ -43,19 +43,22 @@ pub fn setup_template(robot_path: &str, robot: &Robot) -> String {
         toml_string(&robot.tip_link)
     );
     t.push_str(
-        "# ignore_columns = []       # CSV columns to skip, e.g. [\"temperature\"]\n\n\
+        "# ignore_columns = []       # CSV columns to skip, e.g. [\"temperature\"]\n\
+         # assumed_link_mass_kg = 2.0  # kg on every moving body without an <inertial> mass (default: none)\n\n\
          [units]                     # of the CSV's joint and position columns\n\
          angle = \"rad\"               # \"rad\" | \"deg\"\n\
          length = \"m\"                # \"m\" | \"mm\"\n\n\
          # One table per marker (tracker reflector, mocap point); ids as in the CSV.\n\
          [[marker]]\n\
          id = 1\n\
-         xyz = [0.0, 0.0, 0.0]       # m, nominal, in tip_link\n\n\
+         xyz = [0.0, 0.0, 0.0]       # m, nominal, in tip_link\n\
+         # link = \"...\"              # the link it is on (default: tip_link); other links make a tree\n\n\
          # [load]                    # the calibration load; omit when there is none\n\
          # com = [0.0, 0.0, 0.0]     # m, its centre of mass in tip_link\n\
          # gravity = [0.0, 0.0, -9.80665]   # m/s², in base_link\n\n\
          [noise]\n\
          sigma0_um = 10.0            # the instrument's noise floor (eq. 14), µm\n\
+         # weights = \"both\"          # \"estimated\" | \"instrument\" | \"both\" (default: \"both\" with sx, sy, sz, else \"estimated\")\n\
          lambda = 1.0                # weight of the estimated σ (eq. 14), ≥ 0\n\n\
          [model]                     # what is identified\n",
     );
