@@ -310,6 +310,35 @@ fn plots_are_svg_and_complete() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn plots_and_output_are_written_together_or_not_at_all() {
+    let dir = temp_dir("together");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (plots, file) = (dir.join("plots"), dir.join("a-file"));
+    std::fs::write(&file, "kept").unwrap();
+    let mut args = NAIVE.to_vec();
+    let (p, f) = (plots.to_str().unwrap(), file.to_str().unwrap());
+    args.extend(["--plots", p, "--output", f]);
+    assert_rejected(
+        &robcal(&args),
+        "a-file: exists and is not a directory",
+        &plots,
+    );
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "kept");
+    // One directory for both: each figure once, every file there.
+    let mut args = NAIVE.to_vec();
+    args.extend(["--plots", p, "--output", p, "--json"]);
+    json(&robcal(&args));
+    let mut files: Vec<String> = std::fs::read_dir(&plots)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 7, "{files:?}");
+    assert!(files.contains(&"report.html".to_string()), "{files:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn assert_rejected(out: &Output, expect: &str, plots: &Path) {
     assert!(!out.status.success());
     assert!(

@@ -317,6 +317,12 @@ fn main() -> ExitCode {
 
 fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> {
     let start = std::time::Instant::now();
+    // Found before the fit, not after it.
+    for dir in [&a.plots, &a.output].into_iter().flatten() {
+        if dir.exists() && !dir.is_dir() {
+            return Err(format!("{}: exists and is not a directory", dir.display()));
+        }
+    }
     let job = Job::load(&a.setup).map_err(|e| e.to_string())?;
     let max_bytes = a.max_data_mib.saturating_mul(1 << 20);
     let data = job
@@ -381,17 +387,19 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         report.validation =
             Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
     }
+    // Every file of --plots and --output in one all-or-nothing write: a
+    // failure of one writes neither.
+    let robot_path = job.setup.robot_path(&job.setup_path);
+    let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot_path.as_path()];
+    inputs.extend(a.validate.as_deref());
+    let mut dirs: Vec<(&Path, Vec<(PathBuf, Vec<u8>)>)> = Vec::new();
     if let Some(dir) = &a.plots {
-        let mut inputs = vec![a.setup.as_path(), a.data.as_path()];
-        let robot = job.setup.robot_path(&job.setup_path);
-        inputs.push(&robot);
-        inputs.extend(a.validate.as_deref());
         // The report's figures (`--output` has them too).
         let files = plots::figures(&report, html::t975(&report).1)?
             .into_iter()
             .map(|f| (dir.join(f.file), f.svg.into_bytes()))
             .collect();
-        write_dir(dir, files, &inputs)?;
+        dirs.push((dir, files));
     }
     if let Some(dir) = &a.output {
         let urdf = calibrate::export::calibrated_urdf(report.urdf_model(), &job)
@@ -410,9 +418,6 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
             },
             &figures,
         );
-        let robot = job.setup.robot_path(&job.setup_path);
-        let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot.as_path()];
-        inputs.extend(a.validate.as_deref());
         let mut files = vec![
             (dir.join("robot.urdf"), urdf.into_bytes()),
             (dir.join("model.json"), model.into_bytes()),
@@ -423,8 +428,9 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
                 .into_iter()
                 .map(|f| (dir.join(f.file), f.svg.into_bytes())),
         );
-        write_dir(dir, files, &inputs)?;
+        dirs.push((dir, files));
     }
+    write_dirs(dirs, &inputs)?;
     let out = if a.json {
         serde_json::to_string_pretty(&json::ReportJson::of(&report)).map_err(|e| e.to_string())?
             + "\n"
@@ -436,15 +442,39 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         .map_err(|e| format!("cannot write the report: {e}"))
 }
 
-/// `files` into `dir` by one [`robcal::io::write_all_atomic`]; `dir` is
-/// created when missing and removed again when the writing fails.
-fn write_dir(dir: &Path, files: Vec<(PathBuf, Vec<u8>)>, inputs: &[&Path]) -> Result<(), String> {
-    let created = !dir.exists();
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    robcal::io::write_all_atomic(&files, inputs).map_err(|e| {
-        if created {
+/// The files of every `(dir, files)` by one [`robcal::io::write_all_atomic`]
+/// (all or nothing); each `dir` is created when missing and removed again
+/// when the writing fails.
+fn write_dirs(dirs: Vec<(&Path, Vec<(PathBuf, Vec<u8>)>)>, inputs: &[&Path]) -> Result<(), String> {
+    let names: Vec<String> = dirs.iter().map(|d| d.0.display().to_string()).collect();
+    let mut created = Vec::new();
+    let mut all = Vec::new();
+    let mut result = Ok(());
+    for (dir, files) in dirs {
+        if !dir.exists() {
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                result = Err(format!("{}: {e}", dir.display()));
+                break;
+            }
+            created.push(dir);
+        } else if !dir.is_dir() {
+            result = Err(format!("{}: exists and is not a directory", dir.display()));
+            break;
+        }
+        all.extend(files);
+    }
+    // --plots and --output may name one directory: its figures once.
+    let mut seen = std::collections::HashSet::new();
+    all.reverse();
+    all.retain(|(path, _)| seen.insert(path.clone()));
+    if result.is_ok() {
+        result = robcal::io::write_all_atomic(&all, inputs)
+            .map_err(|e| format!("{}: cannot write: {e}", names.join(", ")));
+    }
+    if result.is_err() {
+        for dir in created {
             let _ = std::fs::remove_dir(dir);
         }
-        format!("{}: cannot write: {e}", dir.display())
-    })
+    }
+    result
 }
