@@ -13,9 +13,12 @@
 //!   `measurement_frame_joint` to the URDF's root link, placed so that
 //!   `base_link` sits where the calibration put it (the base pose in the
 //!   measurement frame; the identity when the base frame is not declared);
-//! - each marker as a fixed link `marker_<id>` on `tip_link`
-//!   (joint `marker_<id>_joint`) at its calibrated position;
-//!   `marker_<id>_calibrated` when the URDF already has a `marker_<id>`.
+//! - each marker as a fixed link `marker_<id>` on its link (`tip_link`
+//!   by default; joint `marker_<id>_joint`) at its calibrated position.
+//!   When the URDF already has `marker_<id>` on a fixed joint from that
+//!   link, that joint's origin takes the calibrated position (its rotation
+//!   kept) and nothing is added; when it has a `marker_<id>` elsewhere, the
+//!   new link is `marker_<id>_calibrated` ([`marker_link`]).
 //!
 //! Forward kinematics of this file alone, from `measurement_frame` to
 //! `marker_<id>`, give the prediction of that marker by the geometric model
@@ -61,15 +64,32 @@ fn to_pose(t: &Isometry3<f64>) -> urdf_rs::Pose {
     }
 }
 
-/// The link name of marker `id`: `marker_<id>`, or `marker_<id>_calibrated`
-/// when the URDF already has a link `marker_<id>` (a reflector modelled by
-/// its maker, say).
-pub fn marker_link(urdf: &urdf_rs::Robot, id: u32) -> String {
+/// Where marker `id`, fixed to link `on`, goes in the calibrated URDF.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MarkerLink {
+    /// A new fixed link of this name (`marker_<id>`, or
+    /// `marker_<id>_calibrated` when the URDF has a link `marker_<id>`
+    /// that is not on a fixed joint from `on`).
+    New(String),
+    /// The URDF's own `marker_<id>`, on this fixed joint from `on` (a
+    /// reflector modelled by its maker, as in the data sets of
+    /// `../shared`): the joint's origin takes the calibrated position, its
+    /// rotation kept.
+    Existing(String),
+}
+
+/// Where marker `id` on link `on` goes (see [`MarkerLink`]).
+pub fn marker_link(urdf: &urdf_rs::Robot, id: u32, on: &str) -> MarkerLink {
     let name = format!("marker_{id}");
+    if let Some(j) = urdf.joints.iter().find(|j| j.child.link == name) {
+        if j.joint_type == urdf_rs::JointType::Fixed && j.parent.link == on {
+            return MarkerLink::Existing(j.name.clone());
+        }
+    }
     if urdf.links.iter().any(|l| l.name == name) {
-        format!("{name}_calibrated")
+        MarkerLink::New(format!("{name}_calibrated"))
     } else {
-        name
+        MarkerLink::New(name)
     }
 }
 
@@ -182,12 +202,6 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
     if urdf.links.iter().any(|l| l.name == MEASUREMENT_FRAME) {
         return Err(data(format!("already has a link '{MEASUREMENT_FRAME}'")));
     }
-    let marker_links: Vec<String> = model
-        .names
-        .markers
-        .iter()
-        .map(|(id, _)| marker_link(&urdf, *id))
-        .collect();
     // base_link in the URDF's root frame, through fixed joints only.
     let mut root_to_base = Isometry3::identity();
     let mut link = robot.base_link.clone();
@@ -222,7 +236,7 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
         &root,
         &(g.base * root_to_base.inverse()),
     );
-    for (m, name) in marker_links.iter().enumerate() {
+    for (m, (id, _)) in model.names.markers.iter().enumerate() {
         let p = g.markers[m];
         // The marker's own link (data contract 7.1), tip_link by default.
         let on = job
@@ -231,8 +245,24 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             .get(m)
             .and_then(|s| s.link.as_deref())
             .unwrap_or(&robot.tip_link);
-        let at = Isometry3::translation(p.x, p.y, p.z);
-        added.push_str(&fixed(name, &format!("{name}_joint"), on, name, &at));
+        match marker_link(&urdf, *id, on) {
+            MarkerLink::Existing(joint) => {
+                let origin = urdf
+                    .joints
+                    .iter()
+                    .find(|j| j.name == joint)
+                    .map_or_else(Isometry3::identity, |j| pose(&j.origin));
+                let at = Isometry3::from_parts(
+                    nalgebra::Translation3::new(p.x, p.y, p.z),
+                    origin.rotation,
+                );
+                origins.push((joint, at));
+            }
+            MarkerLink::New(name) => {
+                let at = Isometry3::translation(p.x, p.y, p.z);
+                added.push_str(&fixed(&name, &format!("{name}_joint"), on, &name, &at));
+            }
+        }
     }
     splice(&text, &origins, &added).map_err(data)
 }

@@ -147,8 +147,8 @@ struct CalibrateArgs {
     /// Write the calibrated robot here, all or nothing: `robot.urdf` (the
     /// input URDF with the geometry folded in, refitted as a rigid robot
     /// when the model has parameters a URDF cannot hold; a
-    /// `measurement_frame` root and `marker_<id>` links, or
-    /// `marker_<id>_calibrated` where the URDF has a `marker_<id>`) and
+    /// `measurement_frame` root and `marker_<id>` links at the calibrated
+    /// markers, the URDF's own where it has them) and
     /// `model.json` (the report's JSON with
     /// the full covariance, and the `predictor` that `robcal predict` and
     /// `robcal compensate` read).
