@@ -511,3 +511,20 @@ fn a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line() {
         assert!(err.starts_with("robcal: ") && err.contains(expect), "{err}");
     }
 }
+
+#[test]
+fn a_load_on_the_joint_axis_is_named_as_such_not_as_no_load() {
+    let (dir, setup) = job("axis-load", None, None);
+    let text = std::fs::read_to_string(&setup).unwrap();
+    std::fs::write(&setup, text.replace("com = [0.25, 0.0, 0.30]\n", "")).unwrap();
+    let data = csv(&dir, |_, cells| Some(cells));
+    let err = rejected(&run(&setup, &data, &[]));
+    assert!(
+        err.contains("k_a6 declared, but no row puts a torque")
+            && err.contains(
+                "loaded rows, but their load acts through the joint's axis: check [load] com"
+            ),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -85,10 +85,19 @@ pub fn check_torques(
     if unloaded.is_empty() {
         return Ok(());
     }
+    let loaded = rows.rows.iter().filter(|r| r.load_kg > 0.0).count();
+    let why = if loaded > 0 {
+        format!(
+            "{loaded} loaded rows, but their load acts through the joint's axis: \
+             check [load] com, the load's centre of mass in tip_link"
+        )
+    } else {
+        "no loaded row, and no own weight acting on it".to_string()
+    };
     Err(CalibrationError::Data(format!(
         "{}: {} declared, but no row puts a torque of {} N*m or more on the joint \
-         (no loaded row, and no own weight acting on it): a compliance cannot be \
-         identified without load; measure loaded rows, or remove it from [model]",
+         ({why}): a compliance cannot be identified without load; measure loaded \
+         rows, or remove it from [model]",
         file.display(),
         unloaded.join(", "),
         policy.min_torque_nm
