@@ -528,3 +528,39 @@ fn a_load_on_the_joint_axis_is_named_as_such_not_as_no_load() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn several_loads_against_one_unloaded_point_are_warned_about() {
+    let (dir, setup) = job("shared-unloaded", None, None);
+    // Every loaded row once more at half the load (positions kept: the
+    // warning is about the pairing, not the values).
+    let text = std::fs::read_to_string(root().join("data/kr270/measurements.csv")).unwrap();
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        out.push_str(line);
+        out.push('\n');
+        let cells: Vec<&str> = line.split(',').collect();
+        if i > 0 && cells[3] != "0" {
+            let half = cells[3].parse::<f64>().unwrap() / 2.0;
+            let mut copy: Vec<String> = cells.iter().map(|c| c.to_string()).collect();
+            copy[3] = half.to_string();
+            out.push_str(&copy.join(","));
+            out.push('\n');
+        }
+    }
+    let data = dir.join("data.csv");
+    std::fs::write(&data, out).unwrap();
+    let run = run(
+        &setup,
+        &data,
+        &["--no-diagnose", "--json", "--method", "ols"],
+    );
+    let err = String::from_utf8(run.stderr).unwrap();
+    assert!(
+        err.lines().any(|l| l.starts_with("robcal: warning: ")
+            && l.contains("data.csv:2: 270 unloaded row(s) are each the reference of several loaded rows (first: line 2, for lines 3 and 4)")
+            && l.contains("sigma of the compliances are understated")),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

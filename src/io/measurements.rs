@@ -33,7 +33,12 @@
 //! limits by more than 10 % of the range (one warning per column, first
 //! line given), every revolute value within ±π with `angle = "deg"`, every
 //! position within ±10 with `length = "mm"`, paired rows whose joint values
-//! differ by more than [`PAIR_Q_TOLERANCE`].
+//! differ by more than [`PAIR_Q_TOLERANCE`], and unloaded rows that several
+//! loaded rows (several payloads, one `rep`) are paired with: their
+//! deflections share the unloaded point's noise, which the estimator takes
+//! as independent rows (a helper's generator, 3 payloads a configuration:
+//! the compliances' errors over their σ had an RMS of 1.40 where 1 is
+//! right, and the lack-of-fit test fired on a true model in 60 of 60 seeds).
 
 use std::path::{Path, PathBuf};
 
@@ -454,8 +459,8 @@ fn parse_bytes(
         ));
     }
 
-    let (deflections, moved) = pair(&observations, &file)?;
-    let warnings = warnings(&file, robot, setup.units, &stats, moved);
+    let (deflections, moved, shared) = pair(&observations, &file)?;
+    let warnings = warnings(&file, robot, setup.units, &stats, moved, shared);
 
     Ok(Measurements {
         file,

@@ -161,6 +161,9 @@ pub enum WarningKind {
     Units,
     /// The robot moved between a loaded row and its unloaded row.
     Moved,
+    /// Several loaded rows are measured against one unloaded row: their
+    /// deflections share its noise.
+    Shared,
 }
 
 impl<K> Located<K> {

@@ -20,7 +20,7 @@ use crate::io::{ErrorKind, InputError, InputWarning, WarningKind};
 pub(super) fn pair(
     observations: &[Observation],
     file: &Path,
-) -> Result<(Vec<Deflection>, Option<(usize, [usize; 2])>), InputError> {
+) -> Result<(Vec<Deflection>, Moved, Shared), InputError> {
     let err =
         |kind, line: usize, message: String| InputError::new(file, kind, message).at_line(line);
     let cell_err = |kind, line: usize, column: &str, message: String| {
@@ -108,8 +108,28 @@ pub(super) fn pair(
             rows: [i, u],
         });
     }
-    Ok((deflections, moved))
+    // Unloaded rows that more than one loaded row is measured against, by
+    // runs of the same unloaded row (its index: file order).
+    let mut refs: Vec<(usize, usize, usize)> = deflections
+        .iter()
+        .map(|d| (d.rows[1], d.lines[1], d.lines[0]))
+        .collect();
+    refs.sort_unstable();
+    let mut shared: Shared = None;
+    for run in refs.chunk_by(|x, y| x.0 == y.0).filter(|r| r.len() > 1) {
+        let s = shared.get_or_insert((0, [run[0].1, run[0].2, run[1].2]));
+        s.0 += 1;
+    }
+    Ok((deflections, moved, shared))
 }
+
+/// Loaded rows whose joints moved from their unloaded row's: how many, and
+/// the first pair's lines.
+pub(super) type Moved = Option<(usize, [usize; 2])>;
+
+/// Unloaded rows that several loaded rows are measured against: how many,
+/// and the lines of the first (in file order) and two of its loaded rows.
+pub(super) type Shared = Option<(usize, [usize; 3])>;
 
 /// The file's warnings: values outside the URDF limits, numbers that look
 /// like the other unit, loaded rows whose joints moved.
@@ -118,7 +138,8 @@ pub(super) fn warnings(
     robot: &Robot,
     units: Units,
     stats: &Stats,
-    moved: Option<(usize, [usize; 2])>,
+    moved: Moved,
+    shared: Shared,
 ) -> Vec<InputWarning> {
     let mut warnings = Vec::new();
     let mut warn = |kind, line: Option<usize>, column: Option<&str>, message: String| {
@@ -178,6 +199,20 @@ pub(super) fn warnings(
             format!(
                 "{count} loaded row(s) whose joint values differ from their unloaded row's by \
                  more than {PAIR_Q_TOLERANCE} (first: lines {a} and {b})"
+            ),
+        );
+    }
+    if let Some((count, [u, a, b])) = shared {
+        warn(
+            WarningKind::Shared,
+            Some(u),
+            None,
+            format!(
+                "{count} unloaded row(s) are each the reference of several loaded rows (first: \
+                 line {u}, for lines {a} and {b}): their deflections share its measurement \
+                 noise, which the fit takes as independent, so the sigma of the compliances \
+                 are understated and the lack-of-fit test reads structure that is not there; \
+                 measure an unloaded point with each load (a rep of its own)"
             ),
         );
     }
