@@ -328,7 +328,22 @@ fn protocol_pins_the_validation_run() {
                 && w.contains("in the final model")),
         "{warned:?}"
     );
-    assert_eq!(chosen["warnings"].as_array().map(Vec::len), Some(0));
+    // Its wrist compliance, added at step 2, ends undetermined once the
+    // nonlinear stiffness of step 5 takes over (3 562 ± 7 794 urad/(N*m)):
+    // said, by the rule of `plausibility::determined`.
+    let warned: Vec<&str> = chosen["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    assert_eq!(warned.len(), 1, "{warned:?}");
+    assert!(
+        warned[0].starts_with(
+            "joint_compliance on arm_6_joint, added at step 2, is within 2 sigma of 0"
+        ),
+        "{warned:?}"
+    );
     assert_eq!(
         effects(&chosen),
         [

@@ -17,6 +17,8 @@
 //! | one joint column in the other angle unit | the nominal model registers onto the measured points [`Policy::unit_fit_ratio`] times better with that column converted (deg ↔ rad) | error |
 //! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
+//! | a declared compliance (any joint-law term that follows the torque) the data do not determine | its final estimate ≥ 0 and within [`Policy::determined_sigmas`] σ of 0 (`determined`) | warning (a prediction applies it under any load) |
+//! | an effect the loop added that the later ones took over | every parameter it added within [`Policy::determined_sigmas`] σ of 0 in the final model | warning |
 //! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
 //! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`super::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
@@ -33,6 +35,8 @@
 //! files are checked by their readers ([`crate::io`]).
 
 use nalgebra::Vector3;
+
+mod determined;
 
 use super::geometry::Geometry;
 use super::names::Names;
@@ -311,6 +315,7 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
             report.iterations, report.relinearisations
         ));
     }
+    warnings.extend(determined::undetermined(report, policy));
     warnings.extend(worse_than_nominal(report, policy.worse_than_nominal));
     warnings.extend(outliers(&report.row_errors, policy));
     warnings.extend(urdf_worse(report, policy.worse_than_nominal));

@@ -181,6 +181,12 @@ pub struct Policy {
     /// A compliance or backlash below zero by more than this many σ is an
     /// error; within it, a warning (consistent with zero). 3.
     pub negative_sigmas: f64,
+    /// A final estimate within this many σ of zero is not determined by
+    /// the data ([`super::plausibility`]): a warning for a declared term of
+    /// the joint law that follows the torque (it would be applied, as
+    /// estimated, under any load), and for an effect the loop added whose
+    /// every parameter ended there. 2.
+    pub determined_sigmas: f64,
     /// A row whose final residual (its norm) exceeds this many times the
     /// median row's of its kind (absolute positions, deflections) is
     /// reported as a likely measurement error ([`super::plausibility`]).
@@ -227,6 +233,7 @@ impl Default for Policy {
             unit_check_points: 4096,
             min_spread_m: 0.01,
             negative_sigmas: 3.0,
+            determined_sigmas: 2.0,
             outlier_ratio: 20.0,
             outlier_floor_um: 1.0,
             outlier_min_rows: 10,
