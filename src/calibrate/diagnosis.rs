@@ -21,7 +21,8 @@ use nalgebra::{Dyn, Vector3};
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
-/// rows), the fit falls back to OLS; the reason, for the report.
+/// rows), the fit falls back (to the instrument's σ alone for `both`, to
+/// OLS for `estimated`); the reason, for the report.
 pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
     if method == Method::Ols {
         return None;
@@ -32,7 +33,7 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
     (fewest < least).then(|| {
         format!(
             "{} needs a scatter per configuration to weight by, and configuration {} has {fewest} row(s) \
-             (at least {least}): fitted by OLS instead",
+             (at least {least})",
             method.name(),
             e.rows.configs[g]
         )

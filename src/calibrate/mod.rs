@@ -293,13 +293,25 @@ fn calibrate_rows(
         ));
     }
     // Weights known in advance (the instrument's σ) need no scatter per
-    // configuration; estimated ones (`estimated`, `both`) fall back to OLS.
+    // configuration; estimated ones fall back: `both` to the instrument's σ
+    // alone (given σ enter the weights, data contract 7.2), `estimated`
+    // to OLS.
     if e.fit_settings.weighting != fit::Weighting::Instrument {
         if let Some(note) = diagnosis::weighting_fallback(&e, settings.method) {
-            (e.progress)(&note);
-            notes.push(note);
-            settings.method = Method::Ols;
-            e.fit_settings.method = Method::Ols;
+            if e.fit_settings.weighting == fit::Weighting::Both {
+                let note = format!(
+                    "{note}: weighted by the instrument's sigma alone (sx, sy, sz), one weighted fit"
+                );
+                (e.progress)(&note);
+                notes.push(note);
+                e.fit_settings.weighting = fit::Weighting::Instrument;
+            } else {
+                let note = format!("{note}: fitted by OLS instead");
+                (e.progress)(&note);
+                notes.push(note);
+                settings.method = Method::Ols;
+                e.fit_settings.method = Method::Ols;
+            }
         }
     }
     let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
