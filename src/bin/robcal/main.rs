@@ -392,7 +392,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     let robot_path = job.setup.robot_path(&job.setup_path);
     let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot_path.as_path()];
     inputs.extend(a.validate.as_deref());
-    let mut dirs: Vec<(&Path, Vec<(PathBuf, Vec<u8>)>)> = Vec::new();
+    let mut dirs: Vec<(&Path, Files)> = Vec::new();
     if let Some(dir) = &a.plots {
         // The report's figures (`--output` has them too).
         let files = plots::figures(&report, html::t975(&report).1)?
@@ -445,7 +445,10 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
 /// The files of every `(dir, files)` by one [`robcal::io::write_all_atomic`]
 /// (all or nothing); each `dir` is created when missing and removed again
 /// when the writing fails.
-fn write_dirs(dirs: Vec<(&Path, Vec<(PathBuf, Vec<u8>)>)>, inputs: &[&Path]) -> Result<(), String> {
+/// Files to write: each path with its bytes.
+type Files = Vec<(PathBuf, Vec<u8>)>;
+
+fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String> {
     let names: Vec<String> = dirs.iter().map(|d| d.0.display().to_string()).collect();
     let mut created = Vec::new();
     let mut all = Vec::new();
