@@ -71,8 +71,8 @@ pub enum MarkerLink {
     /// `marker_<id>_calibrated` when the URDF has a link `marker_<id>`
     /// that is not on a fixed joint from `on`).
     New(String),
-    /// The URDF's own `marker_<id>`, on this fixed joint from `on` (a
-    /// reflector modelled by its maker, as in the data sets of
+    /// The URDF's own `marker_<id>`, a leaf on this fixed joint from `on`
+    /// (a reflector modelled by its maker, as in the data sets of
     /// `../shared`): the joint's origin takes the calibrated position, its
     /// rotation kept.
     Existing(String),
@@ -81,8 +81,10 @@ pub enum MarkerLink {
 /// Where marker `id` on link `on` goes (see [`MarkerLink`]).
 pub fn marker_link(urdf: &urdf_rs::Robot, id: u32, on: &str) -> MarkerLink {
     let name = format!("marker_{id}");
+    // A leaf: moving its joint moves nothing else.
+    let leaf = !urdf.joints.iter().any(|j| j.parent.link == name);
     if let Some(j) = urdf.joints.iter().find(|j| j.child.link == name) {
-        if j.joint_type == urdf_rs::JointType::Fixed && j.parent.link == on {
+        if leaf && j.joint_type == urdf_rs::JointType::Fixed && j.parent.link == on {
             return MarkerLink::Existing(j.name.clone());
         }
     }
