@@ -18,7 +18,7 @@
 
 use std::collections::BTreeSet;
 
-use super::super::report::Report;
+use super::super::report::{EffectStep, Parameter, Report};
 use super::super::settings::Policy;
 use crate::model::Param;
 
@@ -36,12 +36,27 @@ fn follows_torque(p: &Param) -> bool {
 
 /// The warnings of the [module docs](self).
 pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
-    let n = policy.determined_sigmas;
+    findings(
+        &report.effects,
+        &report.model.params,
+        &report.parameters,
+        policy.determined_sigmas,
+    )
+}
+
+/// [`undetermined`] of the loop's steps `effects` and the final model's
+/// `params` with their estimates `parameters` (the same order), at `n` σ.
+fn findings(
+    effects: &[EffectStep],
+    params: &[Param],
+    parameters: &[Parameter],
+    n: f64,
+) -> Vec<String> {
     let within = |value: f64, std: f64| value.abs() < n * std;
     let mut warnings = Vec::new();
     // Parameters the loop added, by the effect that added them.
     let mut added: BTreeSet<&str> = BTreeSet::new();
-    for (k, step) in report.effects.iter().enumerate() {
+    for (k, step) in effects.iter().enumerate() {
         let before: BTreeSet<&str> = step
             .parameters_before
             .iter()
@@ -54,8 +69,7 @@ pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
             .filter(|n| !before.contains(n))
             .collect();
         added.extend(&new);
-        let finals: Vec<_> = report
-            .parameters
+        let finals: Vec<_> = parameters
             .iter()
             .filter(|p| new.contains(&p.name.as_str()))
             .collect();
@@ -78,7 +92,7 @@ pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
             ));
         }
     }
-    for (p, par) in report.model.params.iter().zip(&report.parameters) {
+    for (p, par) in params.iter().zip(parameters) {
         if follows_torque(p)
             && !added.contains(par.name.as_str())
             && par.value >= 0.0
@@ -93,4 +107,100 @@ pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
         }
     }
     warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::effects::Effect;
+
+    fn par(name: &str, value: f64, std: f64) -> Parameter {
+        Parameter {
+            name: name.into(),
+            value,
+            std,
+            unit: "urad/(N*m)".into(),
+        }
+    }
+
+    fn step(effect: Effect, joint: &str, before: &[Parameter], after: &[Parameter]) -> EffectStep {
+        EffectStep {
+            effect,
+            joint: Some(joint.into()),
+            marker: None,
+            p_value: 1e-9,
+            f: 40.0,
+            tried: 10,
+            rms_um_before: 60.0,
+            rms_um_after: 55.0,
+            heldout_rms_um_before: None,
+            heldout_rms_um_after: None,
+            parameters_before: before.to_vec(),
+            parameters_after: after.to_vec(),
+        }
+    }
+
+    /// The helper's wrist: 769 ± 817 on a declared compliance is named;
+    /// 5.0 ± 0.1 is not, nor a geometric parameter within 2 σ of 0.
+    #[test]
+    fn a_declared_compliance_the_data_do_not_determine_is_named() {
+        let params = [
+            Param::Compliance { joint: 2 },
+            Param::Compliance { joint: 5 },
+            Param::JointOffset { joint: 1 },
+        ];
+        let pars = [
+            par("k_j3", 5.0, 0.1),
+            par("k_j6", 769.131, 816.844),
+            par("j2.offset", 0.1, 1.0),
+        ];
+        let w = findings(&[], &params, &pars, 2.0);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with("k_j6 = 769.1310 ± 816.8440 urad/(N*m) is within 2 sigma of 0"),
+            "{w:?}"
+        );
+        // A negative one is the negative rule's, not named twice.
+        let pars = [
+            par("k_j3", 5.0, 0.1),
+            par("k_j6", -769.1, 816.8),
+            par("j2.offset", 0.1, 1.0),
+        ];
+        assert!(findings(&[], &params, &pars, 2.0).is_empty());
+    }
+
+    /// The helper's Panda: a link bending added first, taken over by the
+    /// joint compliances added after it, is named once, as an effect.
+    #[test]
+    fn an_effect_later_steps_took_over_is_named_once() {
+        let params = [
+            Param::LinkCompliance { joint: 2 },
+            Param::Compliance { joint: 1 },
+        ];
+        let bend = par("link_compliance_pj3", -0.16, 0.70);
+        let k = par("k_pj2", 3.0, 0.2);
+        let steps = [
+            step(
+                Effect::LinkCompliance,
+                "pj3",
+                &[],
+                &[par("link_compliance_pj3", 4.0, 0.5)],
+            ),
+            step(
+                Effect::JointCompliance,
+                "pj2",
+                std::slice::from_ref(&bend),
+                &[bend.clone(), k.clone()],
+            ),
+        ];
+        let w = findings(&steps, &params, &[bend.clone(), k.clone()], 2.0);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with("link_compliance on pj3, added at step 1, is within 2 sigma of 0"),
+            "{w:?}"
+        );
+        // Still significant at the end: nothing to say.
+        let firm = par("link_compliance_pj3", 4.0, 0.5);
+        assert!(findings(&steps, &params, &[firm, k], 2.0).is_empty());
+    }
 }
