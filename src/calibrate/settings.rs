@@ -91,7 +91,8 @@ pub struct Policy {
     /// Fewest rows per configuration for IRLS/WLS: each configuration's σ
     /// per axis is estimated from its own rows' residuals, so a
     /// configuration with a single row (one marker, no repetition) has no
-    /// scatter to weight by; with fewer, the fit falls back to OLS. 2.
+    /// scatter to weight by; with fewer, the fit falls back (`both` to the
+    /// instrument's σ alone, `estimated` to OLS). 2.
     pub min_rows_per_group: usize,
     /// IRLS stops when no parameter moves by more than this many of its σ.
     /// 1e-3.
