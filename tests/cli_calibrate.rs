@@ -325,9 +325,20 @@ fn plots_and_output_are_written_together_or_not_at_all() {
         &plots,
     );
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "kept");
-    // One directory for both: each figure once, every file there.
+    // Below a file: refused before the fit too.
+    let below = file.join("sub");
     let mut args = NAIVE.to_vec();
-    args.extend(["--plots", p, "--output", p, "--json"]);
+    args.extend(["--output", below.to_str().unwrap()]);
+    assert_rejected(
+        &robcal(&args),
+        "a-file exists and is not a directory",
+        &plots,
+    );
+    // One directory for both, named two ways: each figure once, every file
+    // there.
+    let dotted = dir.join(".").join("plots");
+    let mut args = NAIVE.to_vec();
+    args.extend(["--plots", p, "--output", dotted.to_str().unwrap(), "--json"]);
     json(&robcal(&args));
     let mut files: Vec<String> = std::fs::read_dir(&plots)
         .unwrap()

@@ -38,8 +38,8 @@ mod plots;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Print no progress on stderr (errors still are; warnings are in the
-    /// report).
+    /// Print no progress on stderr (errors still are; calibrate's warnings
+    /// are in its report, predict's and compensate's still on stderr).
     #[arg(short, long, global = true, conflicts_with = "verbose")]
     quiet: bool,
     /// Print each progress step with the time since the start.
@@ -186,7 +186,7 @@ fn finite_positive(s: &str) -> Result<f64, String> {
 fn at_least_one(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
         Ok(v) if v >= 1 => Ok(v),
-        _ => Err("must be a whole number >= 1".into()),
+        _ => Err(format!("must be a whole number from 1 to {}", usize::MAX)),
     }
 }
 
@@ -319,8 +319,21 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     let start = std::time::Instant::now();
     // Found before the fit, not after it.
     for dir in [&a.plots, &a.output].into_iter().flatten() {
-        if dir.exists() && !dir.is_dir() {
-            return Err(format!("{}: exists and is not a directory", dir.display()));
+        // It, or the nearest of its parents that exists (a directory to
+        // create it in).
+        let existing = dir
+            .ancestors()
+            .find(|p| p.as_os_str().is_empty() || p.exists());
+        if let Some(p) = existing.filter(|p| !p.as_os_str().is_empty() && !p.is_dir()) {
+            let what = if p == dir.as_path() {
+                String::new()
+            } else {
+                format!("{} ", p.display())
+            };
+            return Err(format!(
+                "{}: {what}exists and is not a directory",
+                dir.display()
+            ));
         }
     }
     let job = Job::load(&a.setup).map_err(|e| e.to_string())?;
@@ -450,32 +463,44 @@ type Files = Vec<(PathBuf, Vec<u8>)>;
 
 fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String> {
     let names: Vec<String> = dirs.iter().map(|d| d.0.display().to_string()).collect();
-    let mut created = Vec::new();
-    let mut all = Vec::new();
+    // The directories this run creates, shallowest first: removed again,
+    // deepest first and only while empty, when the writing fails.
+    let mut created: Vec<PathBuf> = Vec::new();
+    let mut all: Files = Vec::new();
+    // One directory named two ways (`o`, `./o`, a link to it): each of its
+    // files once, by the directory's canonical path.
+    let mut seen = std::collections::HashSet::new();
     let mut result = Ok(());
     for (dir, files) in dirs {
-        if !dir.exists() {
+        let missing: Vec<PathBuf> = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .map(Path::to_path_buf)
+            .collect();
+        if !missing.is_empty() {
             if let Err(e) = std::fs::create_dir_all(dir) {
                 result = Err(format!("{}: {e}", dir.display()));
                 break;
             }
-            created.push(dir);
+            created.extend(missing.into_iter().rev());
         } else if !dir.is_dir() {
             result = Err(format!("{}: exists and is not a directory", dir.display()));
             break;
         }
-        all.extend(files);
+        let canonical = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+        for (path, bytes) in files {
+            let key = path.file_name().map(|n| canonical.join(n));
+            if key.is_none_or(|k| seen.insert(k)) {
+                all.push((path, bytes));
+            }
+        }
     }
-    // --plots and --output may name one directory: its figures once.
-    let mut seen = std::collections::HashSet::new();
-    all.reverse();
-    all.retain(|(path, _)| seen.insert(path.clone()));
     if result.is_ok() {
         result = robcal::io::write_all_atomic(&all, inputs)
             .map_err(|e| format!("{}: cannot write: {e}", names.join(", ")));
     }
     if result.is_err() {
-        for dir in created {
+        for dir in created.iter().rev() {
             let _ = std::fs::remove_dir(dir);
         }
     }
