@@ -489,7 +489,7 @@ fn a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line() {
                 "--max-iter",
                 "0",
             ][..],
-            "must be a whole number >= 1",
+            "must be a whole number from 1 to",
         ),
         (
             &[

@@ -78,14 +78,18 @@ fn read_points(robot: &Predictor, path: &Path, target: bool) -> Result<Vec<Point
         .cloned()
         .zip(robot.chain().joints().iter().map(|j| j.kind))
         .collect();
-    let rows = parse_points(&text, path, &joints, target).map_err(|e| e.to_string())?;
-    // Not an error: the prediction is the model's (docs/apply.md). Printed
-    // also with --quiet: there is no report to hold it.
+    parse_points(&text, path, &joints, target).map_err(|e| e.to_string())
+}
+
+/// The payload warning of `rows` ([`Predictor::payload_warning`]), printed
+/// once the run has succeeded (an error stays the one line on stderr).
+/// Not an error: the prediction is the model's (docs/apply.md); printed
+/// also with --quiet, as there is no report to hold it.
+fn warn_payloads(robot: &Predictor, rows: &[PointRow], path: &Path) {
     let loads: Vec<_> = rows.iter().map(|r| (r.line, r.load_kg)).collect();
     if let Some(w) = robot.payload_warning(&loads) {
         eprintln!("robcal: warning: {}: {w}", path.display());
     }
-    Ok(rows)
 }
 
 /// The tool point and payload of a row.
@@ -209,7 +213,9 @@ pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
             join(p.as_slice())
         );
     }
-    emit(&out, a.output.as_deref(), &[&a.model, &a.poses])
+    emit(&out, a.output.as_deref(), &[&a.model, &a.poses])?;
+    warn_payloads(&robot, &rows, &a.poses);
+    Ok(())
 }
 
 /// `robcal compensate`.
@@ -261,7 +267,9 @@ pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
             c.iterations
         );
     }
-    emit(&out, a.output.as_deref(), &[&a.model, &a.targets])
+    emit(&out, a.output.as_deref(), &[&a.model, &a.targets])?;
+    warn_payloads(&robot, &rows, &a.targets);
+    Ok(())
 }
 
 /// `robcal init`.

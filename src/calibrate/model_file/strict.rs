@@ -34,6 +34,12 @@ pub(super) fn units(kind: JointKind) -> BTreeMap<String, String> {
 pub(super) fn check(file: &ModelFile) -> Result<(), String> {
     if let Some(kg) = file.heaviest_payload_kg {
         if !(0.0..=crate::io::measurements::MAX_LOAD_KG).contains(&kg) {
+            // (1e300 in full is 301 digits.)
+            let kg = if kg.abs() < 1e6 {
+                format!("{kg}")
+            } else {
+                format!("{kg:e}")
+            };
             return Err(format!("heaviest_payload_kg: {kg} kg is not a payload"));
         }
     }
