@@ -54,6 +54,18 @@ fn findings(
 ) -> Vec<String> {
     let within = |value: f64, std: f64| value.abs() < n * std;
     let mut warnings = Vec::new();
+    // Named by the negative rule already.
+    let negative: BTreeSet<&str> = params
+        .iter()
+        .zip(parameters)
+        .filter(|(p, par)| {
+            matches!(
+                p,
+                Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. }
+            ) && par.value < 0.0
+        })
+        .map(|(_, par)| par.name.as_str())
+        .collect();
     // Parameters the loop added, by the effect that added them.
     let mut added: BTreeSet<&str> = BTreeSet::new();
     for (k, step) in effects.iter().enumerate() {
@@ -73,7 +85,10 @@ fn findings(
             .iter()
             .filter(|p| new.contains(&p.name.as_str()))
             .collect();
-        if !finals.is_empty() && finals.iter().all(|p| within(p.value, p.std)) {
+        if !finals.is_empty()
+            && finals.iter().all(|p| within(p.value, p.std))
+            && !finals.iter().any(|p| negative.contains(p.name.as_str()))
+        {
             let values: Vec<String> = finals
                 .iter()
                 .map(|p| format!("{} = {:.4} ± {:.4} {}", p.name, p.value, p.std, p.unit))
@@ -201,6 +216,20 @@ mod tests {
         );
         // Still significant at the end: nothing to say.
         let firm = par("link_compliance_pj3", 4.0, 0.5);
-        assert!(findings(&steps, &params, &[firm, k], 2.0).is_empty());
+        assert!(findings(&steps, &params, &[firm, k.clone()], 2.0).is_empty());
+        // A compliance that ends negative is the negative rule's (TIAGo
+        // select's arm_6 under IRLS, -3 352 ± 8 512): not named again.
+        let params = [
+            Param::Compliance { joint: 5 },
+            Param::Compliance { joint: 1 },
+        ];
+        let neg = par("k_pj6", -3352.4, 8512.0);
+        let steps = [step(
+            Effect::JointCompliance,
+            "pj6",
+            &[],
+            &[par("k_pj6", 80.0, 9.0)],
+        )];
+        assert!(findings(&steps, &params, &[neg, k], 2.0).is_empty());
     }
 }
