@@ -383,6 +383,31 @@ pub fn run(
                 .map(|a| format!(" on {a}"))
                 .unwrap_or_default();
             (e.progress)(&format!("adding {}{on} (p = {:.3e})", c.effect, t.p_value));
+            // The next eligible candidate, not tried, when it lowers the
+            // sum of squares about as much: the data barely tell the two
+            // apart.
+            if let Some((ri, r)) = eligible.get(from).map(|x| (x.0, &x.1)) {
+                let share = r.delta_rss / t.delta_rss;
+                let band = e.policy.runner_up_share..=1.0 / e.policy.runner_up_share;
+                if t.delta_rss > 0.0 && band.contains(&share) {
+                    let on_r = r
+                        .about
+                        .as_deref()
+                        .map(|a| format!(" on {a}"))
+                        .unwrap_or_default();
+                    notes.push(format!(
+                        "step {}: {}{on} chosen ({} column(s)); {}{on_r} ({} column(s)) lowers \
+                         the weighted sum of squares about as much ({:.1} %), less significantly: \
+                         these data barely tell the two apart",
+                        steps.len() + 1,
+                        c.effect,
+                        t.q,
+                        cands[ri].effect,
+                        r.q,
+                        100.0 * share
+                    ));
+                }
+            }
             let (variable, x) = traced_variable(&e.rows, &e.names, c);
             plots.push(PlotSeries {
                 title: format!(
