@@ -270,6 +270,16 @@ fn human_report_shows_the_errors_before_and_after() {
     assert!(t > 100.0, "{row}");
 }
 
+/// The names of the files in `dir`, sorted.
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut files: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    files.sort();
+    files
+}
+
 #[test]
 fn plots_are_svg_and_complete() {
     let dir = temp_dir("plots");
@@ -277,11 +287,7 @@ fn plots_are_svg_and_complete() {
     let d = dir.to_str().unwrap().to_string();
     args.extend(["--plots", &d, "--json"]);
     json(&robcal(&args));
-    let mut files: Vec<String> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    files.sort();
+    let files = files_in(&dir);
     assert_eq!(
         files,
         [
@@ -340,11 +346,7 @@ fn plots_and_output_are_written_together_or_not_at_all() {
     let mut args = NAIVE.to_vec();
     args.extend(["--plots", p, "--output", dotted.to_str().unwrap(), "--json"]);
     json(&robcal(&args));
-    let mut files: Vec<String> = std::fs::read_dir(&plots)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    files.sort();
+    let files = files_in(&plots);
     assert_eq!(files.len(), 7, "{files:?}");
     assert!(files.contains(&"report.html".to_string()), "{files:?}");
     let _ = std::fs::remove_dir_all(&dir);

@@ -226,6 +226,16 @@ fn select_declares_the_registration_only() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The report's `warnings`.
+fn warnings(v: &Value) -> Vec<&str> {
+    v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect()
+}
+
 /// `calibrate --method ols --json` of `setup` on `data` (and `--validate`).
 fn calibrate_ols(setup: &Path, data: &Path, validate: Option<&Path>) -> Value {
     let mut args = vec![
@@ -315,12 +325,7 @@ fn protocol_pins_the_validation_run() {
     assert!(near(loo(&other), 2.383), "{}", loo(&other));
     // Its wrist sag was within the 50 mrad bound when the loop added it
     // and ends past it: a warning by the plausibility rule, not silence.
-    let warned: Vec<&str> = other["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let warned = warnings(&other);
     assert!(
         warned
             .iter()
@@ -331,12 +336,7 @@ fn protocol_pins_the_validation_run() {
     // Its wrist compliance, added at step 2, ends undetermined once the
     // nonlinear stiffness of step 5 takes over (3 562 ± 7 794 urad/(N*m)):
     // said, by the rule of `plausibility::determined`.
-    let warned: Vec<&str> = chosen["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let warned = warnings(&chosen);
     assert_eq!(warned.len(), 1, "{warned:?}");
     assert!(
         warned[0].starts_with(

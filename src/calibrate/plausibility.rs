@@ -60,6 +60,23 @@ fn loaded_joint(p: &Param) -> Option<u8> {
     }
 }
 
+/// Whether `p` is a term of the joint law that follows the joint's torque
+/// (a compliance, a compensator's bin, nonlinear stiffness, backlash, a
+/// link's bending): one that needs a load to be identified, and that a
+/// payload changes.
+pub(crate) fn follows_torque(p: &Param) -> bool {
+    loaded_joint(p).is_some()
+}
+
+/// A compliance or backlash: physical only at or above zero (the negative
+/// rule of [`check_result`]).
+fn sign_bound(p: &Param) -> bool {
+    matches!(
+        p,
+        Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. }
+    )
+}
+
 /// A declared joint-law parameter needs a torque at its joint: a load on
 /// some row, or the robot's own weight on an absolute row.
 ///
@@ -253,11 +270,7 @@ pub fn check_units(
 pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, CalibrationError> {
     let mut warnings = Vec::new();
     for (p, par) in report.model.params.iter().zip(&report.parameters) {
-        let sign_bound = matches!(
-            p,
-            Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. }
-        );
-        if !sign_bound || par.value >= 0.0 {
+        if !sign_bound(p) || par.value >= 0.0 {
             continue;
         }
         let z = -par.value / par.std;

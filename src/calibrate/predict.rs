@@ -11,12 +11,12 @@
 //! every joint-law term the calibration found (compliances, compensator
 //! tables interpolated between their angles, nonlinear stiffness,
 //! backlash, the gear's cyclic error, the gravity compliance at the
-//! commanded pose) and, to first order as it was
-//! fitted, a link's bending under the payload
-//! ([`crate::model::Param::LinkCompliance`]). Not applied: the drift of the
-//! measurement system and the calibration tool's centre-of-mass estimate
-//! (properties of the calibration, not of the robot). All positions are in
-//! metres in the measurement frame; joint values in rad (or m).
+//! commanded pose) and, to first order as it was fitted, a link's bending
+//! under the payload ([`crate::model::Param::LinkCompliance`]). Not
+//! applied: the drift of the measurement system and the calibration tool's
+//! centre-of-mass estimate (properties of the calibration, not of the
+//! robot). All positions are in metres in the measurement frame; joint
+//! values in rad (or m); [`payload`] says when a payload is extrapolated.
 //!
 //! [`Predictor::predict_covariance`] propagates the calibration's
 //! covariance (eq. 8 / 11) to a prediction, `Σₚ = B Σ Bᵀ` with `B = ∂p/∂x`
@@ -36,7 +36,6 @@ use crate::robot::{
     EquilibriumSettings, Loading, PointLoad,
 };
 use crate::Error;
-
 pub mod payload;
 
 /// A mass carried by the tool.
@@ -64,8 +63,7 @@ pub struct Predictor {
     lin: Linearisation,
     /// `(Param::LinkCompliance, estimate)`: applied to first order.
     bending: Vec<(Param, f64)>,
-    /// The fitted shift of the calibration load's centre of mass \[m, tip
-    /// frame\].
+    /// The fitted shift of the calibration load's centre of mass \[m, tip frame\].
     load_com_shift_m: Vector3<f64>,
     joint_names: Vec<String>,
     /// The calibration and its gravity \[m/s², robot base frame\], for

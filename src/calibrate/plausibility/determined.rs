@@ -22,18 +22,6 @@ use super::super::report::{EffectStep, Parameter, Report};
 use super::super::settings::Policy;
 use crate::model::Param;
 
-/// Whether `p` is a joint-law term that follows the torque.
-fn follows_torque(p: &Param) -> bool {
-    matches!(
-        p,
-        Param::Compliance { .. }
-            | Param::ComplianceAt { .. }
-            | Param::NonlinearStiffness { .. }
-            | Param::Backlash { .. }
-            | Param::LinkCompliance { .. }
-    )
-}
-
 /// The warnings of the [module docs](self).
 pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
     findings(
@@ -58,12 +46,7 @@ fn findings(
     let negative: BTreeSet<&str> = params
         .iter()
         .zip(parameters)
-        .filter(|(p, par)| {
-            matches!(
-                p,
-                Param::Compliance { .. } | Param::ComplianceAt { .. } | Param::Backlash { .. }
-            ) && par.value < 0.0
-        })
+        .filter(|(p, par)| super::sign_bound(p) && par.value < 0.0)
         .map(|(_, par)| par.name.as_str())
         .collect();
     // Parameters the loop added, by the effect that added them.
@@ -108,7 +91,7 @@ fn findings(
         }
     }
     for (p, par) in params.iter().zip(parameters) {
-        if follows_torque(p)
+        if super::follows_torque(p)
             && !added.contains(par.name.as_str())
             && par.value >= 0.0
             && within(par.value, par.std)

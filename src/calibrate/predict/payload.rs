@@ -10,7 +10,7 @@
 //! warning of `robcal predict` and `robcal compensate`.
 
 use super::Predictor;
-use crate::model::Param;
+use crate::calibrate::plausibility::follows_torque;
 
 /// A payload more than this many times the calibration's heaviest is
 /// warned about: twice, so that a payload given in pounds where kilograms
@@ -38,16 +38,7 @@ impl Predictor {
     /// table, nonlinear stiffness, backlash) or a link's bending. A gravity
     /// compliance follows the direction of gravity, not the load.
     pub fn responds_to_payload(&self) -> bool {
-        !self.bending.is_empty()
-            || self.lin.values().keys().any(|p| {
-                matches!(
-                    p,
-                    Param::Compliance { .. }
-                        | Param::ComplianceAt { .. }
-                        | Param::NonlinearStiffness { .. }
-                        | Param::Backlash { .. }
-                )
-            })
+        !self.bending.is_empty() || self.lin.values().keys().any(follows_torque)
     }
 
     /// The warning for predictions at the payloads `loads` (`(line, kg)`
@@ -106,6 +97,7 @@ impl Predictor {
 mod tests {
     use super::*;
     use crate::calibrate::linearisation::{DeflectionModel, Linearisation};
+    use crate::model::Param;
     use crate::robot::{Chain, Joint, JointKind};
     use nalgebra::{Isometry3, Vector3};
     use std::collections::BTreeMap;
