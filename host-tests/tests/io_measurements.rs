@@ -46,7 +46,10 @@ fn units_are_converted_to_si() {
         (1, 0, 7, 0.0, 2)
     );
     // deg: f64::to_radians; mm: the decimal point moved (correctly rounded).
-    assert_eq!(o.q, [90f64.to_radians(), (-45.5f64).to_radians(), 0.15]);
+    assert_eq!(
+        o.q.as_slice(),
+        [90f64.to_radians(), (-45.5f64).to_radians(), 0.15]
+    );
     assert_eq!(
         o.q_written.iter().collect::<Vec<_>>(),
         ["90", "-45.5", "150"]
@@ -414,7 +417,7 @@ fn rows(n: usize, time: bool) -> Vec<Observation> {
             rep: (i % 2) as i64,
             marker: if i % 3 == 0 { 7 } else { 1 },
             load_kg: 0.0,
-            q: q.clone(),
+            q: q.as_slice().into(),
             p_m: p,
             t_s: time.then(|| rng.range(0.0, 1e9)),
             ..Observation::default()
@@ -511,7 +514,7 @@ fn writer_round_trips_bit_exactly() {
         rep: 1,
         marker: 7,
         load_kg: 12.5,
-        q: vec![std::f64::consts::FRAC_PI_2, -0.5, 0.125],
+        q: [std::f64::consts::FRAC_PI_2, -0.5, 0.125][..].into(),
         p_m: [1.2345, -0.0001, 0.0],
         ..Observation::default()
     };

@@ -272,7 +272,7 @@ mod tests {
             let state = |rows: &Rows| -> Vec<_> {
                 rows.rows
                     .iter()
-                    .map(|r| (r.y, r.p, r.tau.clone(), r.twists().to_vec()))
+                    .map(|r| (r.y, r.p, r.tau().to_vec(), r.twists().to_vec()))
                     .collect()
             };
             let r = state(&rows);
@@ -334,7 +334,7 @@ mod tests {
                 let state: Vec<_> = r
                     .rows
                     .iter()
-                    .map(|r| (r.y, r.p, r.tau.clone(), r.frames.theta().to_vec()))
+                    .map(|r| (r.y, r.p, r.tau().to_vec(), r.frames.theta().to_vec()))
                     .collect();
                 (e, state)
             };

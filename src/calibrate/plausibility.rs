@@ -96,7 +96,7 @@ pub fn check_torques(
                 let j = usize::from(j);
                 rows.rows
                     .iter()
-                    .map(|r| r.tau.get(j).map_or(0.0, |t| t.abs()))
+                    .map(|r| r.tau().get(j).map_or(0.0, |t| t.abs()))
                     .fold(0.0, f64::max)
                     < policy.min_torque_nm
             })

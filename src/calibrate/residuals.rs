@@ -165,7 +165,7 @@ fn variables(rows: &Rows, names: &Names) -> Vec<Variable> {
     for (j, name) in names.joints.iter().enumerate() {
         out.push(var(
             format!("tau_{name}"),
-            r.iter().map(|r| r.tau[j]).collect(),
+            r.iter().map(|r| r.tau()[j]).collect(),
             false,
         ));
     }
@@ -314,7 +314,7 @@ pub fn traced_variable(rows: &Rows, names: &Names, c: &Candidate) -> (String, Ve
         }
         Some(j) => (
             format!("tau_{} [N*m]", names.joints[j]),
-            r.iter().map(|r| r.tau[j]).collect(),
+            r.iter().map(|r| r.tau()[j]).collect(),
         ),
         None => match c.effect {
             super::effects::Effect::Drift => (

@@ -383,7 +383,7 @@ mod tests {
         let rows = m.observations(Some(&["j2".into(), "j1".into()])).unwrap();
         assert_eq!(rows.len(), 4);
         assert_eq!((rows[2].config, rows[2].marker), (1, 3));
-        assert_eq!(rows[2].q, [-0.25, 0.5]);
+        assert_eq!(rows[2].q.as_slice(), [-0.25, 0.5]);
         assert_eq!(rows[2].p_m, [7.0, 8.0, 9.0]);
     }
 

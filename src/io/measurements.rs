@@ -78,7 +78,7 @@ pub struct Observation {
     /// Hanging mass \[kg\]; `0` means unloaded.
     pub load_kg: f64,
     /// Joint values \[rad or m\], chain order.
-    pub q: Vec<f64>,
+    pub q: JointValues,
     /// Joint cells as written in the CSV (trimmed), chain order: the
     /// contract names angle-dependent compliances after them. Empty for rows
     /// not read from a file; the writer ignores it.
@@ -94,37 +94,90 @@ pub struct Observation {
     pub line: usize,
 }
 
-/// A row's joint cells as written in the CSV, in chain order, in one string
-/// (one allocation per row, not one per cell: a file of a million rows held
-/// ~300 MB of cells as separate strings). The cells are joined by the
-/// unit separator `\u{1f}`, which a cell that parsed as a number cannot
-/// hold.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct WrittenCells(String);
+/// Joints whose values a row holds inline ([`JointValues`]): a 7-joint arm.
+pub const INLINE_JOINTS: usize = 7;
+
+/// A row's joint values \[rad or m\], inline up to [`INLINE_JOINTS`] joints:
+/// a vector was an allocation per row, and at 10⁶ rows the freed blocks
+/// of the parsed rows kept ~200 MB of heap that the rows built from them
+/// were interleaved with.
+pub type JointValues = smallvec::SmallVec<[f64; INLINE_JOINTS]>;
+
+/// A row's joint cells as written in the CSV, in chain order: a range of a
+/// text shared by the rows read with it (one allocation per ~1 MiB of
+/// cells, not one per row: a file of a million rows held ~300 MB of cells
+/// as separate strings, then ~130 MB as one string per row, whose freed
+/// blocks the heap kept). The cells are joined by the unit separator
+/// `\u{1f}`, which a cell that parsed as a number cannot hold.
+#[derive(Debug, Clone, Default)]
+pub struct WrittenCells {
+    /// The shared text (`None`: no cell, or not yet attached by the reader).
+    text: Option<std::sync::Arc<str>>,
+    /// This row's part of `text`.
+    start: u32,
+    /// End of this row's part of `text`.
+    end: u32,
+}
+
+impl PartialEq for WrittenCells {
+    fn eq(&self, other: &Self) -> bool {
+        self.as_str() == other.as_str()
+    }
+}
+
+impl Eq for WrittenCells {}
 
 impl WrittenCells {
     const SEPARATOR: char = '\u{1f}';
 
-    /// The cells, in order (their length summed first: the string grown
-    /// push by push was five reallocations per row).
+    /// The cells, in order, in a text of their own.
     pub fn new<'a, I>(cells: I) -> Self
     where
         I: IntoIterator<Item = &'a str>,
-        I::IntoIter: Clone,
     {
-        let cells = cells.into_iter();
-        let len = cells
-            .clone()
-            .map(|c| c.len() + Self::SEPARATOR.len_utf8())
-            .sum();
-        let mut s = String::with_capacity(len);
-        for (k, c) in cells.enumerate() {
+        let mut text = String::new();
+        let mut cells = Self::pending(&mut text, cells);
+        cells.text = Some(text.into());
+        cells
+    }
+
+    /// The cells appended to `text`, a batch's shared text: this row's
+    /// range of it, without the text until [`WrittenCells::attach`].
+    /// (`text` stays under 4 GiB: the reader attaches every ~1 MiB.)
+    pub(crate) fn pending<'a, I>(text: &mut String, cells: I) -> Self
+    where
+        I: IntoIterator<Item = &'a str>,
+    {
+        let start = text.len();
+        for (k, c) in cells.into_iter().enumerate() {
             if k > 0 {
-                s.push(Self::SEPARATOR);
+                text.push(Self::SEPARATOR);
             }
-            s.push_str(c);
+            text.push_str(c);
         }
-        Self(s)
+        let at = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        Self {
+            text: None,
+            start: at(start),
+            end: at(text.len()),
+        }
+    }
+
+    /// Gives `text` (the batch's, emptied) to every row's cells in `rows`,
+    /// each made by [`WrittenCells::pending`] into it.
+    pub(crate) fn attach<'r>(text: &mut String, rows: impl Iterator<Item = &'r mut Self>) {
+        let shared: std::sync::Arc<str> = std::mem::take(text).into();
+        for r in rows {
+            r.text = Some(std::sync::Arc::clone(&shared));
+        }
+    }
+
+    /// The cells joined by the separator (empty without any).
+    fn as_str(&self) -> &str {
+        self.text
+            .as_deref()
+            .and_then(|t| t.get(self.start as usize..self.end as usize))
+            .unwrap_or("")
     }
 
     /// Cell `j` (`None` past the last, or when there is none).
@@ -134,8 +187,9 @@ impl WrittenCells {
 
     /// The cells, in order (none for a row not read from a file).
     pub fn iter(&self) -> impl Iterator<Item = &str> {
-        (!self.0.is_empty())
-            .then(|| self.0.split(Self::SEPARATOR))
+        let s = self.as_str();
+        (!s.is_empty())
+            .then(|| s.split(Self::SEPARATOR))
             .into_iter()
             .flatten()
     }
@@ -147,7 +201,7 @@ impl WrittenCells {
 
     /// Whether there is no cell.
     pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
+        self.as_str().is_empty()
     }
 }
 
@@ -164,7 +218,7 @@ pub struct Deflection {
     /// Hanging mass \[kg\], `> 0`.
     pub load_kg: f64,
     /// Joint values \[rad or m\] of the unloaded row (the configuration).
-    pub q: Vec<f64>,
+    pub q: JointValues,
     /// `p_loaded − p_unloaded` \[m\].
     pub dp_m: [f64; 3],
     /// Lines of the loaded and the unloaded row.
@@ -442,13 +496,13 @@ fn parse_bytes(
             // and every file with an error: its message is this
             // reader's, with the file's own record numbers).
             let mut stats = Stats::new(robot.dof());
-            let mut observations: Vec<Observation> = Vec::new();
+            let mut observations = records::Batch::default();
             let mut record = csv::StringRecord::new();
             while rdr.read_record(&mut record).map_err(csv_err)? {
                 let line = line_at(record.position());
-                observations.push(layout.observation(&record, line, &mut stats)?);
+                observations.read(&layout, &record, line, &mut stats)?;
             }
-            (observations, stats)
+            (observations.finish(), stats)
         }
     };
     if observations.is_empty() {

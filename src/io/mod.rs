@@ -49,7 +49,7 @@
 //!            1,0,1,0,90,500,0,0\n\
 //!            1,0,1,20,90,500,-0.25,0\n";
 //! let data = parse_measurements(csv.as_bytes(), "d.csv", &robot, &setup)?;
-//! assert_eq!(data.observations[0].q, [std::f64::consts::FRAC_PI_2]);
+//! assert_eq!(data.observations[0].q.as_slice(), [std::f64::consts::FRAC_PI_2]);
 //! assert_eq!(data.observations[0].p_m, [0.5, 0.0, 0.0]);
 //! assert_eq!(data.deflections[0].dp_m, [0.0, -0.00025, 0.0]);
 //!
@@ -79,8 +79,8 @@ pub mod writer;
 pub use atomic::{write_all_atomic, write_atomic};
 pub use job::Job;
 pub use measurements::{
-    parse_measurements, read_measurements, read_measurements_limited, Deflection, Measurements,
-    Observation, WrittenCells,
+    parse_measurements, read_measurements, read_measurements_limited, Deflection, JointValues,
+    Measurements, Observation, WrittenCells, INLINE_JOINTS,
 };
 pub use setup::{
     AngleUnit, GeometryModel, LengthUnit, Load, Marker, MarkerModel, Model, Noise, Setup, Units,

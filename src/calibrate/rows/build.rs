@@ -128,12 +128,12 @@ impl Rows {
             config,
             marker: index_of(marker),
             load_kg,
-            q: q.to_vec(),
+            q: q.into(),
             measured: Vector3::from(measured),
             line,
             frames: RowFrames::default(),
             p: Vector3::zeros(),
-            tau: vec![0.0; dof],
+            tau: Vec::new(),
             extra: (dt.is_some() || sigma.is_some()).then(|| {
                 Box::new(RowExtra {
                     dt,

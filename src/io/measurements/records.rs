@@ -34,7 +34,8 @@ pub(super) struct Layout<'a> {
 
 impl Layout<'_> {
     /// The record on `line` as an observation; `stats` takes its joint
-    /// values and positions (limits, units).
+    /// values and positions (limits, units); its joint cells as written go
+    /// to the batch text `written` ([`Batch`]).
     ///
     /// # Errors
     /// The first of its cells that is rejected (module [`super`]), with the
@@ -44,9 +45,10 @@ impl Layout<'_> {
         record: &csv::StringRecord,
         line: usize,
         stats: &mut Stats,
+        written: &mut String,
     ) -> Result<Observation, InputError> {
         let mut o = Observation {
-            q: vec![0.0; self.robot.dof()],
+            q: smallvec::smallvec![0.0; self.robot.dof()],
             line,
             rep: 1,
             marker: self.markers.first().copied().unwrap_or(1),
@@ -201,12 +203,71 @@ impl Layout<'_> {
             }
         }
         // Every joint has its column (checked with the header).
-        o.q_written = WrittenCells::new(
+        o.q_written = WrittenCells::pending(
+            written,
             self.joint_field
                 .iter()
                 .map(|&f| f.and_then(|f| record.get(f)).unwrap_or("")),
         );
         Ok(o)
+    }
+}
+
+/// Bytes of joint cells as written after which a [`Batch`] gives its text
+/// to its rows.
+const BATCH_BYTES: usize = 1 << 20;
+
+/// Observations read in order, their joint cells as written in one text
+/// per ~[`BATCH_BYTES`] ([`super::WrittenCells`]).
+#[derive(Default)]
+pub(super) struct Batch {
+    /// The observations.
+    pub(super) out: Vec<Observation>,
+    /// The cells of `out[first..]`, not yet attached.
+    text: String,
+    /// The first observation whose cells are in `text`.
+    first: usize,
+}
+
+impl Batch {
+    /// An empty batch with room for `rows` observations.
+    pub(super) fn with_capacity(rows: usize) -> Self {
+        Self {
+            out: Vec::with_capacity(rows),
+            ..Self::default()
+        }
+    }
+
+    /// Reads `record` on `line` into the next observation.
+    ///
+    /// # Errors
+    /// As [`Layout::observation`] (nothing added).
+    pub(super) fn read(
+        &mut self,
+        layout: &Layout<'_>,
+        record: &csv::StringRecord,
+        line: usize,
+        stats: &mut Stats,
+    ) -> Result<(), InputError> {
+        let o = layout.observation(record, line, stats, &mut self.text)?;
+        self.out.push(o);
+        if self.text.len() >= BATCH_BYTES {
+            self.attach();
+        }
+        Ok(())
+    }
+
+    /// Gives the text to the observations it holds the cells of.
+    fn attach(&mut self) {
+        let rows = self.out[self.first..].iter_mut().map(|o| &mut o.q_written);
+        WrittenCells::attach(&mut self.text, rows);
+        self.first = self.out.len();
+    }
+
+    /// The observations, every one's cells attached.
+    pub(super) fn finish(mut self) -> Vec<Observation> {
+        self.attach();
+        self.out
     }
 }
 
@@ -285,12 +346,12 @@ pub(super) fn chunked(
             // At most one record per line (no slack to copy at the join).
             let lines =
                 newlines.partition_point(|&n| n < hi) - newlines.partition_point(|&n| n < lo);
-            let mut out = Vec::with_capacity(lines + 1);
+            let mut out = Batch::with_capacity(lines + 1);
             let mut record = csv::StringRecord::new();
             loop {
                 match rdr.read_record(&mut record) {
                     Ok(true) => {}
-                    Ok(false) => return Some((out, stats)),
+                    Ok(false) => return Some((out.finish(), stats)),
                     Err(_) => return None,
                 }
                 if record.len() != layout.header.len() {
@@ -298,7 +359,7 @@ pub(super) fn chunked(
                 }
                 let at = lo + record.position().map_or(0, |p| p.byte() as usize);
                 let line = line_at(bytes, newlines, at);
-                out.push(layout.observation(&record, line, &mut stats).ok()?);
+                out.read(layout, &record, line, &mut stats).ok()?;
             }
         },
         Option::is_none,
