@@ -128,15 +128,23 @@ struct Columns<'a> {
     /// mass).
     linearised: bool,
     lin: &'a Linearisation,
+    /// Whether deflection rows are scaled ([`Rows::noise_scale`]).
+    scaled: bool,
 }
 
 impl<'a> Columns<'a> {
-    fn new(params: &'a [Param], lin: &'a Linearisation, names: &super::names::Names) -> Self {
+    fn new(
+        params: &'a [Param],
+        lin: &'a Linearisation,
+        names: &super::names::Names,
+        all: &Rows,
+    ) -> Self {
         Self {
             params,
             si: params.iter().map(|p| names.unit(p).si).collect(),
             linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
             lin,
+            scaled: all.kinds.absolute && all.kinds.deflections,
         }
     }
 
@@ -156,8 +164,13 @@ impl<'a> Columns<'a> {
             Vec::new()
         };
         let sample = row.sample(frames, &compliance, gravity_unit);
+        let scale = (self.scaled && row.kind == super::rows::RowKind::Deflection)
+            .then_some(std::f64::consts::FRAC_1_SQRT_2);
         for ((p, &si), column) in self.params.iter().zip(&self.si).zip(piece.iter_mut()) {
-            let col = p.column_si(&sample)? * si;
+            let mut col = p.column_si(&sample)? * si;
+            if let Some(s) = scale {
+                col *= s;
+            }
             column[3 * k..3 * k + 3].copy_from_slice(col.as_slice());
         }
         Ok(())
@@ -225,7 +238,7 @@ impl Design {
     ) -> Result<Self, Error> {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
-        let columns = Columns::new(params, lin, names);
+        let columns = Columns::new(params, lin, names, all);
         let per = m.div_ceil(threads.max(1)).max(1);
         let Storage {
             b: mut data,
@@ -290,7 +303,7 @@ impl Design {
             y,
             group,
         } = old.map(Self::into_storage).unwrap_or_default();
-        let columns = Columns::new(params, lin, names);
+        let columns = Columns::new(params, lin, names, all);
         let pieces = pieces(&mut data, m, params.len(), per);
         let columns = &columns;
         let done = all.relinearise_with(
@@ -340,13 +353,19 @@ impl Design {
         y.clear();
         y.reserve_exact(3 * rows.len());
         for r in rows {
-            y.extend_from_slice(r.y.as_slice());
+            let s = all.noise_scale(r);
+            if s == 1.0 {
+                y.extend_from_slice(r.y.as_slice());
+            } else {
+                y.extend_from_slice((r.y * s).as_slice());
+            }
         }
         let instrument_sigma = rows.iter().all(|r| r.sigma().is_some()).then(|| {
             let mut ss = vec![Vector3::<f64>::zeros(); groups];
             let mut n = vec![0.0_f64; groups];
             for r in rows {
-                if let (Some(s), Some(g)) = (r.sigma(), ss.get_mut(r.group)) {
+                let sigma = r.sigma().map(|s| s * all.noise_scale(r));
+                if let (Some(s), Some(g)) = (sigma, ss.get_mut(r.group)) {
                     *g += s.component_mul(&s);
                     n[r.group] += 1.0;
                 }

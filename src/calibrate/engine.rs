@@ -308,7 +308,7 @@ impl Engine<'_> {
                 (None, None) => full_fit()?,
             };
             let residuals: Vec<Vector3<f64>> = (0..d.rows())
-                .map(|i| d.residual(&cols, &out.x, i))
+                .map(|i| self.rows.unscaled(i, d.residual(&cols, &out.x, i)))
                 .collect();
             let fitted = Fitted {
                 params: params.to_vec(),
@@ -454,6 +454,11 @@ impl Engine<'_> {
         // is too small for threads to pay.
         let groups = self.rows.configs.len();
         let settings = self.fit_settings;
+        // Deflections scaled in the design ([`Rows::noise_scale`]).
+        let (rows, scaled) = (
+            &self.rows,
+            self.rows.kinds.absolute && self.rows.kinds.deflections,
+        );
         let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
             Some(m) => {
                 let small = groups * groups * cols.len() * cols.len() < 20_000;
@@ -466,7 +471,7 @@ impl Engine<'_> {
                     Some(
                         by.of(g)
                             .iter()
-                            .map(|&i| d.residual(&cols, &out.x, i))
+                            .map(|&i| rows.unscaled(i, d.residual(&cols, &out.x, i)))
                             .collect(),
                     )
                 })
@@ -475,7 +480,17 @@ impl Engine<'_> {
         };
         for g in 0..groups {
             if let Some(f) = fast.as_ref().filter(|f| f.ok.get(g) == Some(&true)) {
-                res.extend(&f.res[by.range(g)]);
+                if scaled {
+                    let unscaled: Vec<Vector3<f64>> = by
+                        .of(g)
+                        .iter()
+                        .zip(&f.res[by.range(g)])
+                        .map(|(&i, &r)| self.rows.unscaled(i, r))
+                        .collect();
+                    res.extend(&unscaled);
+                } else {
+                    res.extend(&f.res[by.range(g)]);
+                }
                 continue;
             }
             if let Some(r) = folds.get(g).and_then(Option::as_ref) {
@@ -495,7 +510,7 @@ impl Engine<'_> {
             };
             let Some(out) = out else { return Ok(None) };
             for &i in by.of(g) {
-                res.extend(&[d.residual(&use_cols, &out.x, i)]);
+                res.extend(&[self.rows.unscaled(i, d.residual(&use_cols, &out.x, i))]);
             }
         }
         self.restore(fitted)?;

@@ -114,8 +114,9 @@ pub fn lack_of_fit(
     // Per cell, in row order: the sum, then the squares about the mean (the
     // sums of one vector per cell, without one per cell: a million rows
     // may be a million cells).
-    let weighted =
-        |row: &super::rows::Row, r: &Vector3<f64>| r.component_mul(&fit.weights[row.group]);
+    let weighted = |row: &super::rows::Row, r: &Vector3<f64>| {
+        r.component_mul(&fit.weights[row.group]) * rows.noise_scale(row)
+    };
     let mut sum = vec![Vector3::<f64>::zeros(); n_cells];
     let mut count = vec![0usize; n_cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
@@ -274,7 +275,7 @@ pub fn most_followed(
     let mut count = vec![0.0; cells];
     let mut res = vec![Vector3::<f64>::zeros(); cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
-        res[c] += r.component_mul(&weights[row.group]);
+        res[c] += r.component_mul(&weights[row.group]) * rows.noise_scale(row);
         count[c] += 1.0;
     }
     for (r, n) in res.iter_mut().zip(&count) {
