@@ -32,9 +32,14 @@ fn seed(i: usize) -> u64 {
 /// `data/kr270/setup.toml` with the joints' offsets declared, its robot
 /// without the links' masses: the generator's unloaded robot does not sag
 /// under its own weight, and robcal's absolute rows would.
-fn job() -> Job {
+fn job(method: Method) -> Job {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/kr270");
-    let dir = std::env::temp_dir().join(format!("robcal-coverage-mixed-{}", std::process::id()));
+    // (One directory per test: the tests run at once.)
+    let dir = std::env::temp_dir().join(format!(
+        "robcal-coverage-mixed-{}-{}",
+        std::process::id(),
+        method.name()
+    ));
     std::fs::create_dir_all(&dir).expect("a temporary directory");
     let setup = std::fs::read_to_string(data.join("setup.toml")).expect("setup");
     let setup = setup.replace("geometry = \"none\"", "geometry = \"joint_offsets\"");
@@ -52,7 +57,7 @@ fn job() -> Job {
 
 /// `z` of every reported parameter by name, over `JOBS` jobs.
 fn run(method: Method) -> Vec<(String, Vec<f64>)> {
-    let job = job();
+    let job = job(method);
     let model = Kr270::new();
     let settings = Settings {
         method,

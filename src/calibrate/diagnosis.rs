@@ -495,11 +495,9 @@ pub fn run(
         converged: current.converged,
         deflection_model: current.linearisation.model.name(),
         parameters: e.parameters(&current),
-        covariance: nalgebra::DMatrix::from_iterator(
-            current.params.len(),
-            current.params.len(),
-            current.fit.covariance.iter().copied(),
-        ),
+        covariance: current
+            .geometry
+            .reported_covariance(&current.params, &current.fit.covariance),
         history: current.fit.history.clone(),
         noise: e
             .rows

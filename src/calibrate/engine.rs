@@ -559,9 +559,13 @@ impl Engine<'_> {
     /// The report's parameters of `f`: geometric ones as their values in
     /// the model (the base as its pose in the measurement frame).
     pub fn parameters(&self, f: &Fitted) -> Vec<Parameter> {
+        // The base's σ of its pose, not of its last step.
+        let std = f
+            .geometry
+            .reported_std(&f.params, &f.fit.covariance, &f.fit.std);
         f.params
             .iter()
-            .zip(f.fit.x.iter().zip(&f.fit.std))
+            .zip(f.fit.x.iter().zip(&std))
             .map(|(p, (&x, &std))| Parameter {
                 name: self.names.name(p),
                 value: if p.is_geometric() {

@@ -209,6 +209,74 @@ impl Geometry {
         largest
     }
 
+    /// The covariance of the reported values of `params` from `cov`, that
+    /// of their steps (the fit's, reported units): the base's steps act in
+    /// the measurement frame (`base ← E(x) · base`), so its translation `t`
+    /// moves by `δt + δr × t` and its rotation vector `r` by `J_l⁻¹(r) δr`
+    /// (the inverse left Jacobian of SO(3)); `G cov Gᵀ`, with `G` those
+    /// derivatives on the base's rows and the identity elsewhere. `cov`
+    /// itself (the same bits) without a base parameter. (The σ of a base
+    /// far from the measurement frame's origin was the step's, `δt`'s,
+    /// 2–4 times that of `t`: a helper's Monte Carlo.)
+    pub fn reported_covariance(
+        &self,
+        params: &[Param],
+        cov: &nalgebra::DMatrix<f64>,
+    ) -> nalgebra::DMatrix<f64> {
+        let base = |i: usize| match params.get(i) {
+            Some(Param::Base { axis }) => Some(usize::from(*axis)),
+            _ => None,
+        };
+        let n = params.len();
+        if (0..n).all(|i| base(i).is_none()) || cov.shape() != (n, n) {
+            return cov.clone();
+        }
+        let t = self.base.translation.vector;
+        let r = self.base.rotation.scaled_axis();
+        // ∂t/∂δr = −[t]× (mm per mrad: t in metres); ∂r/∂δr = J_l⁻¹(r).
+        let lever = -t.cross_matrix();
+        let theta = r.norm();
+        let c = if theta < 1e-6 {
+            1.0 / 12.0
+        } else {
+            1.0 / (theta * theta) - (1.0 + theta.cos()) / (2.0 * theta * theta.sin())
+        };
+        let rx = r.cross_matrix();
+        let jinv = Matrix3::identity() - rx * 0.5 + rx * rx * c;
+        let mut g = nalgebra::DMatrix::<f64>::identity(n, n);
+        for i in 0..n {
+            let Some(a) = base(i) else { continue };
+            for k in 0..n {
+                let Some(b) = base(k).filter(|&b| b >= 3) else {
+                    continue;
+                };
+                g[(i, k)] = if a < 3 {
+                    lever[(a, b - 3)]
+                } else {
+                    jinv[(a - 3, b - 3)]
+                };
+            }
+        }
+        &g * cov * g.transpose()
+    }
+
+    /// The σ of the reported values of `params` ([`Geometry::reported_covariance`]):
+    /// `std` (the fit's) but for the base's parameters.
+    pub fn reported_std(
+        &self,
+        params: &[Param],
+        cov: &nalgebra::DMatrix<f64>,
+        std: &[f64],
+    ) -> Vec<f64> {
+        let cov = self.reported_covariance(params, cov);
+        (params.iter().zip(std).enumerate())
+            .map(|(i, (p, &s))| match p {
+                Param::Base { .. } => cov[(i, i)].max(0.0).sqrt(),
+                _ => s,
+            })
+            .collect()
+    }
+
     /// The value of geometric parameter `p` in the model, plus a last step
     /// `dx` not applied (reported units): the base as its translation \[mm\]
     /// and rotation vector (axis × angle) \[mrad\] in the measurement frame;
