@@ -405,7 +405,8 @@ impl Design {
         self.params.iter().position(|u| u == p)
     }
 
-    /// Residual `Δp − B x` \[m\] of row `i` for `x` on columns `cols`.
+    /// Residual `Δp − B x` \[m\] of row `i` for `x` on columns `cols`, as
+    /// the design holds the row (scaled by [`Rows::noise_scale`]).
     pub fn residual(&self, cols: &[usize], x: &[f64], i: usize) -> Vector3<f64> {
         let mut r = Vector3::new(self.y[3 * i], self.y[3 * i + 1], self.y[3 * i + 2]);
         for (&c, &v) in cols.iter().zip(x) {

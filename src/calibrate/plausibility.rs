@@ -443,14 +443,21 @@ fn outliers(rows: &[RowError], policy: &Policy) -> Option<String> {
 /// in its own (weighted) sum of squares, unless Gauss–Newton stopped at
 /// another stationary point.
 fn worse_than_nominal(report: &Report, margin: f64) -> Option<String> {
-    if report.method == "ols" {
+    // With rows of both kinds the fit's sum has the deflections' residuals
+    // over `√2` (`Rows::noise_scale`): summed here the same way.
+    let kinds = |d: bool| report.row_errors.iter().any(|r| r.deflection == d);
+    let mixed = kinds(true) && kinds(false);
+    if report.method == "ols" && !mixed {
         return worse_message(report.rms_um, report.nominal.rms_um, None, margin);
     }
     let weights: std::collections::HashMap<i64, [f64; 3]> =
         report.noise.iter().map(|n| (n.config, n.weight)).collect();
     let (mut fitted, mut nominal) = (0.0, 0.0);
     for r in &report.row_errors {
-        let w = weights.get(&r.config).copied().unwrap_or([1.0; 3]);
+        let mut w = weights.get(&r.config).copied().unwrap_or([1.0; 3]);
+        if mixed && r.deflection {
+            w = w.map(|w| w * std::f64::consts::FRAC_1_SQRT_2);
+        }
         for a in 0..3 {
             fitted += (w[a] * r.final_um[a]).powi(2);
             nominal += (w[a] * r.nominal_um[a]).powi(2);

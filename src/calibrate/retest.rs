@@ -118,7 +118,21 @@ pub fn revive(
     // stands, with its warnings.
     let predicted = chosen.iter().map(|(_, t)| t.delta_rss).sum::<f64>()
         / chosen[0].1.rss_before.max(f64::MIN_POSITIVE);
-    let realised = |f: &Fitted| 1.0 - (f.rms_um / first.rms_um).powi(2);
+    // (With rows of both kinds, on the design's scale: the deflections'
+    // residuals by `Rows::noise_scale`, as the tests summed them.)
+    let scaled_rss = |f: &Fitted| -> f64 {
+        (e.rows.rows.iter().zip(&f.residuals))
+            .map(|(row, r)| (r * e.rows.noise_scale(row)).norm_squared())
+            .sum()
+    };
+    let mixed = e.rows.kinds.absolute && e.rows.kinds.deflections;
+    let realised = |f: &Fitted| {
+        if mixed {
+            1.0 - scaled_rss(f) / scaled_rss(&first).max(f64::MIN_POSITIVE)
+        } else {
+            1.0 - (f.rms_um / first.rms_um).powi(2)
+        }
+    };
     let kept: Vec<Param> = match &refit {
         Ok(f) if realised(f) >= e.policy.min_realised * predicted => revived
             .iter()

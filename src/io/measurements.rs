@@ -109,7 +109,7 @@ pub type JointValues = smallvec::SmallVec<[f64; INLINE_JOINTS]>;
 /// as separate strings, then ~130 MB as one string per row, whose freed
 /// blocks the heap kept). The cells are joined by the unit separator
 /// `\u{1f}`, which a cell that parsed as a number cannot hold.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct WrittenCells {
     /// The shared text (`None`: no cell, or not yet attached by the reader).
     text: Option<std::sync::Arc<str>>,
@@ -117,6 +117,13 @@ pub struct WrittenCells {
     start: u32,
     /// End of this row's part of `text`.
     end: u32,
+}
+
+impl std::fmt::Debug for WrittenCells {
+    /// This row's cells (not the whole shared text).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.iter()).finish()
+    }
 }
 
 impl PartialEq for WrittenCells {

@@ -198,8 +198,10 @@ fn spread(x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// The pooled noise σ per axis \[µm\] of the final fit: the root mean
-/// square of the per-configuration σ (eq. 14's input).
+/// The pooled noise σ per axis \[µm\] of the final fit's rows: the root
+/// mean square of the per-configuration σ (eq. 14's input, a point's),
+/// and when the rows mix both kinds, of the rows' (a deflection's is `√2`
+/// a point's: `Rows::noise_scale`).
 pub fn noise_um(r: &Report) -> [f64; 3] {
     let mut s = [0.0; 3];
     if r.noise.is_empty() {
@@ -210,7 +212,15 @@ pub fn noise_um(r: &Report) -> [f64; 3] {
             *v += n.sigma_um[a] * n.sigma_um[a];
         }
     }
-    s.map(|v| (v / r.noise.len() as f64).sqrt())
+    let deflections = r.row_errors.iter().filter(|e| e.deflection).count();
+    let rows = r.row_errors.len();
+    let mixed = deflections > 0 && deflections < rows;
+    let share = if mixed {
+        deflections as f64 / rows as f64
+    } else {
+        0.0
+    };
+    s.map(|v| (v / r.noise.len() as f64 * (1.0 + share)).sqrt())
 }
 
 /// Residuals of `s` against its variable, one row of panels per axis:
