@@ -92,6 +92,31 @@ impl Cell {
     }
 }
 
+/// `f` of every job `0..jobs`, on as many threads as the machine has, in
+/// job order.
+pub fn in_parallel<T: Send>(jobs: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let f = &f;
+                s.spawn(move || {
+                    (t..jobs)
+                        .step_by(threads)
+                        .map(|i| (i, f(i)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        let mut all: Vec<_> = handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a job thread"))
+            .collect();
+        all.sort_by_key(|(i, _)| *i);
+        all.into_iter().map(|(_, v)| v).collect()
+    })
+}
+
 /// Runs `jobs` KR-270 jobs (seeds 0..jobs) at `noise` × Table 1 with
 /// `method`, no held-out error, the diagnosis on or off; on as many threads
 /// as the machine has.
@@ -102,7 +127,6 @@ pub fn run(method: Method, noise: f64, jobs: usize, diagnose: bool) -> Cell {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let job = Job::load(root.join("data/kr270/setup.toml")).expect("setup");
     let model = Kr270::new();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let settings = Settings {
         method,
         diagnose,
@@ -116,25 +140,7 @@ pub fn run(method: Method, noise: f64, jobs: usize, diagnose: bool) -> Cell {
         calibrate::calibrate(&job, &data, &settings, &mut |_| {})
             .unwrap_or_else(|e| panic!("job {i}: {e}"))
     };
-    let reports: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
-                s.spawn(move || {
-                    (t..jobs)
-                        .step_by(threads)
-                        .map(|i| (i, one(i)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        let mut all: Vec<_> = handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("a job thread"))
-            .collect();
-        all.sort_by_key(|(i, _)| *i);
-        all
-    });
+    let reports: Vec<_> = in_parallel(jobs, one).into_iter().enumerate().collect();
     let truth = kr270::WLS_VALUE;
     let mut z = vec![Vec::new(); kr270::PARAMS];
     let mut added = Vec::new();

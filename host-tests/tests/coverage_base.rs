@@ -23,6 +23,7 @@ use robcal::io::{parse_measurements, Job};
 use robcal_paper::kr270;
 use robcal_paper::rng::SplitMix64;
 
+use host_tests::coverage::in_parallel;
 use host_tests::exact::Kr270;
 
 const JOBS: usize = 300;
@@ -102,7 +103,6 @@ fn the_bases_intervals_are_its_poses() {
     let names = [
         "base.tx", "base.ty", "base.tz", "base.rx", "base.ry", "base.rz",
     ];
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let one = |i: usize| {
         let text = csv(&model, &mut SplitMix64::new(seed(i)));
         let data = parse_measurements(text.as_bytes(), "base.csv", &job.robot, &job.setup)
@@ -114,18 +114,7 @@ fn the_bases_intervals_are_its_poses() {
             (p.value - truth[names.iter().position(|m| *m == n).unwrap_or(0)]) / p.std
         })
     };
-    let z: Vec<[f64; 6]> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
-                s.spawn(move || (t..JOBS).step_by(threads).map(one).collect::<Vec<_>>())
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("a job thread"))
-            .collect()
-    });
+    let z: Vec<[f64; 6]> = in_parallel(JOBS, one);
     let mut table = String::new();
     let mut fails = Vec::new();
     let mut inside = 0;

@@ -21,6 +21,7 @@ use robcal::io::{parse_measurements, GeometryModel, Job};
 use robcal_paper::kr270;
 use robcal_paper::rng::SplitMix64;
 
+use host_tests::coverage::in_parallel;
 use host_tests::exact::Kr270;
 
 const JOBS: usize = 400;
@@ -65,7 +66,6 @@ fn run(method: Method) -> Vec<(String, Vec<f64>)> {
         heldout: false,
         ..Settings::default()
     };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let one = |i: usize| {
         let text = model.csv(&mut SplitMix64::new(seed(i)), 1.0);
         let data = parse_measurements(text.as_bytes(), "mixed.csv", &job.robot, &job.setup)
@@ -73,18 +73,7 @@ fn run(method: Method) -> Vec<(String, Vec<f64>)> {
         calibrate::calibrate(&job, &data, &settings, &mut |_| {})
             .unwrap_or_else(|e| panic!("job {i}: {e}"))
     };
-    let reports: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
-                s.spawn(move || (t..JOBS).step_by(threads).map(one).collect::<Vec<_>>())
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("a job thread"))
-            .collect()
-    });
+    let reports: Vec<_> = in_parallel(JOBS, one);
     // The truth: Table 3's compliances [µrad/(N·m)], offsets of 0.
     let truth = |name: &str| match kr270::PARAM_NAMES.iter().position(|n| *n == name) {
         Some(k) => Some(kr270::WLS_VALUE[k]),

@@ -128,8 +128,8 @@ struct Columns<'a> {
     /// mass).
     linearised: bool,
     lin: &'a Linearisation,
-    /// Whether deflection rows are scaled ([`Rows::noise_scale`]).
-    scaled: bool,
+    /// Whether the rows mix both kinds ([`super::rows::noise_scale`]).
+    mixed: bool,
 }
 
 impl<'a> Columns<'a> {
@@ -144,7 +144,7 @@ impl<'a> Columns<'a> {
             si: params.iter().map(|p| names.unit(p).si).collect(),
             linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
             lin,
-            scaled: all.kinds.absolute && all.kinds.deflections,
+            mixed: all.mixed(),
         }
     }
 
@@ -164,12 +164,11 @@ impl<'a> Columns<'a> {
             Vec::new()
         };
         let sample = row.sample(frames, &compliance, gravity_unit);
-        let scale = (self.scaled && row.kind == super::rows::RowKind::Deflection)
-            .then_some(std::f64::consts::FRAC_1_SQRT_2);
+        let scale = super::rows::noise_scale(self.mixed, row.kind);
         for ((p, &si), column) in self.params.iter().zip(&self.si).zip(piece.iter_mut()) {
             let mut col = p.column_si(&sample)? * si;
-            if let Some(s) = scale {
-                col *= s;
+            if scale != 1.0 {
+                col *= scale;
             }
             column[3 * k..3 * k + 3].copy_from_slice(col.as_slice());
         }
@@ -405,8 +404,7 @@ impl Design {
         self.params.iter().position(|u| u == p)
     }
 
-    /// Residual `Δp − B x` \[m\] of row `i` for `x` on columns `cols`, as
-    /// the design holds the row (scaled by [`Rows::noise_scale`]).
+    /// Residual `Δp − B x` \[m\] of row `i` (scaled: [`Rows::noise_scale`]).
     pub fn residual(&self, cols: &[usize], x: &[f64], i: usize) -> Vector3<f64> {
         let mut r = Vector3::new(self.y[3 * i], self.y[3 * i + 1], self.y[3 * i + 2]);
         for (&c, &v) in cols.iter().zip(x) {

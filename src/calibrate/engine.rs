@@ -454,11 +454,8 @@ impl Engine<'_> {
         // is too small for threads to pay.
         let groups = self.rows.configs.len();
         let settings = self.fit_settings;
-        // Deflections scaled in the design ([`Rows::noise_scale`]).
-        let (rows, scaled) = (
-            &self.rows,
-            self.rows.kinds.absolute && self.rows.kinds.deflections,
-        );
+        // Residuals in metres again ([`Rows::unscaled`]).
+        let rows = &self.rows;
         let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
             Some(m) => {
                 let small = groups * groups * cols.len() * cols.len() < 20_000;
@@ -480,16 +477,8 @@ impl Engine<'_> {
         };
         for g in 0..groups {
             if let Some(f) = fast.as_ref().filter(|f| f.ok.get(g) == Some(&true)) {
-                if scaled {
-                    let unscaled: Vec<Vector3<f64>> = by
-                        .of(g)
-                        .iter()
-                        .zip(&f.res[by.range(g)])
-                        .map(|(&i, &r)| self.rows.unscaled(i, r))
-                        .collect();
-                    res.extend(&unscaled);
-                } else {
-                    res.extend(&f.res[by.range(g)]);
+                for (&i, &r) in by.of(g).iter().zip(&f.res[by.range(g)]) {
+                    res.extend(&[self.rows.unscaled(i, r)]);
                 }
                 continue;
             }

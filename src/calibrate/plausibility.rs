@@ -41,7 +41,7 @@ mod determined;
 use super::geometry::Geometry;
 use super::names::Names;
 use super::report::{Report, RowError};
-use super::rows::Rows;
+use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy};
 use crate::io::{AngleUnit, Job, Measurements};
 
@@ -454,10 +454,17 @@ fn worse_than_nominal(report: &Report, margin: f64) -> Option<String> {
         report.noise.iter().map(|n| (n.config, n.weight)).collect();
     let (mut fitted, mut nominal) = (0.0, 0.0);
     for r in &report.row_errors {
-        let mut w = weights.get(&r.config).copied().unwrap_or([1.0; 3]);
-        if mixed && r.deflection {
-            w = w.map(|w| w * std::f64::consts::FRAC_1_SQRT_2);
-        }
+        let kind = if r.deflection {
+            RowKind::Deflection
+        } else {
+            RowKind::Absolute
+        };
+        let s = super::rows::noise_scale(mixed, kind);
+        let w = weights
+            .get(&r.config)
+            .copied()
+            .unwrap_or([1.0; 3])
+            .map(|w| w * s);
         for a in 0..3 {
             fitted += (w[a] * r.final_um[a]).powi(2);
             nominal += (w[a] * r.nominal_um[a]).powi(2);

@@ -86,8 +86,7 @@ pub struct Unexplained {
 pub struct ConfigNoise {
     /// `config` as in the CSV.
     pub config: i64,
-    /// Residual σ per axis x, y, z \[µm\] (eq. 14's σ): a measured point's
-    /// (a deflection's is `√2` times it; [`super::rows::Rows::noise_scale`]).
+    /// Residual σ per axis x, y, z \[µm\] (eq. 14's σ, a point's: [`super::rows::noise_scale`]).
     pub sigma_um: [f64; 3],
     /// The weight per axis the fit gave its rows (eq. 14; 1 for OLS).
     pub weight: [f64; 3],

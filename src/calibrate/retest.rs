@@ -125,9 +125,8 @@ pub fn revive(
             .map(|(row, r)| (r * e.rows.noise_scale(row)).norm_squared())
             .sum()
     };
-    let mixed = e.rows.kinds.absolute && e.rows.kinds.deflections;
     let realised = |f: &Fitted| {
-        if mixed {
+        if e.rows.mixed() {
             1.0 - scaled_rss(f) / scaled_rss(&first).max(f64::MIN_POSITIVE)
         } else {
             1.0 - (f.rms_um / first.rms_um).powi(2)

@@ -24,6 +24,8 @@ use crate::robot::{
 use crate::Error;
 
 mod build;
+mod noise;
+pub use noise::noise_scale;
 
 /// Which kinds of rows there are: the core's, for its candidate rule.
 pub use crate::model::effect::DataKinds;
@@ -270,28 +272,6 @@ pub struct Rows {
 }
 
 impl Rows {
-    /// The factor `row` enters the design with (`y`, columns, instrument
-    /// σ): `1/√2` for a deflection (two points' noise) when the rows mix
-    /// both kinds, else 1, so that eq. 14's σ per configuration and axis is
-    /// one point's for both (`docs/numerics.md` §7). Residuals are
-    /// reported unscaled ([`Rows::unscaled`]).
-    pub fn noise_scale(&self, row: &Row) -> f64 {
-        if self.kinds.absolute && self.kinds.deflections && row.kind == RowKind::Deflection {
-            std::f64::consts::FRAC_1_SQRT_2
-        } else {
-            1.0
-        }
-    }
-
-    /// Row `i`'s residual `r` from the design (scaled by
-    /// [`Rows::noise_scale`]) in metres again.
-    pub fn unscaled(&self, i: usize, r: Vector3<f64>) -> Vector3<f64> {
-        match self.rows.get(i).map(|row| self.noise_scale(row)) {
-            Some(s) if s != 1.0 => r / s,
-            _ => r,
-        }
-    }
-
     /// Recomputes every row at `geometry` and `lin` (see
     /// [`super::linearisation`]): frames, predicted position, torques, the
     /// columns' joint twists and the left-hand side `y`.
