@@ -10,7 +10,7 @@ use super::calibrated::CalibratedModel;
 use super::design::Design;
 use super::fit::{fit, fit_known, fit_moments, information, leading, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
-use super::heldout::ols_heldout;
+use super::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
 use super::linearisation::Linearisation;
 use super::moments::DesignMoments;
 use super::names::Names;
@@ -439,11 +439,9 @@ impl Engine<'_> {
         let Some(by) = d.group_rows() else {
             return Ok(None);
         };
-        let fast = if self.fit_settings.method == Method::Ols {
-            ols_heldout(&d, &cols, &by)
-        } else {
-            None
-        };
+        // (Its residuals a window of groups at a time: `WINDOW_ROWS` rows.)
+        let fast = (self.fit_settings.method == Method::Ols).then(|| ols_heldout(&d, &cols));
+        let (fast, mut window): (_, Option<HeldOut>) = (fast.flatten(), None);
         // Weighted fits: each fold from the moments per configuration and
         // axis, built once (`moments`); a fold that leaves a parameter
         // unidentified is refitted from the rows below.
@@ -476,8 +474,13 @@ impl Engine<'_> {
             None => Vec::new(),
         };
         for g in 0..groups {
-            if let Some(f) = fast.as_ref().filter(|f| f.ok.get(g) == Some(&true)) {
-                for (&i, &r) in by.of(g).iter().zip(&f.res[by.range(g)]) {
+            if let Some(f) = &fast {
+                if window.as_ref().is_none_or(|w| g >= w.first + w.ok.len()) {
+                    window = Some(f.groups(&by, OlsHeldOut::window(&by, g, WINDOW_ROWS)));
+                }
+            }
+            if let Some(r) = window.as_ref().and_then(|w| w.of(&by, g)) {
+                for (&i, &r) in by.of(g).iter().zip(r) {
                     res.extend(&[self.rows.unscaled(i, r)]);
                 }
                 continue;

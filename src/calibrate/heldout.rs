@@ -17,7 +17,9 @@
 //! identity does not reproduce; the engine refits those from the moments
 //! per configuration and axis ([`super::moments`]), without the rows.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use std::borrow::Cow;
+
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn, Matrix3, Vector3};
 
 use super::design::{Design, GroupRows};
 
@@ -25,6 +27,10 @@ use super::design::{Design, GroupRows};
 /// other group has (removing it leaves a parameter unidentified): the
 /// caller refits that group.
 const MIN_EIGENVALUE: f64 = 1e-9;
+
+/// Rows whose held-out residuals are computed at a time
+/// ([`OlsHeldOut::window`]): 1.5 MB of residuals.
+pub const WINDOW_ROWS: usize = 1 << 16;
 
 /// Whether `I − H_gg` with these eigenvalues leaves the fit without the
 /// group identified (every eigenvalue above [`MIN_EIGENVALUE`]).
@@ -34,39 +40,71 @@ fn invertible(eigenvalues: &[f64]) -> bool {
         .any(|v| v.is_nan() || *v <= MIN_EIGENVALUE)
 }
 
-/// The held-out residuals of [`ols_heldout`], in the order of its
-/// [`GroupRows`].
+/// The held-out residuals of some groups under an [`OlsHeldOut`], in the
+/// order of its [`GroupRows`]: [`OlsHeldOut::groups`].
 #[derive(Debug, Clone)]
 pub struct HeldOut {
-    /// The held-out residual \[m\] of every row, group by group as in
-    /// [`GroupRows::all`] (zero in a group that is not `ok`).
+    /// The first group.
+    pub first: usize,
+    /// The held-out residual \[m\] of every row of the groups, group by
+    /// group as in [`GroupRows::all`] (zero in a group that is not `ok`);
+    /// group `g`'s are at [`GroupRows::range`]`(g)` less
+    /// [`GroupRows::offset`]`(first)`.
     pub res: Vec<Vector3<f64>>,
-    /// Per group, whether its residuals were computed: `false` when its
-    /// removal leaves the fit singular (the caller refits it).
+    /// Per group from `first`, whether its residuals were computed:
+    /// `false` when its removal leaves the fit singular (the caller refits
+    /// it).
     pub ok: Vec<bool>,
 }
 
-/// The held-out residuals of every group of `d` under the OLS fit on the
-/// columns `cols` (`by`: `d`'s rows by group); `None` overall when `Λ`
-/// itself is not positive definite. The groups on worker threads
-/// ([`super::parallel`]), each independent of the others: the same bits
-/// on any number of threads.
-pub fn ols_heldout(d: &Design, cols: &[usize], by: &GroupRows) -> Option<HeldOut> {
-    ols_heldout_on(d, cols, by, super::parallel::for_rows(d.rows()))
+impl HeldOut {
+    /// Group `g`'s held-out residuals, when they are here and computed.
+    pub fn of(&self, by: &GroupRows, g: usize) -> Option<&[Vector3<f64>]> {
+        let k = g.checked_sub(self.first)?;
+        if self.ok.get(k) != Some(&true) {
+            return None;
+        }
+        let base = by.offset(self.first);
+        let r = by.range(g);
+        self.res.get(r.start - base..r.end - base)
+    }
+}
+
+/// The OLS fit on some columns of a design, factorised once, whose
+/// held-out residuals are computed for a range of groups at a time
+/// ([`OlsHeldOut::groups`]): at a million configurations the residuals of
+/// them all were 24 MB at the run's peak.
+pub struct OlsHeldOut<'a> {
+    d: &'a Design,
+    /// The columns (the design's own when they are all of them in order).
+    b: Cow<'a, DMatrix<f64>>,
+    x: DVector<f64>,
+    chol: Cholesky<f64, Dyn>,
+    /// `L` of `Λ = L Lᵀ` by rows: row `r`'s `L_rc`, `c < r`, at
+    /// `[r n..r n + r]`.
+    l_rows: Vec<f64>,
+    /// `1 / L_rr`.
+    l_inv_diag: Vec<f64>,
+    threads: usize,
+}
+
+/// The OLS fit on the columns `cols` of `d`, ready for the held-out
+/// residuals of its groups; `None` when `Λ` itself is not positive
+/// definite. The groups on worker threads ([`super::parallel`]), each
+/// independent of the others: the same bits on any number of threads.
+pub fn ols_heldout<'a>(d: &'a Design, cols: &[usize]) -> Option<OlsHeldOut<'a>> {
+    ols_heldout_on(d, cols, super::parallel::for_rows(d.rows()))
 }
 
 /// [`ols_heldout`] on `threads` threads.
-fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) -> Option<HeldOut> {
+fn ols_heldout_on<'a>(d: &'a Design, cols: &[usize], threads: usize) -> Option<OlsHeldOut<'a>> {
     // All columns in order (the engine's case): the design itself, not a
     // copy of it (with many rows the copy is the largest allocation).
-    let selected;
     let b = if cols.len() == d.b.ncols() && cols.iter().enumerate().all(|(i, &c)| i == c) {
-        &d.b
+        Cow::Borrowed(&d.b)
     } else {
-        selected = d.b.select_columns(cols);
-        &selected
+        Cow::Owned(d.b.select_columns(cols))
     };
-    let y = &d.y;
     // `Λ = BᵀB` as nalgebra's `tr_mul` computes it (each element the `dot`
     // of two columns), the upper triangle's dots on worker threads and
     // mirrored: the same bits (a product commutes), half the dots.
@@ -82,70 +120,152 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         lambda[(j, i)] = v;
     }
     let chol = lambda.cholesky()?;
-    let x = chol.solve(&b.tr_mul(&DVector::from_column_slice(y)));
+    let x = chol.solve(&b.tr_mul(&DVector::from_column_slice(&d.y)));
     if !x.iter().all(|v| v.is_finite()) {
         return None;
     }
-    // A group of one row (one point per configuration: the case with the
-    // most groups) in fixed-size arithmetic without an allocation per
-    // group: `w_a = Λ⁻¹ b_aᵀ` from the inverse, `H_ab = b_b · w_a`.
-    //
-    // `w` holds the row's three axes (`[a n..(a + 1) n]`, read once from
-    // the design's columns) then `w_a` (`[(3 + a) n..(4 + a) n]`). Each
-    // `w_a` is summed over `c` in order, as `(0..n).map(..).sum()` sums it
-    // (from its first term: a float sum starts at −0.0), for all `r` side
-    // by side (the inverse's column `c` is contiguous): the same bits, where
-    // a sum per `r` read the design and the inverse across their strides.
-    let inv = chol.inverse();
-    let one = |i: usize, w: &mut [f64], out: &mut Vec<Vector3<f64>>| {
-        let (bi, w) = w.split_at_mut(3 * n);
-        for c in 0..n {
-            for a in 0..3 {
-                bi[a * n + c] = b[(3 * i + a, c)];
-            }
+    let l = chol.l();
+    let mut l_rows = vec![0.0; n * n];
+    for r in 0..n {
+        for c in 0..r {
+            l_rows[r * n + c] = l[(r, c)];
         }
-        let mut e = Vector3::from_fn(|a, _| y[3 * i + a]);
-        for (c, xc) in x.iter().enumerate() {
-            for a in 0..3 {
-                e[a] -= bi[a * n + c] * xc;
-            }
-        }
-        for a in 0..3 {
-            let (row, wa) = (&bi[a * n..(a + 1) * n], &mut w[a * n..(a + 1) * n]);
-            for (c, &bc) in row.iter().enumerate() {
-                let column = &inv.as_slice()[c * n..(c + 1) * n];
-                if c == 0 {
-                    for (wr, &v) in wa.iter_mut().zip(column) {
-                        *wr = v * bc;
-                    }
-                } else {
-                    for (wr, &v) in wa.iter_mut().zip(column) {
-                        *wr += v * bc;
-                    }
+    }
+    let l_inv_diag = (0..n).map(|r| 1.0 / l[(r, r)]).collect();
+    Some(OlsHeldOut {
+        d,
+        b,
+        x,
+        chol,
+        l_rows,
+        l_inv_diag,
+        threads,
+    })
+}
+
+impl OlsHeldOut<'_> {
+    /// The held-out residuals of the groups `range` (`by`: the design's
+    /// rows by group), contiguous runs of them on worker threads.
+    pub fn groups(&self, by: &GroupRows, range: std::ops::Range<usize>) -> HeldOut {
+        let count = range.len();
+        let threads = self.threads.clamp(1, count.max(1));
+        let n = self.x.len();
+        let runs = super::parallel::map(threads, threads, |k| {
+            let (lo, hi) = (
+                range.start + k * count / threads,
+                range.start + (k + 1) * count / threads,
+            );
+            let mut z = vec![0.0; 3 * n];
+            let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
+            let mut ok = Vec::with_capacity(hi - lo);
+            for g in lo..hi {
+                let rs = by.of(g);
+                let done = match rs {
+                    [] => true,
+                    [i] => self.one(*i, &mut z, &mut res),
+                    _ => self.many(rs, &mut res),
+                };
+                if !done {
+                    res.extend(rs.iter().map(|_| Vector3::zeros()));
                 }
+                ok.push(done);
+            }
+            (res, ok)
+        });
+        // The first run's vectors grown by the others' (not a third copy).
+        let mut runs = runs.into_iter();
+        let (res, ok) = runs.next().unwrap_or_default();
+        let mut out = HeldOut {
+            first: range.start,
+            res,
+            ok,
+        };
+        for (res, ok) in runs {
+            out.res.extend(res);
+            out.ok.extend(ok);
+        }
+        out
+    }
+
+    /// The groups from `first` whose rows add up to about `rows` (at least
+    /// one group; none past the last): [`OlsHeldOut::groups`]' next range.
+    pub fn window(by: &GroupRows, first: usize, rows: usize) -> std::ops::Range<usize> {
+        let groups = by.groups();
+        let target = by.offset(first).saturating_add(rows);
+        // The first group from which `offset` reaches the target (offsets
+        // ascend with the group).
+        let (mut lo, mut hi) = (first.saturating_add(1), groups);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if by.offset(mid) >= target {
+                hi = mid;
+            } else {
+                lo = mid + 1;
             }
         }
-        let bg = |a: usize, c: usize| bi[a * n + c];
-        let ih = Matrix3::from_fn(|a, c| {
-            let h: f64 = (0..n).map(|r| bg(c, r) * w[a * n + r]).sum();
-            f64::from(u8::from(a == c)) - h
-        });
-        // Symmetric by construction; its rounding is not.
-        let ih = (ih + ih.transpose()) * 0.5;
-        let eig = ih.symmetric_eigen();
-        if !invertible(eig.eigenvalues.as_slice()) {
+        first.min(groups)..lo.min(groups).max(first.min(groups))
+    }
+
+    /// A group of one row (one point per configuration: the case with the
+    /// most groups) in fixed-size arithmetic without an allocation per
+    /// group: `z_a = L⁻¹ b_aᵀ` by forward substitution (`z` holds the three
+    /// axes, `[a n..(a + 1) n]`), `H_ab = z_a · z_b`, and `(I − H) e(−g) = e`
+    /// solved by Cholesky once `I − H`'s smallest eigenvalue (closed form)
+    /// is above [`MIN_EIGENVALUE`]. (The inverse of `Λ` times each axis and
+    /// a 3 × 3 eigendecomposition were half of a million rows' held-out
+    /// error.)
+    fn one(&self, i: usize, z: &mut [f64], out: &mut Vec<Vector3<f64>>) -> bool {
+        let (b, n) = (&*self.b, self.x.len());
+        let mut e = Vector3::from_fn(|a, _| self.d.y[3 * i + a]);
+        for (c, xc) in self.x.iter().enumerate() {
+            for a in 0..3 {
+                e[a] -= b[(3 * i + a, c)] * xc;
+            }
+        }
+        for r in 0..n {
+            let lr = &self.l_rows[r * n..r * n + r];
+            for a in 0..3 {
+                let za = &z[a * n..a * n + r];
+                let mut s = b[(3 * i + a, r)];
+                for (l, zc) in lr.iter().zip(za) {
+                    s -= l * zc;
+                }
+                z[a * n + r] = s * self.l_inv_diag[r];
+            }
+        }
+        let za = |a: usize| &z[a * n..(a + 1) * n];
+        let dot = |a: usize, c: usize| -> f64 { za(a).iter().zip(za(c)).map(|(u, v)| u * v).sum() };
+        let (h01, h02, h12) = (dot(0, 1), dot(0, 2), dot(1, 2));
+        let ih = Matrix3::new(
+            1.0 - dot(0, 0),
+            -h01,
+            -h02,
+            -h01,
+            1.0 - dot(1, 1),
+            -h12,
+            -h02,
+            -h12,
+            1.0 - dot(2, 2),
+        );
+        if !invertible(&[smallest_eigenvalue(&ih)]) {
             return false;
         }
-        let t = eig.eigenvectors.tr_mul(&e).component_div(&eig.eigenvalues);
-        out.push(eig.eigenvectors * t);
+        let Some(chol) = ih.cholesky() else {
+            return false;
+        };
+        out.push(chol.solve(&e));
         true
-    };
-    let many = |rs: &[usize], out: &mut Vec<Vector3<f64>>| {
+    }
+
+    /// A group of several rows: `I − H_gg` from the factorisation of `Λ`,
+    /// its eigendecomposition, the residuals through it.
+    fn many(&self, rs: &[usize], out: &mut Vec<Vector3<f64>>) -> bool {
+        let (b, y, n) = (&*self.b, &self.d.y, self.x.len());
         let m = 3 * rs.len();
         let bg = DMatrix::from_fn(m, n, |r, c| b[(3 * rs[r / 3] + r % 3, c)]);
-        let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &x;
+        let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &self.x;
         // I − H_gg, symmetric positive semidefinite.
-        let ih = DMatrix::identity(m, m) - &bg * chol.solve(&bg.transpose());
+        let ih = DMatrix::identity(m, m) - &bg * self.chol.solve(&bg.transpose());
         let eig = ih.symmetric_eigen();
         if !invertible(eig.eigenvalues.as_slice()) {
             return false;
@@ -155,37 +275,28 @@ fn ols_heldout_on(d: &Design, cols: &[usize], by: &GroupRows, threads: usize) ->
         let e = &eig.eigenvectors * e;
         out.extend((0..rs.len()).map(|k| Vector3::new(e[3 * k], e[3 * k + 1], e[3 * k + 2])));
         true
-    };
-    // Contiguous runs of groups, one per thread.
-    let groups = by.groups();
-    let threads = threads.clamp(1, groups.max(1));
-    let runs = super::parallel::map(threads, threads, |k| {
-        let (lo, hi) = (k * groups / threads, (k + 1) * groups / threads);
-        let mut w = vec![0.0; 6 * n];
-        let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
-        let mut ok = Vec::with_capacity(hi - lo);
-        for g in lo..hi {
-            let rs = by.of(g);
-            let done = match rs {
-                [i] => one(*i, &mut w, &mut res),
-                _ => many(rs, &mut res),
-            };
-            if !done {
-                res.extend(rs.iter().map(|_| Vector3::zeros()));
-            }
-            ok.push(done);
-        }
-        (res, ok)
-    });
-    // The first run's vectors grown by the others' (not a third copy).
-    let mut runs = runs.into_iter();
-    let (res, ok) = runs.next().unwrap_or_default();
-    let mut out = HeldOut { res, ok };
-    for (res, ok) in runs {
-        out.res.extend(res);
-        out.ok.extend(ok);
     }
-    Some(out)
+}
+
+/// The smallest eigenvalue of a symmetric 3 × 3 matrix, in closed form
+/// (the trigonometric solution of its characteristic cubic; absolute error
+/// of a few `ε` times its largest element); NaN when an element is.
+fn smallest_eigenvalue(m: &Matrix3<f64>) -> f64 {
+    let off = m[(0, 1)].powi(2) + m[(0, 2)].powi(2) + m[(1, 2)].powi(2);
+    let q = m.trace() / 3.0;
+    let diag = (m[(0, 0)] - q).powi(2) + (m[(1, 1)] - q).powi(2) + (m[(2, 2)] - q).powi(2);
+    let p = ((diag + 2.0 * off) / 6.0).sqrt();
+    if p.is_nan() {
+        return f64::NAN;
+    }
+    if p == 0.0 {
+        // Diagonal and equal.
+        return q;
+    }
+    let c = (m - Matrix3::identity() * q) / p;
+    let r = (c.determinant() / 2.0).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos()
 }
 
 #[cfg(test)]
@@ -232,7 +343,9 @@ mod tests {
             let d = design(groups, per, n, seed);
             let cols: Vec<usize> = (0..n).collect();
             let by = d.group_rows().expect("groups in range");
-            let fast = ols_heldout(&d, &cols, &by).expect("positive definite");
+            let fast = ols_heldout(&d, &cols)
+                .expect("positive definite")
+                .groups(&by, 0..groups);
             for g in 0..groups {
                 assert!(fast.ok[g], "identifiable without the group");
                 let res = &fast.res[by.range(g)];
@@ -262,10 +375,15 @@ mod tests {
         }
         let by = d.group_rows().expect("groups in range");
         let cols: Vec<usize> = (0..6).collect();
-        let one = ols_heldout_on(&d, &cols, &by, 1).expect("positive definite");
+        let all = 0..by.groups();
+        let one = ols_heldout_on(&d, &cols, 1)
+            .expect("positive definite")
+            .groups(&by, all.clone());
         assert!(!one.ok[0] && one.ok[1..].iter().all(|&ok| ok));
         for threads in [2, 3, 7, 100] {
-            let many = ols_heldout_on(&d, &cols, &by, threads).expect("positive definite");
+            let many = ols_heldout_on(&d, &cols, threads)
+                .expect("positive definite")
+                .groups(&by, all.clone());
             assert_eq!(many.ok, one.ok);
             let bits = |h: &HeldOut| -> Vec<u64> {
                 h.res
@@ -299,8 +417,68 @@ mod tests {
             d.b[(r, 0)] = 0.0;
         }
         let by = d.group_rows().expect("groups in range");
-        let fast = ols_heldout(&d, &[0, 1, 2], &by).expect("positive definite");
+        let fast = ols_heldout(&d, &[0, 1, 2])
+            .expect("positive definite")
+            .groups(&by, 0..6);
         assert!(!fast.ok[0]);
         assert!(fast.ok[1..].iter().all(|&ok| ok));
+        assert!(fast.of(&by, 0).is_none() && fast.of(&by, 6).is_none());
+    }
+
+    #[test]
+    fn windows_of_groups_give_the_residuals_of_all_at_once() {
+        let mut d = design(50, 1, 5, 9);
+        d.group = (0..50)
+            .map(|i| [0, 1, 1, 2, 3, 3, 3][i % 7] + 4 * (i / 7))
+            .collect();
+        d.groups = 4 * 8;
+        let by = d.group_rows().expect("groups in range");
+        let cols: Vec<usize> = (0..5).collect();
+        let fit = ols_heldout(&d, &cols).expect("positive definite");
+        let all = fit.groups(&by, 0..by.groups());
+        for rows in [1, 2, 5, 1000] {
+            let mut first = 0;
+            let mut seen = 0;
+            while first < by.groups() {
+                let range = OlsHeldOut::window(&by, first, rows);
+                assert!(range.start == first && range.end > first, "{range:?}");
+                let part = fit.groups(&by, range.clone());
+                for g in range.clone() {
+                    assert_eq!(part.of(&by, g), all.of(&by, g));
+                    seen += 1;
+                }
+                first = range.end;
+            }
+            assert_eq!(seen, by.groups());
+        }
+        assert_eq!(
+            OlsHeldOut::window(&by, by.groups(), 4),
+            by.groups()..by.groups()
+        );
+    }
+
+    #[test]
+    fn the_closed_form_smallest_eigenvalue_is_the_decompositions() {
+        let mut next = super::super::design::testing::rng(11);
+        for k in 0..2000 {
+            let a = Matrix3::from_fn(|_, _| next());
+            // Symmetric; every fourth nearly singular, some diagonal.
+            let mut m = a * a.transpose();
+            if k % 4 == 0 {
+                let v = a.column(0).normalize();
+                m = Matrix3::identity() - v * v.transpose() * (1.0 - 1e-12 * k as f64);
+            }
+            if k % 7 == 0 {
+                m = Matrix3::from_diagonal(&m.diagonal());
+            }
+            let want = m.symmetric_eigenvalues().min();
+            let got = smallest_eigenvalue(&m);
+            assert!(
+                (got - want).abs() <= 1e-14 * m.norm().max(1.0),
+                "{got} vs {want}"
+            );
+        }
+        assert_eq!(smallest_eigenvalue(&(Matrix3::identity() * 2.0)), 2.0);
+        assert!(smallest_eigenvalue(&Matrix3::from_element(f64::NAN)).is_nan());
     }
 }
