@@ -61,16 +61,10 @@ impl Rows {
         let threads = crate::calibrate::parallel::for_rows(entering.len()).min(dof);
         let per_joint = crate::calibrate::parallel::map(dof, threads, |j| {
             let values: Vec<f64> = entering.iter().map(|o| o.q[j]).collect();
-            let mut sorted = values.clone();
-            // (Equal under `total_cmp` is the same bits: unstable is the
-            // same order, and faster on a million values.)
-            sorted.sort_unstable_by(f64::total_cmp);
-            let mut centres = Vec::new();
-            clusters(&sorted, |c| centres.push(c));
             let mut jb = Vec::new();
             let mut counts = Vec::new();
             let mut written_bins = Vec::new();
-            if centres.len() <= policy.max_bins {
+            if let Some(mut centres) = clusters_at_most(&values, policy.max_bins) {
                 // (Only here: with many distinct values, e.g. random poses,
                 // the key's scan of every value made this sort quadratic
                 // for bins that are then not used.)
@@ -242,4 +236,84 @@ fn group_of(configs: &[i64], config: i64, hint: &mut usize) -> usize {
     };
     *hint = g;
     g
+}
+
+/// The centres of [`clusters`] of `values` (in sorted order) when there
+/// are at most `max` of them, else `None`: sorted a growing prefix at a
+/// time (the smallest values selected, then sorted), stopping once the
+/// prefix's closed clusters are more than `max` (a later value never
+/// joins a closed cluster). At a million random joint values, as many
+/// clusters show in the first few thousand: two selections, where the
+/// sort of every value was 0.1 s a joint.
+fn clusters_at_most(values: &[f64], max: usize) -> Option<Vec<f64>> {
+    let mut v = values.to_vec();
+    let n = v.len();
+    // `v[..sorted]`: the `sorted` smallest values, in order.
+    let (mut sorted, mut next) = (0, PREFIX.min(n));
+    loop {
+        if next >= n / 4 {
+            // (Equal under `total_cmp` is the same bits: unstable is the
+            // same order, and faster on a million values.)
+            v[sorted..].sort_unstable_by(f64::total_cmp);
+            sorted = n;
+        } else {
+            v[sorted..].select_nth_unstable_by(next - sorted - 1, f64::total_cmp);
+            v[sorted..next].sort_unstable_by(f64::total_cmp);
+            sorted = next;
+        }
+        let mut count = 0_usize;
+        clusters(&v[..sorted], |_| count += 1);
+        if sorted == n {
+            if count > max {
+                return None;
+            }
+            let mut centres = Vec::with_capacity(count);
+            clusters(&v, |c| centres.push(c));
+            return Some(centres);
+        }
+        if count.saturating_sub(1) > max {
+            return None;
+        }
+        next = next.saturating_mul(2).min(n);
+    }
+}
+
+/// The first prefix [`clusters_at_most`] sorts.
+const PREFIX: usize = 4096;
+
+#[cfg(test)]
+mod tests {
+    use super::{clusters, clusters_at_most};
+
+    #[test]
+    fn the_clusters_of_a_prefix_decide_as_those_of_all_values() {
+        let mut s = 7_u64;
+        let mut next = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // Random values, binned values with jitter, a few values, one.
+        let random: Vec<f64> = (0..100_000).map(|_| 6.0 * next() - 3.0).collect();
+        let binned: Vec<f64> = (0..100_000)
+            .map(|i| (i % 9) as f64 * 0.3 + 2e-4 * next())
+            .collect();
+        let wide: Vec<f64> = (0..40_000).map(|i| (i % 40) as f64 * 0.01).collect();
+        for values in [random, binned, wide, vec![0.5; 3], vec![1.0], Vec::new()] {
+            let mut sorted = values.clone();
+            sorted.sort_unstable_by(f64::total_cmp);
+            let mut all = Vec::new();
+            clusters(&sorted, |c| all.push(c));
+            for max in [0, 8, 9, 32, 39, 40, 1000] {
+                let want = (all.len() <= max).then(|| all.clone());
+                assert_eq!(
+                    clusters_at_most(&values, max),
+                    want,
+                    "{} values, max {max}",
+                    values.len()
+                );
+            }
+        }
+    }
 }
