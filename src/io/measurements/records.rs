@@ -273,16 +273,13 @@ impl Batch {
 
 /// Where the lines of `bytes[range]` end (`\n`, `\r\n` or a lone `\r`,
 /// as the csv crate's records do), positions in `bytes`.
+/// (`memchr`'s SIMD search: a byte at a time was a tenth of a million
+/// rows' run.)
 pub(super) fn line_ends(bytes: &[u8], range: std::ops::Range<usize>) -> Vec<usize> {
     let from = range.start;
-    bytes[range]
-        .iter()
-        .enumerate()
-        .filter_map(|(k, &b)| {
-            let i = from + k;
-            let end = b == b'\n' || (b == b'\r' && bytes.get(i + 1) != Some(&b'\n'));
-            end.then_some(i)
-        })
+    memchr::memchr2_iter(b'\n', b'\r', &bytes[range])
+        .map(|k| from + k)
+        .filter(|&i| bytes[i] == b'\n' || bytes.get(i + 1) != Some(&b'\n'))
         .collect()
 }
 
@@ -379,4 +376,26 @@ pub(super) fn chunked(
         }
     }
     Some((observations, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::line_ends;
+
+    #[test]
+    fn line_ends_are_lf_crlf_and_a_lone_cr_in_any_range() {
+        let bytes = b"a,b\nc\r\nd\re\r\r\n\n\rf\r";
+        // A byte at a time (the reference).
+        let want: Vec<usize> = (0..bytes.len())
+            .filter(|&i| {
+                bytes[i] == b'\n' || (bytes[i] == b'\r' && bytes.get(i + 1) != Some(&b'\n'))
+            })
+            .collect();
+        assert_eq!(want, [3, 6, 8, 10, 12, 13, 14, 16]);
+        for split in 0..=bytes.len() {
+            let mut got = line_ends(bytes, 0..split);
+            got.extend(line_ends(bytes, split..bytes.len()));
+            assert_eq!(got, want, "split at {split}");
+        }
+    }
 }
