@@ -37,6 +37,7 @@
 //! | [`retest`] | the parameters left out at the nominal robot, tested again at the fitted one |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
+//! | `widest` | the host's passes over many rows compiled for the widest instruction set found at run time (same bits as the baseline) |
 //! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; building the rows; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
@@ -83,6 +84,7 @@ pub mod settings;
 pub mod trial;
 pub mod validate;
 mod view;
+mod widest;
 
 use nalgebra::Vector3;
 

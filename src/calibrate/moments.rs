@@ -21,6 +21,7 @@
 use nalgebra::{DMatrix, DVector, Dyn, Vector3};
 
 use super::design::Design;
+use super::widest::{widest, Kernel};
 use crate::estimate::accumulator::symmetric;
 use crate::estimate::{
     group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Fit, Noise,
@@ -357,7 +358,22 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// `y += Σ_c x_c k_c` over the terms `(x_c, k_c)` in order, each element's
 /// sum as one [`axpy`] after the other (`y + x₁k₁`, then `+ x₂k₂`, …), four
 /// terms per pass over `y`.
+/// (Compiled for the widest instruction set: [`widest`].)
 fn axpy_cells(y: &mut [f64], terms: &[(&[f64], f64)]) {
+    struct Op<'y, 't, 'x>(&'y mut [f64], &'t [(&'x [f64], f64)]);
+    impl Kernel for Op<'_, '_, '_> {
+        type Output = ();
+        #[inline(always)]
+        fn run(self) {
+            axpy_cells_on(self.0, self.1);
+        }
+    }
+    widest(Op(y, terms));
+}
+
+/// [`axpy_cells`]' arithmetic.
+#[inline(always)]
+fn axpy_cells_on(y: &mut [f64], terms: &[(&[f64], f64)]) {
     let mut fours = terms.chunks_exact(4);
     for t in fours.by_ref() {
         let (x0, x1, x2, x3) = (
@@ -379,7 +395,22 @@ fn axpy_cells(y: &mut [f64], terms: &[(&[f64], f64)]) {
 /// `(Σ aᵢ sᵢ, Σ bᵢ sᵢ)` of each of three `s` in one pass, each sum in four
 /// partial sums (independent chains the processor can overlap), combined
 /// as `(p₀ + p₁) + (p₂ + p₃)` and the remainder added after.
+/// (Compiled for the widest instruction set: [`widest`].)
 fn dot2x3(a: &[f64], b: &[f64], s: [&[f64]; 3]) -> [(f64, f64); 3] {
+    struct Op<'a>(&'a [f64], &'a [f64], [&'a [f64]; 3]);
+    impl Kernel for Op<'_> {
+        type Output = [(f64, f64); 3];
+        #[inline(always)]
+        fn run(self) -> [(f64, f64); 3] {
+            dot2x3_on(self.0, self.1, self.2)
+        }
+    }
+    widest(Op(a, b, s))
+}
+
+/// [`dot2x3`]'s arithmetic.
+#[inline(always)]
+fn dot2x3_on(a: &[f64], b: &[f64], s: [&[f64]; 3]) -> [(f64, f64); 3] {
     let (mut p, mut q) = ([[0.0; 4]; 3], [[0.0; 4]; 3]);
     let len = 4 * (a.len() / 4);
     for i in (0..len).step_by(4) {

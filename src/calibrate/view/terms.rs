@@ -2,6 +2,8 @@
 //! upper triangle in row order (by columns, so that threads can share a
 //! triangle) and four rows' leverages at once.
 
+use super::super::widest::{widest, Kernel};
+
 /// One row's share of a rank-3 update: its three axes' columns, the factor
 /// of each axis (`w²`, or `w⁴σ²` for `M`) and its `Δp`.
 pub(super) struct Term<'a> {
@@ -17,7 +19,38 @@ pub(super) struct Term<'a> {
 /// columns `j` in `columns` (and their `η_j`): each element's sum is the
 /// same whichever columns a call takes, so that threads may share the
 /// triangle by columns ([`column_shares`]).
+///
+/// Compiled for the widest instruction set the processor has
+/// ([`super::super::widest`]): wider vectors across the elements of a
+/// column, each element's arithmetic, and so its bits, those of the
+/// baseline build.
 pub(super) fn add_terms(
+    m: &mut [f64],
+    eta: Option<&mut [f64]>,
+    n: usize,
+    terms: &[Term<'_>],
+    columns: std::ops::Range<usize>,
+) {
+    struct Op<'m, 't, 'b>(
+        &'m mut [f64],
+        Option<&'m mut [f64]>,
+        usize,
+        &'t [Term<'b>],
+        std::ops::Range<usize>,
+    );
+    impl Kernel for Op<'_, '_, '_> {
+        type Output = ();
+        #[inline(always)]
+        fn run(self) {
+            add_terms_on(self.0, self.1, self.2, self.3, self.4);
+        }
+    }
+    widest(Op(m, eta, n, terms, columns));
+}
+
+/// [`add_terms`]' arithmetic, inlined into the dispatched function.
+#[inline(always)]
+fn add_terms_on(
     m: &mut [f64],
     mut eta: Option<&mut [f64]>,
     n: usize,
@@ -79,7 +112,23 @@ pub(super) const LANES: usize = 4;
 /// index order), bit for bit; the `3 LANES` sums are independent chains
 /// side by side (the processor overlaps them, the compiler may vectorise
 /// across them: neither changes any lane's arithmetic).
+///
+/// Dispatched as [`add_terms`] is (the same bits on any instruction set).
 pub(super) fn leverage3_rows(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
+    struct Op<'a>(&'a [f64], usize, &'a [f64]);
+    impl Kernel for Op<'_> {
+        type Output = [f64; 3 * LANES];
+        #[inline(always)]
+        fn run(self) -> [f64; 3 * LANES] {
+            leverage3_rows_on(self.0, self.1, self.2)
+        }
+    }
+    widest(Op(inv, p, b))
+}
+
+/// [`leverage3_rows`]' arithmetic, inlined into the dispatched function.
+#[inline(always)]
+fn leverage3_rows_on(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
     let mut q = [0.0; 3 * LANES];
     let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
     for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
