@@ -344,6 +344,7 @@ fn moment_weight(w: f64, sigma: Option<f64>, n: usize) -> Result<Option<f64>, Er
 }
 
 /// `y += x k`.
+#[inline(always)]
 fn axpy(y: &mut [f64], x: &[f64], k: f64) {
     for (y, &x) in y.iter_mut().zip(x) {
         *y += x * k;
