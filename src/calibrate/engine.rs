@@ -439,9 +439,10 @@ impl Engine<'_> {
         let Some(by) = d.group_rows() else {
             return Ok(None);
         };
-        // (Its residuals a window of groups at a time: `WINDOW_ROWS` rows.)
-        let fast = (self.fit_settings.method == Method::Ols).then(|| ols_heldout(&d, &cols));
-        let (fast, mut window): (_, Option<HeldOut>) = (fast.flatten(), None);
+        let ols = self.fit_settings.method == Method::Ols;
+        let fast = ols.then(|| ols_heldout(&d, &cols)).flatten();
+        // Its residuals a window of groups (`WINDOW_ROWS` rows) at a time.
+        let mut window: Option<HeldOut> = None;
         // Weighted fits: each fold from the moments per configuration and
         // axis, built once (`moments`); a fold that leaves a parameter
         // unidentified is refitted from the rows below.

@@ -190,11 +190,11 @@ impl OlsHeldOut<'_> {
     /// The groups from `first` whose rows add up to about `rows` (at least
     /// one group; none past the last): [`OlsHeldOut::groups`]' next range.
     pub fn window(by: &GroupRows, first: usize, rows: usize) -> std::ops::Range<usize> {
-        let groups = by.groups();
+        let (groups, first) = (by.groups(), first.min(by.groups()));
         let target = by.offset(first).saturating_add(rows);
-        // The first group from which `offset` reaches the target (offsets
-        // ascend with the group).
-        let (mut lo, mut hi) = (first.saturating_add(1), groups);
+        // The first group past `first` from which `offset` reaches the
+        // target (offsets ascend with the group), at most the last.
+        let (mut lo, mut hi) = (first + 1, groups);
         while lo < hi {
             let mid = lo + (hi - lo) / 2;
             if by.offset(mid) >= target {
@@ -203,7 +203,7 @@ impl OlsHeldOut<'_> {
                 lo = mid + 1;
             }
         }
-        first.min(groups)..lo.min(groups).max(first.min(groups))
+        first..lo.min(groups)
     }
 
     /// A group of one row (one point per configuration: the case with the
@@ -351,15 +351,22 @@ mod tests {
         }
     }
 
+    /// [`design`] of `rows` rows in groups of one, two and three rows
+    /// (every seventh row starts four groups), the last ones empty.
+    fn mixed(rows: usize, n: usize, seed: u64, groups: usize) -> Design {
+        let mut d = design(rows, 1, n, seed);
+        d.group = (0..rows)
+            .map(|i| [0, 1, 1, 2, 3, 3, 3][i % 7] + 4 * (i / 7))
+            .collect();
+        d.groups = groups;
+        d
+    }
+
     #[test]
     fn the_same_bits_on_any_number_of_threads() {
         // Groups of one, two and three rows, one singular (column 0 only in
         // group 0).
-        let mut d = design(40, 1, 6, 5);
-        d.group = (0..40)
-            .map(|i| [0, 1, 1, 2, 3, 3, 3][i % 7] + 4 * (i / 7))
-            .collect();
-        d.groups = 4 * 6;
+        let mut d = mixed(40, 6, 5, 4 * 6);
         for r in 3..d.b.nrows() {
             d.b[(r, 0)] = 0.0;
         }
@@ -417,11 +424,7 @@ mod tests {
 
     #[test]
     fn windows_of_groups_give_the_residuals_of_all_at_once() {
-        let mut d = design(50, 1, 5, 9);
-        d.group = (0..50)
-            .map(|i| [0, 1, 1, 2, 3, 3, 3][i % 7] + 4 * (i / 7))
-            .collect();
-        d.groups = 4 * 8;
+        let d = mixed(50, 5, 9, 4 * 8);
         let by = d.group_rows().expect("groups in range");
         let cols: Vec<usize> = (0..5).collect();
         let fit = ols_heldout(&d, &cols).expect("positive definite");

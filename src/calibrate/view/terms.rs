@@ -31,59 +31,52 @@ pub(super) fn add_terms(
     terms: &[Term<'_>],
     columns: std::ops::Range<usize>,
 ) {
-    struct Op<'m, 't, 'b>(
-        &'m mut [f64],
-        Option<&'m mut [f64]>,
-        usize,
-        &'t [Term<'b>],
-        std::ops::Range<usize>,
-    );
-    impl Kernel for Op<'_, '_, '_> {
-        type Output = ();
-        #[inline(always)]
-        fn run(self) {
-            add_terms_on(self.0, self.1, self.2, self.3, self.4);
-        }
-    }
-    widest(Op(m, eta, n, terms, columns));
+    widest(AddTerms(m, eta, n, terms, columns));
 }
 
-/// [`add_terms`]' arithmetic, inlined into the dispatched function.
-#[inline(always)]
-fn add_terms_on(
-    m: &mut [f64],
-    mut eta: Option<&mut [f64]>,
-    n: usize,
-    terms: &[Term<'_>],
-    columns: std::ops::Range<usize>,
-) {
-    let mut pairs = terms.chunks_exact(2);
-    for pair in pairs.by_ref() {
-        let (t, u) = (&pair[0], &pair[1]);
-        for (j, column) in triangle_columns(m, n, &columns) {
-            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
-            let c = [u.k[0] * u.b[0][j], u.k[1] * u.b[1][j], u.k[2] * u.b[2][j]];
-            if let Some(e) = eta.as_deref_mut() {
-                let v = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
-                e[j] = ((v + c[0] * u.y[0]) + c[1] * u.y[1]) + c[2] * u.y[2];
-            }
-            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
-            let ub = (&u.b[0][..=j], &u.b[1][..=j], &u.b[2][..=j]);
-            for (i, x) in column[..=j].iter_mut().enumerate() {
-                let v = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
-                *x = ((v + ub.0[i] * c[0]) + ub.1[i] * c[1]) + ub.2[i] * c[2];
+/// [`add_terms`] as a [`Kernel`].
+struct AddTerms<'m, 't, 'b>(
+    &'m mut [f64],
+    Option<&'m mut [f64]>,
+    usize,
+    &'t [Term<'b>],
+    std::ops::Range<usize>,
+);
+
+impl Kernel for AddTerms<'_, '_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(self) {
+        let AddTerms(m, mut eta, n, terms, columns) = self;
+        let mut pairs = terms.chunks_exact(2);
+        for pair in pairs.by_ref() {
+            let (t, u) = (&pair[0], &pair[1]);
+            for (j, column) in triangle_columns(m, n, &columns) {
+                let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
+                let c = [u.k[0] * u.b[0][j], u.k[1] * u.b[1][j], u.k[2] * u.b[2][j]];
+                if let Some(e) = eta.as_deref_mut() {
+                    let v = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
+                    e[j] = ((v + c[0] * u.y[0]) + c[1] * u.y[1]) + c[2] * u.y[2];
+                }
+                let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
+                let ub = (&u.b[0][..=j], &u.b[1][..=j], &u.b[2][..=j]);
+                for (i, x) in column[..=j].iter_mut().enumerate() {
+                    let v = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
+                    *x = ((v + ub.0[i] * c[0]) + ub.1[i] * c[1]) + ub.2[i] * c[2];
+                }
             }
         }
-    }
-    for t in pairs.remainder() {
-        for (j, column) in triangle_columns(m, n, &columns) {
-            let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
-            if let Some(e) = eta.as_deref_mut() {
-                e[j] = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
-            }
-            let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
-            for (i, x) in column[..=j].iter_mut().enumerate() {
-                *x = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
+        for t in pairs.remainder() {
+            for (j, column) in triangle_columns(m, n, &columns) {
+                let a = [t.k[0] * t.b[0][j], t.k[1] * t.b[1][j], t.k[2] * t.b[2][j]];
+                if let Some(e) = eta.as_deref_mut() {
+                    e[j] = ((e[j] + a[0] * t.y[0]) + a[1] * t.y[1]) + a[2] * t.y[2];
+                }
+                let tb = (&t.b[0][..=j], &t.b[1][..=j], &t.b[2][..=j]);
+                for (i, x) in column[..=j].iter_mut().enumerate() {
+                    *x = ((*x + tb.0[i] * a[0]) + tb.1[i] * a[1]) + tb.2[i] * a[2];
+                }
             }
         }
     }
@@ -91,6 +84,7 @@ fn add_terms_on(
 
 /// The columns `j` in `columns` of the column-major `n × n` matrix `m`,
 /// with their index.
+#[inline(always)]
 fn triangle_columns<'m>(
     m: &'m mut [f64],
     n: usize,
@@ -115,34 +109,33 @@ pub(super) const LANES: usize = 4;
 ///
 /// Dispatched as [`add_terms`] is (the same bits on any instruction set).
 pub(super) fn leverage3_rows(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
-    struct Op<'a>(&'a [f64], usize, &'a [f64]);
-    impl Kernel for Op<'_> {
-        type Output = [f64; 3 * LANES];
-        #[inline(always)]
-        fn run(self) -> [f64; 3 * LANES] {
-            leverage3_rows_on(self.0, self.1, self.2)
-        }
-    }
-    widest(Op(inv, p, b))
+    widest(Leverage3Rows(inv, p, b))
 }
 
-/// [`leverage3_rows`]' arithmetic, inlined into the dispatched function.
-#[inline(always)]
-fn leverage3_rows_on(inv: &[f64], p: usize, b: &[f64]) -> [f64; 3 * LANES] {
-    let mut q = [0.0; 3 * LANES];
-    let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
-    for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
-        let mut s = [0.0; 3 * LANES];
-        for (r, &v) in col.iter().enumerate() {
-            for (s, &x) in s.iter_mut().zip(bk(r)) {
-                *s += v * x;
+/// [`leverage3_rows`] as a [`Kernel`].
+struct Leverage3Rows<'a>(&'a [f64], usize, &'a [f64]);
+
+impl Kernel for Leverage3Rows<'_> {
+    type Output = [f64; 3 * LANES];
+
+    #[inline(always)]
+    fn run(self) -> [f64; 3 * LANES] {
+        let Leverage3Rows(inv, p, b) = self;
+        let mut q = [0.0; 3 * LANES];
+        let bk = |k: usize| -> &[f64] { &b[3 * LANES * k..3 * LANES * (k + 1)] };
+        for (c, col) in inv.chunks_exact(p.max(1)).enumerate().take(p) {
+            let mut s = [0.0; 3 * LANES];
+            for (r, &v) in col.iter().enumerate() {
+                for (s, &x) in s.iter_mut().zip(bk(r)) {
+                    *s += v * x;
+                }
+            }
+            for ((q, s), &x) in q.iter_mut().zip(&s).zip(bk(c)) {
+                *q += s * x;
             }
         }
-        for ((q, s), &x) in q.iter_mut().zip(&s).zip(bk(c)) {
-            *q += s * x;
-        }
+        q
     }
-    q
 }
 
 /// `threads` contiguous runs of the columns `0..n` of an upper triangle
