@@ -74,6 +74,9 @@ pub fn read_limited(path: &Path, what: &str, limit: u64) -> Result<Vec<u8>, Inpu
         return Err(too_large(meta.len()));
     }
     let file = std::fs::File::open(path).map_err(|e| io(format!("cannot read {what}: {e}")))?;
+    if let Some(bytes) = read_in_pieces(&file, meta.len(), crate::calibrate::parallel::threads()) {
+        return Ok(bytes);
+    }
     let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
     // The file may grow between the check and the read.
     file.take(limit.saturating_add(1))
@@ -83,6 +86,52 @@ pub fn read_limited(path: &Path, what: &str, limit: u64) -> Result<Vec<u8>, Inpu
         return Err(too_large(bytes.len() as u64));
     }
     Ok(bytes)
+}
+
+/// Files at least this large are read in pieces on the engine's threads
+/// ([`read_in_pieces`]).
+const PIECES_FROM_BYTES: u64 = 32 << 20;
+
+/// The `len` bytes of `file` read in one piece per thread (`threads`: the
+/// engine's, [`crate::calibrate::parallel::threads`]), each at its own
+/// offset, into one buffer: the kernel's copy into fresh pages (and their
+/// faults) was ~0.3 s of one thread for a file of 10⁶ rows (187 MB),
+/// before anything else could start. `None` (the caller reads the file from the start, as for a small
+/// file) on one thread, for a file below [`PIECES_FROM_BYTES`], on any
+/// error, or when the file is not exactly `len` bytes long any more.
+#[cfg(unix)]
+fn read_in_pieces(file: &std::fs::File, len: u64, threads: usize) -> Option<Vec<u8>> {
+    use std::os::unix::fs::FileExt;
+    if threads < 2 || len < PIECES_FROM_BYTES {
+        return None;
+    }
+    let len = usize::try_from(len).ok()?;
+    // Zeroed by the allocator (fresh pages for a buffer this large): each
+    // page is first touched by the thread that reads into it.
+    let mut bytes = vec![0_u8; len];
+    let per = len.div_ceil(threads);
+    let read = |k: usize, piece: &mut [u8]| file.read_exact_at(piece, (k * per) as u64).is_ok();
+    let all = std::thread::scope(|s| {
+        let mut pieces = bytes.chunks_mut(per).enumerate();
+        let first = pieces.next();
+        let others: Vec<_> = pieces
+            .map(|(k, piece)| s.spawn(move || read(k, piece)))
+            .collect();
+        let ok = first.is_none_or(|(k, piece)| read(k, piece));
+        others
+            .into_iter()
+            .fold(ok, |ok, h| h.join().unwrap_or(false) && ok)
+    });
+    // Grown since its metadata was read: the caller's read sees its limit.
+    let mut past = [0_u8; 1];
+    let ended = file.read_at(&mut past, len as u64).ok()? == 0;
+    (all && ended).then_some(bytes)
+}
+
+/// [`read_in_pieces`] where there is no positioned read: never.
+#[cfg(not(unix))]
+fn read_in_pieces(_file: &std::fs::File, _len: u64, _threads: usize) -> Option<Vec<u8>> {
+    None
 }
 
 /// As [`read_limited`], as UTF-8 text.
@@ -167,5 +216,37 @@ mod tests {
         assert!(m.ends_with("' is not a number"), "{m}");
         assert!(shorten(&"word ".repeat(1000)).chars().count() <= MAX_MESSAGE_CHARS + 1);
         assert_eq!(shorten("joint 'a1': zero axis"), "joint 'a1': zero axis");
+    }
+
+    /// A large file read in pieces on 2 and 3 threads is the file, byte for
+    /// byte (pieces of unequal length, the last one short); one that is
+    /// not `len` bytes long any more, or a small one, is left to the
+    /// caller's read.
+    #[cfg(unix)]
+    #[test]
+    fn pieces_are_the_file() {
+        let dir = std::env::temp_dir().join(format!("robcal-pieces-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("big.csv");
+        let len = PIECES_FROM_BYTES as usize + 12_345;
+        let bytes: Vec<u8> = (0..len).map(|i| (i * 7 % 251) as u8).collect();
+        std::fs::write(&path, &bytes).unwrap();
+        let file = std::fs::File::open(&path).unwrap();
+        for threads in [2, 3] {
+            let got = read_in_pieces(&file, len as u64, threads).expect("read in pieces");
+            assert!(got == bytes, "{threads} threads");
+        }
+        assert!(read_in_pieces(&file, len as u64, 1).is_none());
+        // Grown, or shrunk, since its length was read.
+        assert!(read_in_pieces(&file, len as u64 - 1, 2).is_none());
+        assert!(read_in_pieces(&file, len as u64 + 1, 2).is_none());
+        assert!(read_limited(&path, "the measurements", len as u64).unwrap() == bytes);
+        drop(file);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let small = std::env::temp_dir().join(format!("robcal-small-{}", std::process::id()));
+        std::fs::write(&small, b"x").unwrap();
+        let file = std::fs::File::open(&small).unwrap();
+        assert!(read_in_pieces(&file, 1, 2).is_none());
+        std::fs::remove_file(&small).unwrap();
     }
 }
