@@ -4,6 +4,8 @@
 //! blocking the suite; it is a guard, not a speed measurement).
 
 use std::io::Read;
+mod common;
+use common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -73,11 +75,9 @@ fn refused(r: &Run, file: &str) -> String {
     line
 }
 
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("robcal-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory for test `name`, removed when dropped.
+fn dir(name: &str) -> Scratch {
+    Scratch::new(&format!("robcal-hostile-{name}"))
 }
 
 /// The KR-270 setup in `d` with `robot = ROBOT`.

@@ -4,6 +4,8 @@
 //! when the numbers only look suspicious (wrong units). Built from the
 //! KR-270 job (`data/kr270`), each case changing one thing.
 
+mod common;
+use common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -21,10 +23,8 @@ fn robcal(args: &[&str]) -> Output {
 
 /// A fresh directory with a copy of the KR-270 setup (its `[units]` and
 /// `[model]` replaced by `units`/`model` when given, robot path absolute).
-fn job(name: &str, units: Option<&str>, model: Option<&str>) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("robcal-input-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+fn job(name: &str, units: Option<&str>, model: Option<&str>) -> (Scratch, PathBuf) {
+    let dir = Scratch::new(&format!("robcal-input-{name}"));
     let text = std::fs::read_to_string(root().join("data/kr270/setup.toml")).unwrap();
     let urdf = root().join("data/kr270/kr270.urdf");
     let mut text = text.replace(

@@ -7,6 +7,8 @@
 //! Skipped with the reason on a plain clone (no `../shared`); with
 //! `ROBCAL_REQUIRE_SHARED=1` (CI) a missing `../shared` fails.
 
+mod common;
+use common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -59,11 +61,9 @@ fn ok(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("robcal-real-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory for test `name`, removed when dropped.
+fn dir(name: &str) -> Scratch {
+    Scratch::new(&format!("robcal-real-{name}"))
 }
 
 /// `robcal import poses` of `set` (its `split` = `split`) into `dir`.
