@@ -17,6 +17,10 @@
 //! - The angle bins of each joint (`rows/build.rs`: each sorts every
 //!   value) and the chunks of a large measurement file
 //!   (`io::measurements`, joined in file order).
+//! - The OLS held-out's column dots (`heldout/dots.rs`): a run of the
+//!   pairs per thread, each dot summed in its own order whatever the
+//!   thread. (The pieces of a large input file, `io::input`, are read on
+//!   as many threads of their own.)
 //!
 //! The answers are therefore bit for bit those of the serial loop, whatever
 //! the number of threads (tests: `tests` below, and `tests/cli_threads.rs`
