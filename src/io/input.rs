@@ -114,13 +114,15 @@ fn read_in_pieces(file: &std::fs::File, len: u64, threads: usize) -> Option<Vec<
     let all = std::thread::scope(|s| {
         let mut pieces = bytes.chunks_mut(per).enumerate();
         let first = pieces.next();
+        // A thread the system refuses is an error like any other (not a
+        // panic, as `thread::scope`'s `spawn` would make it).
         let others: Vec<_> = pieces
-            .map(|(k, piece)| s.spawn(move || read(k, piece)))
+            .map(|(k, piece)| std::thread::Builder::new().spawn_scoped(s, move || read(k, piece)))
             .collect();
         let ok = first.is_none_or(|(k, piece)| read(k, piece));
-        others
-            .into_iter()
-            .fold(ok, |ok, h| h.join().unwrap_or(false) && ok)
+        others.into_iter().fold(ok, |ok, h| {
+            h.ok().is_some_and(|h| h.join().unwrap_or(false)) && ok
+        })
     });
     // Grown since its metadata was read: the caller's read sees its limit.
     let mut past = [0_u8; 1];

@@ -6,14 +6,16 @@
 //! `r = 0; r += s₀ + s₄; r += s₁ + s₅; r += s₂ + s₆; r += s₃ + s₇` and the
 //! last `m mod 8` products one by one. Each sum here takes the same
 //! products in the same order, a block of rows at a time for every pair, so
-//! each result is `dot`'s, bit for bit; but the columns are read once per
-//! thread instead of once per pair (the held-out's `Λ` of 15 columns of
-//! 3·10⁶ rows: 135 dots were 135 passes over two 24 MB columns).
+//! each result is `dot`'s, bit for bit (but for the sign of a NaN, which
+//! nothing reads); but the columns are read once per thread instead of once
+//! per pair (the held-out's `Λ` of 15 columns of 3·10⁶ rows: 135 dots were
+//! 135 passes over two 24 MB columns).
 
 use super::super::widest::{widest, Kernel};
 
-/// Rows a block: two columns' block stay in the first-level cache while
-/// the pairs of a thread go by.
+/// Rows a block (8 KiB of a column): the block of every column (128 KiB
+/// at 16 columns) stays in the second-level cache while the pairs of a
+/// thread go by.
 const BLOCK: usize = 1024;
 
 /// `dot(columns[i], columns[j])` (nalgebra's, bit for bit) for every
