@@ -30,7 +30,9 @@
 //! everything on the calling thread), else
 //! [`std::thread::available_parallelism`]. Work that is already on a
 //! worker runs serially on it: no nesting.
-//! The calling thread works too; no thread outlives the call.
+//! The calling thread works too; no thread outlives the call. A thread the
+//! system refuses to start (a process limit, memory) is not an error: its
+//! work is done on the calling thread, with the same answers.
 
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -74,6 +76,30 @@ impl Drop for Inside {
     }
 }
 
+/// A worker thread of the scope `s` running `f`, or the system's refusal
+/// (too many threads or processes: `RLIMIT_NPROC`, memory): the callers
+/// then do that work on the calling thread, not panic as
+/// `Scope::spawn` would.
+fn spawn<'s, 'e, R: Send + 's>(
+    s: &'s std::thread::Scope<'s, 'e>,
+    f: impl FnOnce() -> R + Send + 's,
+) -> Option<std::thread::ScopedJoinHandle<'s, R>> {
+    #[cfg(test)]
+    if REFUSE
+        .with(|r| r.get().checked_sub(1).map(|left| r.set(left)))
+        .is_some()
+    {
+        return None;
+    }
+    std::thread::Builder::new().spawn_scoped(s, f).ok()
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests: the next this many [`spawn`]s on this thread are refused.
+    static REFUSE: Cell<usize> = const { Cell::new(0) };
+}
+
 /// `f(0), …, f(n − 1)` in order, on up to `threads` threads.
 pub fn map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     map_until(n, threads, f, |_| false)
@@ -83,7 +109,9 @@ pub fn map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
 /// result `stop`s (all `n` when none does), on up to `threads` threads.
 /// The items are started in index order; once an item stops, no later one
 /// is started (later ones already running finish, and are dropped). With
-/// one thread (or one item) this is the serial loop.
+/// one thread (or one item) this is the serial loop; a thread the system
+/// refuses is one thread fewer (the calling thread takes every item no
+/// worker took).
 pub fn map_until<T: Send>(
     n: usize,
     threads: usize,
@@ -123,7 +151,7 @@ pub fn map_until<T: Send>(
         }
     };
     let mut all = std::thread::scope(|s| {
-        let workers: Vec<_> = (1..threads).map(|_| s.spawn(work)).collect();
+        let workers: Vec<_> = (1..threads).filter_map(|_| spawn(s, work)).collect();
         let mut all = work();
         for w in workers {
             match w.join() {
@@ -150,7 +178,8 @@ pub fn for_rows(rows: usize) -> usize {
 
 /// `f(first, run)` on `threads` contiguous runs of `items`, mutably
 /// (`first`: the index of the run's first item); the first error in item
-/// order (each run stops at its first; the runs after it have run).
+/// order (each run stops at its first; the runs after it have run). A run
+/// whose thread the system refuses runs on the calling thread.
 ///
 /// # Errors
 /// The first run's error that has one.
@@ -164,24 +193,38 @@ pub fn for_runs_mut<T: Send, E: Send>(
     }
     let per = items.len().div_ceil(threads);
     let f = &f;
+    let run_here = |first: usize, run: &mut [T]| {
+        let _inside = Inside::enter();
+        f(first, run)
+    };
     std::thread::scope(|s| {
-        let handles: Vec<_> = items
+        // Each run is sent to its worker once the worker has started, so
+        // that a refused worker leaves its run here.
+        let slots: Vec<_> = items
             .chunks_mut(per)
             .enumerate()
             .map(|(k, run)| {
-                s.spawn(move || {
-                    let _inside = Inside::enter();
-                    f(k * per, run)
-                })
+                let (tx, rx) = std::sync::mpsc::channel::<&mut [T]>();
+                let worker = spawn(s, move || rx.recv().ok().map(|run| run_here(k * per, run)));
+                match worker {
+                    Some(h) => match tx.send(run) {
+                        Ok(()) => Err(h),
+                        Err(back) => Ok(run_here(k * per, back.0)),
+                    },
+                    None => Ok(run_here(k * per, run)),
+                }
             })
             .collect();
-        handles
+        slots
             .into_iter()
-            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .map(|slot| match slot {
+                Ok(done) => Some(done),
+                Err(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+            })
             .collect::<Vec<_>>()
     })
     .into_iter()
-    .collect()
+    .try_for_each(|done| done.unwrap_or(Ok(())))
 }
 
 #[cfg(test)]
@@ -205,6 +248,34 @@ mod tests {
             let out = map_until(5, threads, |i| i, |_| false);
             assert_eq!(out, vec![0, 1, 2, 3, 4]);
         }
+    }
+
+    /// Threads the system refuses (none, some, all) leave their work to
+    /// the calling thread: the same results, in order.
+    #[test]
+    fn refused_threads_leave_their_work_here() {
+        for refused in [1, 2, 3, 10] {
+            REFUSE.with(|r| r.set(refused));
+            let out = map(50, 4, |i| i * i);
+            assert_eq!(out, (0..50).map(|i| i * i).collect::<Vec<_>>());
+            REFUSE.with(|r| r.set(refused));
+            let out = map_until(40, 4, |i| i, |&i| i % 7 == 6);
+            assert_eq!(out, (0..7).collect::<Vec<_>>());
+            REFUSE.with(|r| r.set(refused));
+            let mut items: Vec<usize> = (0..30).collect();
+            let r = for_runs_mut(&mut items, 4, |first, run| {
+                for (k, v) in run.iter_mut().enumerate() {
+                    *v = 10 * (first + k) + usize::from(threads() == 1);
+                }
+                if first == 16 {
+                    return Err(first);
+                }
+                Ok(())
+            });
+            assert_eq!(r, Err(16), "{refused} refused");
+            assert_eq!(items, (0..30).map(|i| 10 * i + 1).collect::<Vec<_>>());
+        }
+        REFUSE.with(|r| r.set(0));
     }
 
     #[test]
