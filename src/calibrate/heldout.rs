@@ -93,8 +93,9 @@ pub struct OlsHeldOut<'a> {
 /// The OLS fit on the columns `cols` of `d`, ready for the held-out
 /// residuals of its groups; `None` when `Λ` itself is not positive
 /// definite or the estimate is not finite (and for a design whose `Δp` is
-/// not one value per row, which none is). The groups on worker threads ([`super::parallel`]), each
-/// independent of the others: the same bits on any number of threads.
+/// not one value per row, which none is). The groups on worker threads
+/// ([`super::parallel`]), each independent of the others: the same bits on
+/// any number of threads.
 pub fn ols_heldout<'a>(d: &'a Design, cols: &[usize]) -> Option<OlsHeldOut<'a>> {
     ols_heldout_on(d, cols, super::parallel::for_rows(d.rows()))
 }

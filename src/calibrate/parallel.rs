@@ -19,8 +19,9 @@
 //!   (`io::measurements`, joined in file order).
 //! - The OLS held-out's column dots (`heldout/dots.rs`): a run of the
 //!   pairs per thread, each dot summed in its own order whatever the
-//!   thread. (The pieces of a large input file, `io::input`, are read on
-//!   as many threads of their own.)
+//!   thread.
+//! - The pieces of a large input file (`io::input`, [`for_runs_mut`]: one
+//!   positioned read a piece).
 //!
 //! The answers are therefore bit for bit those of the serial loop, whatever
 //! the number of threads (tests: `tests` below, and `tests/cli_threads.rs`

@@ -93,12 +93,14 @@ pub fn read_limited(path: &Path, what: &str, limit: u64) -> Result<Vec<u8>, Inpu
 const PIECES_FROM_BYTES: u64 = 32 << 20;
 
 /// The `len` bytes of `file` read in one piece per thread (`threads`: the
-/// engine's, [`crate::calibrate::parallel::threads`]), each at its own
-/// offset, into one buffer: the kernel's copy into fresh pages (and their
-/// faults) was ~0.3 s of one thread for a file of 10⁶ rows (187 MB),
-/// before anything else could start. `None` (the caller reads the file from the start, as for a small
-/// file) on one thread, for a file below [`PIECES_FROM_BYTES`], on any
-/// error, or when the file is not exactly `len` bytes long any more.
+/// engine's), each at its own offset, into one buffer
+/// ([`crate::calibrate::parallel::for_runs_mut`]: a piece whose thread the
+/// system refuses is read on this one). The kernel's copy into fresh pages
+/// (and their faults) was ~0.3 s of one thread for a file of 10⁶ rows
+/// (187 MB), before anything else could start. `None` (the caller reads
+/// the file from the start, as for a small file) on one thread, for a
+/// file below [`PIECES_FROM_BYTES`], on any error, or when the file is not
+/// exactly `len` bytes long any more.
 #[cfg(unix)]
 fn read_in_pieces(file: &std::fs::File, len: u64, threads: usize) -> Option<Vec<u8>> {
     use std::os::unix::fs::FileExt;
@@ -109,25 +111,14 @@ fn read_in_pieces(file: &std::fs::File, len: u64, threads: usize) -> Option<Vec<
     // Zeroed by the allocator (fresh pages for a buffer this large): each
     // page is first touched by the thread that reads into it.
     let mut bytes = vec![0_u8; len];
-    let per = len.div_ceil(threads);
-    let read = |k: usize, piece: &mut [u8]| file.read_exact_at(piece, (k * per) as u64).is_ok();
-    let all = std::thread::scope(|s| {
-        let mut pieces = bytes.chunks_mut(per).enumerate();
-        let first = pieces.next();
-        // A thread the system refuses is an error like any other (not a
-        // panic, as `thread::scope`'s `spawn` would make it).
-        let others: Vec<_> = pieces
-            .map(|(k, piece)| std::thread::Builder::new().spawn_scoped(s, move || read(k, piece)))
-            .collect();
-        let ok = first.is_none_or(|(k, piece)| read(k, piece));
-        others.into_iter().fold(ok, |ok, h| {
-            h.ok().is_some_and(|h| h.join().unwrap_or(false)) && ok
-        })
-    });
+    crate::calibrate::parallel::for_runs_mut(&mut bytes, threads, |first, piece| {
+        file.read_exact_at(piece, first as u64)
+    })
+    .ok()?;
     // Grown since its metadata was read: the caller's read sees its limit.
     let mut past = [0_u8; 1];
     let ended = file.read_at(&mut past, len as u64).ok()? == 0;
-    (all && ended).then_some(bytes)
+    ended.then_some(bytes)
 }
 
 /// [`read_in_pieces`] where there is no positioned read: never.
