@@ -307,9 +307,7 @@ impl Engine<'_> {
                     .map_err(|e| CalibrationError::Core("fit", e))?,
                 (None, None) => full_fit()?,
             };
-            let residuals: Vec<Vector3<f64>> = (0..d.rows())
-                .map(|i| self.rows.unscaled(i, d.residual(&cols, &out.x, i)))
-                .collect();
+            let residuals = d.residuals(&self.rows, &cols, &out.x);
             let fitted = Fitted {
                 params: params.to_vec(),
                 rms_um: rms_um(&residuals),
