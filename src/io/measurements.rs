@@ -507,7 +507,8 @@ fn parse_bytes(
             let mut record = csv::StringRecord::new();
             while rdr.read_record(&mut record).map_err(csv_err)? {
                 let line = line_at(record.position());
-                observations.read(&layout, &record, line, &mut stats)?;
+                let cells: Vec<&str> = record.iter().collect();
+                observations.read(&layout, &cells, line, &mut stats)?;
             }
             (observations.finish(), stats)
         }
