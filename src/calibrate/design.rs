@@ -197,7 +197,7 @@ impl Design {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
         let columns = Columns::new(params, lin, names, all);
-        let per = m.div_ceil(threads.max(1)).max(1);
+        let per = super::rows::run_length(m, threads);
         let Storage {
             b: mut data,
             y,
@@ -205,13 +205,11 @@ impl Design {
         } = storage;
         let pieces = pieces(&mut data, m, n, per);
         let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
-        super::parallel::for_runs_mut(&mut { runs }, threads, |_, runs| {
+        super::parallel::for_each_mut(&mut { runs }, threads, |_, (run, piece)| {
             let mut frames = crate::robot::Frames::empty();
-            for (run, piece) in runs.iter_mut() {
-                for (k, row) in run.iter().enumerate() {
-                    all.frames_into(row, &mut frames)?;
-                    columns.write(row, &frames, all.gravity_unit, piece, k)?;
-                }
+            for (k, row) in run.iter().enumerate() {
+                all.frames_into(row, &mut frames)?;
+                columns.write(row, &frames, all.gravity_unit, piece, k)?;
             }
             Ok::<_, Error>(())
         })?;
@@ -255,7 +253,7 @@ impl Design {
         threads: usize,
     ) -> Result<Result<Self, Error>, super::settings::CalibrationError> {
         let m = all.rows.len();
-        let per = m.div_ceil(threads.max(1)).max(1);
+        let per = super::rows::run_length(m, threads);
         let Storage {
             b: mut data,
             y,

@@ -37,7 +37,7 @@
 
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 thread_local! {
     /// Whether this thread is running an item of [`map_until`] or a run of
@@ -166,6 +166,36 @@ pub fn map_until<T: Send>(
     all.retain(|(i, _)| *i < end);
     all.sort_unstable_by_key(|(i, _)| *i);
     all.into_iter().map(|(_, t)| t).collect()
+}
+
+/// `f(k, item)` for every item, on up to `threads` threads that each take
+/// the next item not yet taken (in index order): for items that take
+/// unequal times, or threads that the system slows unequally, where
+/// [`for_runs_mut`]'s one run per thread waits for the slowest. The first
+/// error in item order; once an item fails no later one is started (as
+/// [`map_until`]; with one thread, the serial loop).
+///
+/// # Errors
+/// The first item's error that has one.
+pub fn for_each_mut<T: Send, E: Send>(
+    items: &mut [T],
+    threads: usize,
+    f: impl Fn(usize, &mut T) -> Result<(), E> + Sync,
+) -> Result<(), E> {
+    if threads <= 1 || items.len() < 2 {
+        return items.iter_mut().enumerate().try_for_each(|(k, t)| f(k, t));
+    }
+    // Each item once, to the thread that takes its index.
+    let slots: Vec<Mutex<Option<&mut T>>> = items.iter_mut().map(|t| Mutex::new(Some(t))).collect();
+    let take = |k: usize| slots[k].lock().ok().and_then(|mut slot| slot.take());
+    map_until(
+        slots.len(),
+        threads,
+        |k| take(k).map_or(Ok(()), |t| f(k, t)),
+        Result::is_err,
+    )
+    .into_iter()
+    .collect()
 }
 
 /// Fewest rows a thread is started for.
@@ -486,6 +516,34 @@ mod tests {
             .next()
             .expect("serial");
         assert!(threads == serial);
+    }
+
+    /// Every item once, the first error in item order, every item before
+    /// it done; with none, some or all threads refused.
+    #[test]
+    fn items_taken_in_turn() {
+        for (threads, refused) in [(1, 0), (2, 0), (3, 0), (8, 0), (4, 2), (4, 10)] {
+            let mut items = vec![0_usize; 200];
+            REFUSE.with(|r| r.set(refused));
+            let r = for_each_mut(&mut items, threads, |k, v| {
+                *v += k + 1;
+                Ok::<(), usize>(())
+            });
+            assert_eq!(r, Ok(()));
+            assert_eq!(items, (1..=200).collect::<Vec<_>>(), "{threads} threads");
+            REFUSE.with(|r| r.set(refused));
+            let r = for_each_mut(&mut items, threads, |k, v| {
+                if k % 50 == 37 {
+                    return Err(k);
+                }
+                *v = 0;
+                Ok(())
+            });
+            assert_eq!(r, Err(37), "{threads} threads");
+            assert!(items[..37].iter().all(|&v| v == 0));
+            assert_eq!(items[37], 38);
+        }
+        REFUSE.with(|r| r.set(0));
     }
 
     #[test]

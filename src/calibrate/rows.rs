@@ -117,6 +117,22 @@ pub struct RowExtra {
     pub gravity_q: Vec<[f64; 2]>,
 }
 
+/// Rows a run of [`Rows::relinearise_with`] has on `threads` threads (the
+/// last run fewer): all of them on one thread; else about
+/// [`RUNS_PER_THREAD`] runs per thread, taken in turn, so that a thread the
+/// system slows leaves the others the runs it has not started (one run per
+/// thread waited ~0.05–0.1 s per relinearisation of 10⁶ rows for the
+/// slower thread on a shared machine).
+pub fn run_length(rows: usize, threads: usize) -> usize {
+    if threads <= 1 {
+        return rows.max(1);
+    }
+    rows.div_ceil(threads * RUNS_PER_THREAD).max(1)
+}
+
+/// Runs per thread of [`Rows::relinearise_with`] ([`run_length`]).
+const RUNS_PER_THREAD: usize = 8;
+
 /// A run of rows in [`Rows::relinearise_with`], with its state and its
 /// first error from `then`.
 type Run<'a, S> = (&'a mut [Row], Option<S>, Result<(), Error>);
@@ -309,9 +325,8 @@ impl Rows {
     /// [`Rows::relinearise_on`], handing each row, once it is computed, to
     /// `then(state, k, row, frames, gravity_unit)` with the row's frames
     /// (those [`Rows::frames`] recomputes, bit for bit), `k` its index in
-    /// its run: the rows are split in runs of `rows.div_ceil(threads)`, one
-    /// per thread, and `states` holds one state per run (none: `then` is
-    /// not called). A design built here needs no second forward
+    /// its run: the rows are split in runs of [`run_length`] rows, and
+    /// `states` holds one state per run (none: `then` is not called). A design built here needs no second forward
     /// kinematics per row ([`super::design::Design::relinearised`]).
     /// `then`'s first error (in row order) does not stop the rows: it is
     /// returned when they are all computed.
@@ -488,26 +503,24 @@ impl Rows {
             }
             Ok(())
         };
-        // One item per run (a run per thread, as `for_runs_mut` splits the
-        // rows), with its state and `then`'s first error.
-        let per = self.rows.len().div_ceil(threads.max(1)).max(1);
+        // One item per run ([`run_length`]), with its state and `then`'s
+        // first error; the threads take the runs in turn.
+        let per = run_length(self.rows.len(), threads);
         let mut states = states.into_iter();
         let mut runs: Vec<Run<'_, S>> = self
             .rows
             .chunks_mut(per)
             .map(|run| (run, states.next(), Ok(())))
             .collect();
-        let done = super::parallel::for_runs_mut(&mut runs, threads, |first, items| {
+        let done = super::parallel::for_each_mut(&mut runs, threads, |r, (run, state, failed)| {
             let mut rigid = Frames::empty();
-            for (r, (run, state, failed)) in items.iter_mut().enumerate() {
-                for (k, row) in run.iter_mut().enumerate() {
-                    let mut sink = |row: &Row, frames: &Frames<f64, J>| {
-                        if let (Some(state), Ok(())) = (state.as_mut(), &*failed) {
-                            *failed = then(state, k, row, frames, g_unit);
-                        }
-                    };
-                    one(row, &mut rigid, &mut sink).map_err(|e| ((first + r) * per + k, e))?;
-                }
+            for (k, row) in run.iter_mut().enumerate() {
+                let mut sink = |row: &Row, frames: &Frames<f64, J>| {
+                    if let (Some(state), Ok(())) = (state.as_mut(), &*failed) {
+                        *failed = then(state, k, row, frames, g_unit);
+                    }
+                };
+                one(row, &mut rigid, &mut sink).map_err(|e| (r * per + k, e))?;
             }
             Ok(())
         });
