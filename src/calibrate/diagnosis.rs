@@ -169,29 +169,35 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
     let d = e.design(&params)?;
     let model: Vec<usize> = (0..current.params.len()).collect();
     // Each candidate's test on its own (on worker threads: they share only
-    // the design); the first error in the candidates' order.
+    // the design); up to the first error in the candidates' order, as the
+    // serial loop.
     let threads = super::parallel::threads().min(cands.len());
     let names = &e.names;
-    let outcomes = super::parallel::map(cands.len(), threads, |ci| {
-        let c = &cands[ci];
-        let cols: Vec<usize> = c.test.iter().filter_map(|p| d.index(p)).collect();
-        let cols = d.independent(&model, &cols);
-        if cols.is_empty() {
-            return Ok(None);
-        }
-        match fit::test(&d, &model, &cols, &current.fit.weights) {
-            Ok(t) => Ok(Some(Tested {
-                effect: c.effect,
-                about: c.about(names),
-                q: t.dof_num,
-                f: t.f,
-                p_value: t.p_value,
-                delta_rss: t.delta_rss,
-            })),
-            Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => Ok(None),
-            Err(err) => Err(err),
-        }
-    });
+    let outcomes = super::parallel::map_until(
+        cands.len(),
+        threads,
+        |ci| {
+            let c = &cands[ci];
+            let cols: Vec<usize> = c.test.iter().filter_map(|p| d.index(p)).collect();
+            let cols = d.independent(&model, &cols);
+            if cols.is_empty() {
+                return Ok(None);
+            }
+            match fit::test(&d, &model, &cols, &current.fit.weights) {
+                Ok(t) => Ok(Some(Tested {
+                    effect: c.effect,
+                    about: c.about(names),
+                    q: t.dof_num,
+                    f: t.f,
+                    p_value: t.p_value,
+                    delta_rss: t.delta_rss,
+                })),
+                Err(Error::NotIdentifiable { .. } | Error::TooFewEquations { .. }) => Ok(None),
+                Err(err) => Err(err),
+            }
+        },
+        Result::is_err,
+    );
     let mut tested: Vec<(usize, Tested)> = Vec::new();
     for (ci, outcome) in outcomes.into_iter().enumerate() {
         match outcome {

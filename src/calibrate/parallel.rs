@@ -172,8 +172,11 @@ pub fn map_until<T: Send>(
 /// the next item not yet taken (in index order): for items that take
 /// unequal times, or threads that the system slows unequally, where
 /// [`for_runs_mut`]'s one run per thread waits for the slowest. The first
-/// error in item order; once an item fails no later one is started (as
-/// [`map_until`]; with one thread, the serial loop).
+/// error in item order, every item before it done; once an item fails no
+/// later one is started, but later items already taken (running, or taken
+/// just before the failure was known) run to their end and keep what they
+/// changed in their items (as [`for_runs_mut`]'s runs after a failing one;
+/// with one thread, the serial loop, which stops at the failure).
 ///
 /// # Errors
 /// The first item's error that has one.
