@@ -118,11 +118,11 @@ pub struct RowExtra {
 }
 
 /// Rows a run of [`Rows::relinearise_with`] has on `threads` threads (the
-/// last run fewer): all of them on one thread; else about
-/// [`RUNS_PER_THREAD`] runs per thread, taken in turn, so that a thread the
-/// system slows leaves the others the runs it has not started (one run per
-/// thread waited ~0.05–0.1 s per relinearisation of 10⁶ rows for the
-/// slower thread on a shared machine).
+/// last run fewer): all of them on one thread; else about eight runs per
+/// thread (`RUNS_PER_THREAD`), taken in turn, so that a thread the system
+/// slows leaves the others the runs it has not started (one run per thread
+/// waited ~0.05–0.1 s per relinearisation of 10⁶ rows for the slower
+/// thread on a shared machine).
 pub fn run_length(rows: usize, threads: usize) -> usize {
     if threads <= 1 {
         return rows.max(1);
