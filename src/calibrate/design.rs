@@ -317,17 +317,15 @@ impl Design {
             .zip(group.chunks_mut(per))
             .zip(rows.chunks(per))
             .collect();
-        let filled = super::parallel::for_runs_mut(&mut runs, threads, |_, runs| {
-            for ((ys, gs), rs) in runs.iter_mut() {
-                for ((y, g), r) in ys.iter_mut().zip(gs.iter_mut()).zip(rs.iter()) {
-                    let s = all.noise_scale(r);
-                    *y = if s == 1.0 {
-                        r.y.into()
-                    } else {
-                        (r.y * s).into()
-                    };
-                    *g = r.group;
-                }
+        let filled = super::parallel::for_each_mut(&mut runs, threads, |_, ((ys, gs), rs)| {
+            for ((y, g), r) in ys.iter_mut().zip(gs.iter_mut()).zip(rs.iter()) {
+                let s = all.noise_scale(r);
+                *y = if s == 1.0 {
+                    r.y.into()
+                } else {
+                    (r.y * s).into()
+                };
+                *g = r.group;
             }
             Ok::<(), std::convert::Infallible>(())
         });
