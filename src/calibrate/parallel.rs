@@ -5,13 +5,16 @@
 //!   ([`super::engine::Engine::heldout`]): each item is computed by the
 //!   same code as in a serial loop, on one thread, from the same inputs,
 //!   and the results are handed back by index ([`map`], [`map_until`]).
-//! - The trials of a step's candidates ([`super::trial`]), each on a copy
-//!   of the engine's state, in order up to the first admissible one
+//! - The tests of a round's candidates (`diagnosis.rs`, up to the first
+//!   error, [`map_until`]) and their trials ([`super::trial`]), each on a
+//!   copy of the engine's state, in order up to the first admissible one
 //!   ([`map_until`]), when the rows are too few for the item below.
 //! - The rows of a relinearisation ([`super::rows::Rows::relinearise`])
-//!   and of a design ([`super::design::Design::new`]): each thread takes a
-//!   contiguous run of rows and the results come back in row order
-//!   ([`for_runs_mut`]); never more than one thread per
+//!   and of a design ([`super::design::Design::new`]): contiguous runs of
+//!   rows, about eight per thread ([`super::rows::run_length`]), each taken
+//!   by the next free thread, the results in row order ([`for_each_mut`]);
+//!   a design's left-hand sides and a fit's residuals by runs of rows
+//!   ([`for_each_mut`], [`for_runs_mut`]); never more than one thread per
 //!   [`MIN_ROWS_PER_THREAD`] rows ([`for_rows`]: a thread costs tens of µs
 //!   to start, a small job stays on the calling thread).
 //! - The angle bins of each joint (`rows/build.rs`: each sorts every
