@@ -227,10 +227,11 @@ impl OlsHeldOut<'_> {
     /// A group of one row (one point per configuration: the case with the
     /// most groups) in fixed-size arithmetic without an allocation per
     /// group: `z_a = L⁻¹ b_aᵀ` by forward substitution (`z` holds the three
-    /// axes, `[a n..(a + 1) n]`), `H_ab = z_a · z_b`, and `(I − H) e(−g) = e`
-    /// solved by Cholesky once every eigenvalue of `I − H` is above
-    /// [`MIN_EIGENVALUE`] ([`definite_beyond`]). (The inverse of `Λ` times each axis and
-    /// a 3 × 3 eigendecomposition were half of a million rows' held-out
+    /// axes of each column side by side, `[3c..3c + 3]`),
+    /// `H_ab = z_a · z_b`, and `(I − H) e(−g) = e` solved by Cholesky once
+    /// every eigenvalue of `I − H` is above [`MIN_EIGENVALUE`]
+    /// ([`definite_beyond`]). (The inverse of `Λ` times each axis and a
+    /// 3 × 3 eigendecomposition were half of a million rows' held-out
     /// error.)
     fn one(&self, i: usize, z: &mut [f64], out: &mut Vec<Vector3<f64>>) -> bool {
         let (b, n) = (&*self.b, self.x.len());
@@ -240,19 +241,24 @@ impl OlsHeldOut<'_> {
                 e[a] -= b[(3 * i + a, c)] * xc;
             }
         }
+        // The three axes' substitutions side by side (three independent
+        // chains of sums, each in the order of one axis alone: the same
+        // bits; one after the other they were a chain of dependent adds).
+        let (z, _) = z.as_chunks_mut::<3>();
+        let z = &mut z[..n];
         for r in 0..n {
             let lr = &self.l_rows[r * n..r * n + r];
-            for a in 0..3 {
-                let za = &z[a * n..a * n + r];
-                let mut s = b[(3 * i + a, r)];
-                for (l, zc) in lr.iter().zip(za) {
-                    s -= l * zc;
-                }
-                z[a * n + r] = s * self.l_inv_diag[r];
+            let mut s = [b[(3 * i, r)], b[(3 * i + 1, r)], b[(3 * i + 2, r)]];
+            for (l, zc) in lr.iter().zip(&z[..r]) {
+                s[0] -= l * zc[0];
+                s[1] -= l * zc[1];
+                s[2] -= l * zc[2];
             }
+            let d = self.l_inv_diag[r];
+            z[r] = [s[0] * d, s[1] * d, s[2] * d];
         }
-        let za = |a: usize| &z[a * n..(a + 1) * n];
-        let dot = |a: usize, c: usize| -> f64 { za(a).iter().zip(za(c)).map(|(u, v)| u * v).sum() };
+        let z = &*z;
+        let dot = |a: usize, c: usize| -> f64 { z.iter().map(|z| z[a] * z[c]).sum() };
         let (h01, h02, h12) = (dot(0, 1), dot(0, 2), dot(1, 2));
         let ih = Matrix3::new(
             1.0 - dot(0, 0),
