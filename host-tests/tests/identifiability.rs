@@ -551,6 +551,7 @@ fn the_columns_themselves_find_an_exact_dependence() {
         group: (0..rows).collect(),
         groups: rows,
         instrument_sigma: None,
+        unit_sums: None,
     };
     let kept = d.kept_by_columns(&[0, 1, 2, 3, 4, 5], 1e-6);
     assert_eq!(kept, [true, true, true, false, true, false]);

@@ -1,7 +1,7 @@
 //! The design: the columns of a list of parameters at every row (`B` of
 //! eq. 4, stacked), and which of them the data can tell apart.
 
-use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3, U3};
+use nalgebra::{DMatrix, Dyn, OMatrix, Vector3, U3};
 
 use super::linearisation::Linearisation;
 use super::rows::{Row, Rows};
@@ -14,6 +14,8 @@ use crate::model::Param;
 use crate::Error;
 
 mod group_rows;
+mod kept;
+mod unit_sums;
 pub use group_rows::GroupRows;
 
 /// The columns of some parameters at every row: `b` is `3·rows × params`,
@@ -34,6 +36,12 @@ pub struct Design {
     /// The instrument's σ per group and axis \[m\] (the root mean square of
     /// its rows'), when every row has one (data contract 7.2).
     pub instrument_sigma: Option<Vec<Vector3<f64>>>,
+    /// The unit-weight sums `Σ BᵀB`, `Σ Bᵀ Δp` of all the columns and rows,
+    /// when the pass that built the design made them
+    /// ([`Design::relinearised`]; the passes over the design then use them,
+    /// bit for bit the sums they would make). `None` for a design built
+    /// otherwise, and to be set to `None` by whoever changes `b` or `y`.
+    pub unit_sums: Option<Accumulator<f64, Dyn>>,
 }
 
 /// Each run's piece of every column of a design's storage `data` (resized
@@ -260,22 +268,52 @@ impl Design {
             group,
         } = old.map(Self::into_storage).unwrap_or_default();
         let columns = Columns::new(params, lin, names, all);
-        let pieces = pieces(&mut data, m, params.len(), per);
+        // With runs that start at the view's blocks, each block's
+        // unit-weight sums from its columns as they are written.
+        let fuse = unit_sums::aligned(m, per);
+        let states: Vec<_> = pieces(&mut data, m, params.len(), per)
+            .into_iter()
+            .enumerate()
+            .map(|(r, piece)| {
+                (
+                    piece,
+                    fuse.then(|| unit_sums::RunSums::new(per.min(m - r * per))),
+                )
+            })
+            .collect();
         let columns = &columns;
+        let mut states = states;
         let done = all.relinearise_with(
             geometry,
             lin,
             threads,
-            pieces,
-            |piece, k, row, frames, g| columns.write(row, frames, g, piece, k),
+            states.iter_mut().collect(),
+            |(piece, sums), k, row, frames, g| {
+                columns.write(row, frames, g, piece, k)?;
+                if let Some(sums) = sums {
+                    let s = super::rows::noise_scale(columns.mixed, row.kind);
+                    let y = if s == 1.0 { row.y } else { row.y * s };
+                    sums.add(piece, k, y.into());
+                }
+                Ok(())
+            },
         )?;
-        Ok(done.map(|()| Self::finish(all, params, Storage { b: data, y, group })))
+        let sums = fuse.then(|| {
+            let runs = states.into_iter().filter_map(|(_, s)| s).collect();
+            unit_sums::merge_runs(params.len(), runs)
+        });
+        Ok(done.map(|()| {
+            let mut d = Self::finish(all, params, Storage { b: data, y, group });
+            d.unit_sums = sums.flatten();
+            d
+        }))
     }
 
     /// The design of the first `n` parameters only: its leading columns,
     /// in place (the storage stays, for the next design).
     pub fn keep_leading(&mut self, n: usize) {
         let n = n.min(self.params.len());
+        self.unit_sums = None;
         let m3 = self.b.nrows();
         let b = std::mem::replace(&mut self.b, DMatrix::zeros(0, 0));
         let mut data: Vec<f64> = b.data.into();
@@ -352,6 +390,7 @@ impl Design {
             group,
             groups,
             instrument_sigma,
+            unit_sums: None,
         }
     }
 
@@ -492,60 +531,6 @@ impl Design {
         )
         .ok()
     }
-
-    /// Which of the columns `cols` are kept, in order, by the pivots
-    /// `1 − R²` (a column regressed on the kept ones before it) of the
-    /// columns themselves: `R` of a Householder QR of the rows (block by
-    /// block: `R ← qr([R; rows])`), then its columns orthogonalised in
-    /// order, twice (Gram–Schmidt). `Λ = BᵀB` squares the condition of `B`:
-    /// its pivots carry rounding of about `ε·κ(Λ)`, of the order of the
-    /// tolerance past `κ ≈ 10⁸`, where an exactly dependent column can pass
-    /// and the weights of a fit then make the solver refuse it (a random
-    /// chain: `1 − R²` of 6e-22 from the columns, ~1e-6 from `Λ`). Here the
-    /// rounding is about `ε·κ(B)`. A column without information (squared
-    /// norm at most `ε²` of the largest) is left out, as in `Λ`.
-    pub fn kept_by_columns(&self, cols: &[usize], tolerance: f64) -> Vec<bool> {
-        let n = cols.len();
-        let mut r = DMatrix::<f64>::zeros(0, n);
-        let per = QR_ROWS.max(n);
-        let mut start = 0;
-        while start < self.rows() {
-            let end = (start + per).min(self.rows());
-            let k = r.nrows();
-            let stacked = DMatrix::from_fn(k + 3 * (end - start), n, |i, j| {
-                if i < k {
-                    r[(i, j)]
-                } else {
-                    self.b[(3 * start + i - k, cols[j])]
-                }
-            });
-            r = stacked.qr().r();
-            start = end;
-        }
-        let norms: Vec<f64> = (0..n).map(|j| r.column(j).norm_squared()).collect();
-        let floor = f64::EPSILON * f64::EPSILON * norms.iter().copied().fold(0.0, f64::max);
-        let mut basis: Vec<DVector<f64>> = Vec::new();
-        (0..n)
-            .map(|j| {
-                if norms[j].is_nan() || norms[j] <= floor {
-                    return false;
-                }
-                let mut v = r.column(j).into_owned();
-                for _ in 0..2 {
-                    for q in &basis {
-                        let p = q.dot(&v);
-                        v.axpy(-p, q, 1.0);
-                    }
-                }
-                let d = v.norm_squared() / norms[j];
-                let keep = d > tolerance;
-                if keep {
-                    basis.push(&v / v.norm());
-                }
-                keep
-            })
-            .collect()
-    }
 }
 
 /// Below this ratio of the smallest kept pivot of `Λ` to the largest, the
@@ -555,9 +540,6 @@ impl Design {
 /// equations (at worst 7e-7), below the tolerance (1e-6); well-conditioned
 /// models pay nothing.
 pub const CHECK_RCOND: f64 = 1e-3;
-
-/// Rows added to `R` at a time in [`Design::kept_by_columns`].
-const QR_ROWS: usize = 4096;
 
 /// Pseudo-random designs for the unit tests of what reads a design.
 #[cfg(test)]

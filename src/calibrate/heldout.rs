@@ -338,6 +338,7 @@ mod tests {
             group: (0..rows).map(|i| i / per).collect(),
             groups,
             instrument_sigma: None,
+            unit_sums: None,
         }
     }
 

@@ -401,6 +401,7 @@ mod tests {
                     .map(|g| Vector3::repeat(2e-6 * (1 + g % 3) as f64))
                     .collect()
             }),
+            unit_sums: None,
         }
     }
 

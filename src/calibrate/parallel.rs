@@ -410,6 +410,21 @@ mod tests {
                 "{threads} threads"
             );
             assert_eq!(bits(&fused.y), bits(&d.y));
+            // Its unit-weight sums, when the pass made them (runs of whole
+            // blocks, or one run), are the view's of the design.
+            assert_eq!(fused.unit_sums.is_some(), threads == 1);
+            if let Some(sums) = &fused.unit_sums {
+                let cols: Vec<usize> = (0..params.len()).collect();
+                let view = crate::calibrate::view::View::new(&d, &cols, None, None)
+                    .information()
+                    .expect("finite");
+                assert_eq!(
+                    bits(sums.information().as_slice()),
+                    bits(view.information().as_slice())
+                );
+                assert_eq!(bits(sums.eta().as_slice()), bits(view.eta().as_slice()));
+                assert_eq!(sums.weighted_yy().to_bits(), view.weighted_yy().to_bits());
+            }
             assert_eq!((fused.b.shape(), &fused.group), (d.b.shape(), &d.group));
             assert!(state(&rows) == r, "{threads} threads");
             (r, d.b, d.y)

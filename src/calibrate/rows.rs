@@ -25,7 +25,9 @@ use crate::Error;
 
 mod build;
 mod noise;
+mod runs;
 pub use noise::noise_scale;
+pub use runs::run_length;
 
 /// Which kinds of rows there are: the core's, for its candidate rule.
 pub use crate::model::effect::DataKinds;
@@ -116,22 +118,6 @@ pub struct RowExtra {
     /// are then at the equilibrium, not at `q`); else empty.
     pub gravity_q: Vec<[f64; 2]>,
 }
-
-/// Rows a run of [`Rows::relinearise_with`] has on `threads` threads (the
-/// last run fewer): all of them on one thread; else about eight runs per
-/// thread (`RUNS_PER_THREAD`), taken in turn, so that a thread the system
-/// slows leaves the others the runs it has not started (one run per thread
-/// waited ~0.05–0.1 s per relinearisation of 10⁶ rows for the slower
-/// thread on a shared machine).
-pub fn run_length(rows: usize, threads: usize) -> usize {
-    if threads <= 1 {
-        return rows.max(1);
-    }
-    rows.div_ceil(threads * RUNS_PER_THREAD).max(1)
-}
-
-/// Runs per thread of [`Rows::relinearise_with`] ([`run_length`]).
-const RUNS_PER_THREAD: usize = 8;
 
 /// A run of rows in [`Rows::relinearise_with`], with its state and its
 /// first error from `then`.

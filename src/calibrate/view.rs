@@ -4,14 +4,19 @@
 //!
 //! Every sum is the core's ([`crate::estimate::Accumulator::update`] and
 //! [`crate::estimate::leverage`]), bit for bit, in a layout the processor
-//! streams faster (issue 16):
+//! streams faster (issue 16). A view of more than [`BLOCK_ROWS`] rows is
+//! summed a block of [`BLOCK_ROWS`] rows at a time, each block as the core
+//! sums its rows from zero, the blocks' sums merged in row order as the
+//! core merges accumulators ([`crate::estimate::Accumulator::merge`]): the
+//! blocks are independent, and worker threads take them in turn, each
+//! reading only its blocks' rows.
 //!
 //! - the included rows are copied, each row's three axes as three
 //!   contiguous runs of its columns, so that the rank-3 update of a column
 //!   of `Λ` runs over contiguous values (vectorised across the elements of
 //!   the column, each element's sum unchanged): once per view when it has
-//!   at most [`BLOCK_ROWS`] rows, else [`BLOCK_ROWS`] at a time in each
-//!   pass (a copy of a million rows' columns was 190 MB while a fit ran);
+//!   at most [`BLOCK_ROWS`] rows, else a block at a time in each pass (a
+//!   copy of a million rows' columns was 190 MB while a fit ran);
 //! - two rows are added per pass over the triangle (each element gets the
 //!   first row's three terms, then the second's: the order of the row by
 //!   row stream);
@@ -20,8 +25,9 @@
 //! - the leverages of four rows are computed side by side.
 //!
 //! Where a weight, σ or sum is not finite (or a weight negative), the
-//! core's [`crate::estimate::Accumulator::update`] is run instead: it gives
-//! the errors it always gave. `tests` compare both ways bit for bit.
+//! core's [`crate::estimate::Accumulator::update`] is run instead, over all
+//! the rows in order: it gives the errors it always gave. `tests` compare
+//! both ways bit for bit (the core's per block, merged).
 
 use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3, U3};
 
@@ -35,7 +41,8 @@ use crate::estimate::{
     Reweightable, RobustWeight, Solution,
 };
 use crate::Error;
-use terms::{add_terms, leverage3_rows, Term, LANES};
+pub(super) use terms::Term;
+use terms::{add_terms, leverage3_rows, LANES};
 
 /// The rows of a [`Design`] on some of its columns, optionally without one
 /// group (leave-one-out).
@@ -55,6 +62,85 @@ pub(super) struct View<'a> {
     b: Vec<f64>,
     /// The sums at unit weights when already made ([`View::knowing`]).
     known: Option<Accumulator<f64, Dyn>>,
+}
+
+/// One block's sums: `Λ` (upper triangle), `η`, `Σ Δpᵀ W² Δp` and the
+/// equations with a positive weight.
+pub(super) type Sums = (DMatrix<f64>, DVector<f64>, f64, usize);
+
+/// The sums of a block of rows, each a [`Term`] (its three axes' columns,
+/// `w²` per axis, `Δp`), in order, from zero: `Λ`'s columns `columns` (and
+/// their `η`), and with `first` also `Σ Δpᵀ W² Δp` and the equations
+/// ([`View::sums`]' block, and the relinearisation's
+/// ([`super::design::Design::relinearised`])).
+pub(super) fn block_sums<'b>(
+    n: usize,
+    rows: impl Iterator<Item = Term<'b>>,
+    columns: std::ops::Range<usize>,
+    first: bool,
+) -> Sums {
+    let mut info = DMatrix::<f64>::zeros(n, n);
+    let mut eta = DVector::<f64>::zeros(n);
+    let (mut yy, mut equations) = (0.0, 0);
+    let terms: Vec<Term<'b>> = rows
+        .inspect(|t| {
+            if first {
+                let (f, y) = (t.k, t.y);
+                yy = ((yy + f[0] * y[0] * y[0]) + f[1] * y[1] * y[1]) + f[2] * y[2] * y[2];
+                equations += f.iter().filter(|f| **f > 0.0).count();
+            }
+        })
+        .collect();
+    add_terms(
+        info.as_mut_slice(),
+        Some(eta.as_mut_slice()),
+        n,
+        &terms,
+        columns,
+    );
+    (info, eta, yy, equations)
+}
+
+/// The sums of blocks, in order, each from its shares of the triangle's
+/// columns (the first share's `Δpᵀ W² Δp` and equations), merged as the
+/// core merges accumulators ([`Accumulator::merge`]); `None` where a sum
+/// is not finite (or there is no block).
+pub(super) fn merged(
+    n: usize,
+    blocks: Vec<Vec<(std::ops::Range<usize>, Sums)>>,
+) -> Option<Accumulator<f64, Dyn>> {
+    let mut all: Option<Accumulator<f64, Dyn>> = None;
+    for mut parts in blocks {
+        let (mut info, mut eta, mut yy, mut equations) = match &parts[..] {
+            // One share: its sums are all.
+            [(columns, _)] if *columns == (0..n) => parts.pop()?.1,
+            _ => (DMatrix::zeros(n, n), DVector::zeros(n), 0.0, 0),
+        };
+        for (t, (columns, (part, part_eta, part_yy, part_equations))) in
+            parts.into_iter().enumerate()
+        {
+            for j in columns {
+                info.column_mut(j).copy_from(&part.column(j));
+                eta[j] = part_eta[j];
+            }
+            if t == 0 {
+                (yy, equations) = (part_yy, part_equations);
+            }
+        }
+        let block = Accumulator::from_sums(info, eta, yy, equations);
+        match &mut all {
+            None => all = Some(block),
+            Some(all) => all.merge(&block).ok()?,
+        }
+    }
+    let all = all?;
+    let finite = all.weighted_yy().is_finite()
+        && all
+            .information()
+            .iter()
+            .chain(all.eta().iter())
+            .all(|v| v.is_finite());
+    finite.then_some(all)
 }
 
 /// Rows a view copies at a time ([`View`]).
@@ -125,11 +211,21 @@ impl<'a> View<'a> {
         weights: &[Vector3<f64>],
         noise: Option<Noise<'_, f64>>,
     ) -> Result<Accumulator<f64, Dyn>, Error> {
+        self.streamed_rows(&self.rows, weights, noise)
+    }
+
+    /// [`View::streamed`] of the design rows `rows`.
+    fn streamed_rows(
+        &self,
+        rows: &[usize],
+        weights: &[Vector3<f64>],
+        noise: Option<Noise<'_, f64>>,
+    ) -> Result<Accumulator<f64, Dyn>, Error> {
         let n = self.cols.len();
         let mut acc = Accumulator::zeros(Dyn(n));
         // One block, refilled for every row.
         let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
-        for &i in &self.rows {
+        for &i in rows {
             let g = self.d.group[i];
             for a in 0..3 {
                 for k in 0..n {
@@ -148,56 +244,29 @@ impl<'a> View<'a> {
     /// positive weight, as [`Accumulator::update`] sums them; `None` where
     /// a weight is negative or anything is not finite.
     fn sums(&self, weights: &[Vector3<f64>]) -> Option<Accumulator<f64, Dyn>> {
+        if let Some(made) = self.made(weights) {
+            return Some(made);
+        }
         let n = self.cols.len();
         let ok = |w: &Vector3<f64>| w.iter().all(|w| *w >= 0.0 && w.is_finite());
         if !self.rows.iter().all(|&i| ok(&weights[self.d.group[i]])) {
             return None;
         }
-        // Each share of the triangle's columns over every row ([`by_columns`]);
-        // the first also sums `Δpᵀ W² Δp` and counts the equations.
-        let parts = self.by_columns(|t, columns| {
-            let mut info = DMatrix::<f64>::zeros(n, n);
-            let mut eta = DVector::<f64>::zeros(n);
-            let (mut yy, mut equations) = (0.0, 0);
-            self.each_block(columns.end, |rows, b| {
-                let mut terms = Vec::with_capacity(rows.len());
-                for (k, &i) in rows.iter().enumerate() {
-                    let w = weights[self.d.group[i]];
-                    let (f, y) = ([w[0] * w[0], w[1] * w[1], w[2] * w[2]], self.y(i));
-                    if t == 0 {
-                        yy = ((yy + f[0] * y[0] * y[0]) + f[1] * y[1] * y[1]) + f[2] * y[2] * y[2];
-                        equations += f.iter().filter(|f| **f > 0.0).count();
-                    }
-                    terms.push(Term {
-                        b: self.row_of(b, k),
-                        k: f,
-                        y,
-                    });
+        // Each block's sums, its columns shared between threads or all on
+        // one ([`View::by_blocks`]); the first share of a block also sums
+        // `Δpᵀ W² Δp` and counts the equations.
+        let blocks = self.by_blocks(|t, rows, b, columns| {
+            let terms = rows.iter().enumerate().map(|(k, &i)| {
+                let w = weights[self.d.group[i]];
+                Term {
+                    b: self.row_of(b, k),
+                    k: [w[0] * w[0], w[1] * w[1], w[2] * w[2]],
+                    y: self.y(i),
                 }
-                let (m, e) = (info.as_mut_slice(), Some(eta.as_mut_slice()));
-                add_terms(m, e, n, &terms, columns.clone());
             });
-            (info, eta, yy, equations)
+            block_sums(n, terms, columns, t == 0)
         });
-        let mut parts = parts;
-        let (mut info, mut eta, mut yy, mut equations) = match &parts[..] {
-            // One share (a small view, or one thread): its sums are all.
-            [(columns, _)] if *columns == (0..n) => parts.pop()?.1,
-            _ => (DMatrix::zeros(n, n), DVector::zeros(n), 0.0, 0),
-        };
-        for (t, (columns, (part, part_eta, part_yy, part_equations))) in
-            parts.into_iter().enumerate()
-        {
-            for j in columns {
-                info.column_mut(j).copy_from(&part.column(j));
-                eta[j] = part_eta[j];
-            }
-            if t == 0 {
-                (yy, equations) = (part_yy, part_equations);
-            }
-        }
-        let finite = yy.is_finite() && info.iter().chain(eta.iter()).all(|v| v.is_finite());
-        finite.then(|| Accumulator::from_sums(info, eta, yy, equations))
+        merged(n, blocks)
     }
 
     /// `Λ = Σ Bᵀ B` of the included rows, unit weights (the independence
@@ -206,6 +275,19 @@ impl<'a> View<'a> {
     /// bit; `None` where a sum is not finite.
     pub(super) fn information(&self) -> Option<Accumulator<f64, Dyn>> {
         self.sums(&vec![Vector3::repeat(1.0); self.d.groups])
+    }
+
+    /// The design's own unit-weight sums ([`Design`]'s `unit_sums`, made
+    /// in the pass that built it), when this view is every row on every
+    /// column and `weights` are all one: what [`View::sums`] gives, bit
+    /// for bit, without a pass.
+    fn made(&self, weights: &[Vector3<f64>]) -> Option<Accumulator<f64, Dyn>> {
+        let sums = self.d.unit_sums.as_ref()?;
+        let every = self.rows.len() == self.d.rows()
+            && self.cols.len() == self.d.b.ncols()
+            && self.cols.iter().enumerate().all(|(k, &c)| k == c)
+            && weights.iter().all(|w| *w == Vector3::repeat(1.0));
+        every.then(|| sums.clone())
     }
 
     /// The sandwich's middle term `M = Σ Bᵀ W² Σ² W² B` with σ of `noise`
@@ -224,35 +306,43 @@ impl<'a> View<'a> {
                 && s.iter().all(|s| *s > 0.0 && s.is_finite())
         });
         if ok {
-            let parts = self.by_columns(|_, columns| {
+            let blocks = self.by_blocks(|_, rows, b, columns| {
                 let mut m = DMatrix::<f64>::zeros(n, n);
-                self.each_block(columns.end, |rows, b| {
-                    let mut terms = Vec::with_capacity(rows.len());
-                    for (r, &i) in rows.iter().enumerate() {
-                        let g = self.d.group[i];
-                        let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
-                        let k = |a: usize| {
-                            let w2 = w[a] * w[a];
-                            w2 * w2 * s[a] * s[a]
-                        };
-                        terms.push(Term {
-                            b: self.row_of(b, r),
-                            k: [k(0), k(1), k(2)],
-                            y: [0.0; 3],
-                        });
-                    }
-                    add_terms(m.as_mut_slice(), None, n, &terms, columns.clone());
-                });
+                let mut terms = Vec::with_capacity(rows.len());
+                for (r, &i) in rows.iter().enumerate() {
+                    let g = self.d.group[i];
+                    let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+                    let k = |a: usize| {
+                        let w2 = w[a] * w[a];
+                        w2 * w2 * s[a] * s[a]
+                    };
+                    terms.push(Term {
+                        b: self.row_of(b, r),
+                        k: [k(0), k(1), k(2)],
+                        y: [0.0; 3],
+                    });
+                }
+                add_terms(m.as_mut_slice(), None, n, &terms, columns.clone());
                 m
             });
-            for (columns, part) in parts {
-                if columns == (0..n) {
-                    // One share: its sum is all.
-                    m = part;
-                    continue;
+            // Each block's `M` from its shares, the blocks' added in order
+            // (as [`Accumulator::merge`] adds the middle terms).
+            for (k, parts) in blocks.into_iter().enumerate() {
+                let mut block = DMatrix::<f64>::zeros(n, n);
+                for (columns, part) in parts {
+                    if columns == (0..n) {
+                        // One share: its sum is all.
+                        block = part;
+                        continue;
+                    }
+                    for j in columns {
+                        block.column_mut(j).copy_from(&part.column(j));
+                    }
                 }
-                for j in columns {
-                    m.column_mut(j).copy_from(&part.column(j));
+                if k == 0 {
+                    m = block;
+                } else {
+                    m += &block;
                 }
             }
             if m.iter().all(|v| v.is_finite()) {
@@ -418,166 +508,4 @@ impl Reweightable<f64, Dyn> for View<'_> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::calibrate::design::testing::{design, rng};
-
-    /// The leverage of one row and axis as [`crate::estimate::leverage`]
-    /// sums it.
-    fn one(inv: &[f64], p: usize, b: impl Fn(usize) -> f64) -> f64 {
-        let mut q = 0.0;
-        for c in 0..p {
-            let mut s = 0.0;
-            for r in 0..p {
-                s += inv[c * p + r] * b(r);
-            }
-            q += s * b(c);
-        }
-        q
-    }
-
-    #[test]
-    fn batched_leverages_are_the_row_by_row_ones_bit_for_bit() {
-        let mut next = rng(7);
-        for p in [1, 2, 5, 43] {
-            let inv: Vec<f64> = (0..p * p).map(|_| next() * 1e3).collect();
-            let b: Vec<f64> = (0..3 * p * LANES).map(|_| next()).collect();
-            let q = leverage3_rows(&inv, p, &b);
-            for j in 0..LANES {
-                for a in 0..3 {
-                    let want = one(&inv, p, |k| b[(3 * k + a) * LANES + j]);
-                    assert_eq!(q[a * LANES + j].to_bits(), want.to_bits());
-                }
-            }
-        }
-    }
-
-    fn same(a: &[f64], b: &[f64]) {
-        assert_eq!(a.len(), b.len());
-        for (a, b) in a.iter().zip(b) {
-            assert_eq!(a.to_bits(), b.to_bits(), "{a} vs {b}");
-        }
-    }
-
-    /// The leverage pass on worker threads (a chunk of rows at a time) is
-    /// the pass on one thread (inside a worker, [`super::super::parallel`]
-    /// gives one), bit for bit: more rows than a chunk, groups across the
-    /// threads' runs and the chunks' ends.
-    #[test]
-    fn residual_sigma_on_threads_is_the_serial_one() {
-        let d = design(5000, 7, 9, 11);
-        let cols: Vec<usize> = (0..9).collect();
-        let v = View::new(&d, &cols, None, None);
-        let weights: Vec<Vector3<f64>> = (0..d.groups)
-            .map(|g| Vector3::new(1.0, 0.5 + (g % 3) as f64, 2.0))
-            .collect();
-        let fit = v
-            .weighted(&weights, None)
-            .expect("sums")
-            .solve_active(&[true; 9])
-            .expect("solution");
-        let run = || {
-            let mut sigma = vec![Vector3::zeros(); d.groups];
-            let mut dof = vec![Vector3::zeros(); d.groups];
-            v.residual_sigma_into(&fit, &weights, &mut sigma, &mut dof)
-                .expect("sigma");
-            let flat =
-                |v: Vec<Vector3<f64>>| v.iter().flat_map(|v| v.iter().copied()).collect::<Vec<_>>();
-            (flat(sigma), flat(dof))
-        };
-        let threads = run();
-        let serial = super::super::parallel::map(2, 2, |k| (k == 0).then(run))
-            .into_iter()
-            .flatten()
-            .next()
-            .expect("serial");
-        same(&threads.0, &serial.0);
-        same(&threads.1, &serial.1);
-    }
-
-    #[test]
-    fn the_sums_are_the_cores_bit_for_bit() {
-        // Odd and even row counts (the pairs and the last row alone), some
-        // zero weights, every column or some.
-        for (groups, per, n, seed) in [(5, 3, 7, 1), (4, 4, 43, 2), (1, 1, 3, 3)] {
-            let d = design(groups, per, n, seed);
-            let mut next = rng(seed + 10);
-            let weights: Vec<Vector3<f64>> = (0..groups)
-                .map(|g| {
-                    let w = Vector3::from_fn(|_, _| next() + 0.6);
-                    if g == 1 {
-                        Vector3::new(0.0, w.y, w.z)
-                    } else {
-                        w
-                    }
-                })
-                .collect();
-            let sigma: Vec<Vector3<f64>> = (0..groups)
-                .map(|_| Vector3::from_fn(|_, _| (next() + 0.6) * 1e-5))
-                .collect();
-            let all: Vec<usize> = (0..n).collect();
-            let some: Vec<usize> = (0..n).step_by(2).collect();
-            for cols in [&all, &some] {
-                for (skip, block) in [
-                    (None, BLOCK_ROWS),
-                    (Some(0), BLOCK_ROWS),
-                    (None, 2),
-                    (Some(1), 4),
-                ] {
-                    let v = View::blocked(&d, cols, skip, None, block);
-                    let fast = v.weighted(&weights, None).expect("sums");
-                    let core = v.streamed(&weights, None).expect("stream");
-                    assert_eq!(fast.equations(), core.equations());
-                    assert_eq!(fast.weighted_yy().to_bits(), core.weighted_yy().to_bits());
-                    same(fast.eta().as_slice(), core.eta().as_slice());
-                    same(fast.information().as_slice(), core.information().as_slice());
-                    let noise = Noise::known(&sigma);
-                    let m = v.middle(&weights, noise).expect("middle");
-                    let core = v.streamed(&weights, Some(noise)).expect("stream");
-                    same(m.as_slice(), core.middle().as_slice());
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn the_information_is_the_unit_weight_blocks_bit_for_bit() {
-        // What `Design::identifiability` streamed before: blocks of the
-        // columns with unit weights and Δp = 0, one `update` per row.
-        for (groups, per, n, seed) in [(5, 3, 7, 4), (4, 4, 43, 5), (1, 1, 3, 6)] {
-            let d = design(groups, per, n, seed);
-            let cols: Vec<usize> = (0..n).rev().step_by(2).collect();
-            let fast = View::new(&d, &cols, None, None)
-                .information()
-                .expect("finite");
-            let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(cols.len()));
-            for i in 0..d.rows() {
-                let b =
-                    OMatrix::<f64, U3, Dyn>::from_fn(cols.len(), |a, k| d.b[(3 * i + a, cols[k])]);
-                core.update(&Block::new(b, Vector3::zeros()))
-                    .expect("finite");
-            }
-            same(fast.information().as_slice(), core.information().as_slice());
-        }
-    }
-
-    #[test]
-    fn bad_weights_give_the_cores_errors() {
-        let d = design(3, 2, 4, 5);
-        let cols: Vec<usize> = (0..4).collect();
-        let v = View::new(&d, &cols, None, None);
-        for bad in [-1.0, f64::NAN, f64::INFINITY] {
-            let mut w = vec![Vector3::repeat(1.0); 3];
-            w[1].y = bad;
-            assert_eq!(
-                v.weighted(&w, None).map(|_| ()),
-                v.streamed(&w, None).map(|_| ())
-            );
-            let sigma = vec![Vector3::repeat(1e-5); 3];
-            assert_eq!(
-                v.middle(&w, Noise::known(&sigma)).map(|_| ()),
-                v.streamed(&w, Some(Noise::known(&sigma))).map(|_| ())
-            );
-        }
-    }
-}
+mod tests;

@@ -27,5 +27,6 @@ pub(crate) fn design(groups: usize, per: usize, n: usize, seed: u64) -> Design {
         group: (0..rows).map(|i| i / per).collect(),
         groups,
         instrument_sigma: None,
+        unit_sums: None,
     }
 }

@@ -1,7 +1,8 @@
 //! How a [`View`]'s rows reach its passes: copied a block at a time into
 //! the layout the kernels of [`super::terms`] stream (each row's three
-//! axes as three contiguous runs of its columns), and the triangle's
-//! columns shared between worker threads.
+//! axes as three contiguous runs of its columns), the blocks taken in turn
+//! by worker threads, or one block's triangle shared between them by
+//! columns.
 
 use super::terms::column_shares;
 use super::View;
@@ -39,21 +40,32 @@ impl View<'_> {
         }
     }
 
-    /// `f(rows, b)` for the included rows in runs of at most `block`, in
-    /// order: `rows` the run's design rows, `b` their columns as
-    /// [`View::copy`] lays them out, the first `upto` of them (the others
-    /// are not to be read).
-    pub(super) fn each_block(&self, upto: usize, mut f: impl FnMut(&[usize], &[f64])) {
+    /// `f(t, rows, b, columns)` for each block of the included rows, in
+    /// order, and each share `t` of the triangle's columns `columns`:
+    /// `rows` the block's design rows, `b` their columns ([`View::copy`]'s
+    /// layout). Each element of a block's sums is summed by one share over
+    /// the block's rows in order; a view of at most `block` rows is one
+    /// block whose columns are shared between worker threads
+    /// ([`View::by_columns`]); a larger one is blocks of `block` rows, each
+    /// all columns on one worker thread, taken in turn. The results are
+    /// the same whatever the number of threads.
+    pub(super) fn by_blocks<T: Send>(
+        &self,
+        f: impl Fn(usize, &[usize], &[f64], std::ops::Range<usize>) -> T + Sync,
+    ) -> Vec<Vec<(std::ops::Range<usize>, T)>> {
         if self.rows.len() <= self.block {
-            f(&self.rows, &self.b);
-            return;
+            return vec![self.by_columns(|t, columns| f(t, &self.rows, &self.b, columns))];
         }
-        let mut b = Vec::new();
-        for first in (0..self.rows.len()).step_by(self.block) {
+        let n = self.cols.len();
+        let blocks = self.rows.len().div_ceil(self.block);
+        let threads = super::super::parallel::for_rows(self.rows.len());
+        super::super::parallel::map(blocks, threads, |k| {
+            let first = k * self.block;
             let len = self.block.min(self.rows.len() - first);
-            self.copy_into(first, len, upto, &mut b);
-            f(&self.rows[first..first + len], &b);
-        }
+            let mut b = Vec::new();
+            self.copy_into(first, len, n, &mut b);
+            vec![(0..n, f(0, &self.rows[first..first + len], &b, 0..n))]
+        })
     }
 
     /// `f(t, columns)` for each share `t` of the triangle's columns

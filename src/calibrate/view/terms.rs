@@ -6,10 +6,10 @@ use super::super::widest::{widest, Kernel};
 
 /// One row's share of a rank-3 update: its three axes' columns, the factor
 /// of each axis (`w²`, or `w⁴σ²` for `M`) and its `Δp`.
-pub(super) struct Term<'a> {
-    pub(super) b: [&'a [f64]; 3],
-    pub(super) k: [f64; 3],
-    pub(super) y: [f64; 3],
+pub(in crate::calibrate) struct Term<'a> {
+    pub(in crate::calibrate) b: [&'a [f64]; 3],
+    pub(in crate::calibrate) k: [f64; 3],
+    pub(in crate::calibrate) y: [f64; 3],
 }
 
 /// `m[i][j] += Σ_a b_a[i] (k_a b_a[j])` for `i ≤ j` (`m` column-major
