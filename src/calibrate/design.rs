@@ -271,7 +271,7 @@ impl Design {
         // With runs that start at the view's blocks, each block's
         // unit-weight sums from its columns as they are written.
         let fuse = unit_sums::aligned(m, per);
-        let states: Vec<_> = pieces(&mut data, m, params.len(), per)
+        let mut states: Vec<_> = pieces(&mut data, m, params.len(), per)
             .into_iter()
             .enumerate()
             .map(|(r, piece)| {
@@ -282,7 +282,6 @@ impl Design {
             })
             .collect();
         let columns = &columns;
-        let mut states = states;
         let done = all.relinearise_with(
             geometry,
             lin,
