@@ -290,9 +290,7 @@ impl Design {
             |(piece, sums), k, row, frames, g| {
                 columns.write(row, frames, g, piece, k)?;
                 if let Some(sums) = sums {
-                    let s = super::rows::noise_scale(columns.mixed, row.kind);
-                    let y = if s == 1.0 { row.y } else { row.y * s };
-                    sums.add(piece, k, y.into());
+                    sums.add(piece, k, super::rows::scaled_y(columns.mixed, row).into());
                 }
                 Ok(())
             },
@@ -356,12 +354,7 @@ impl Design {
             .collect();
         let filled = super::parallel::for_each_mut(&mut runs, threads, |_, ((ys, gs), rs)| {
             for ((y, g), r) in ys.iter_mut().zip(gs.iter_mut()).zip(rs.iter()) {
-                let s = all.noise_scale(r);
-                *y = if s == 1.0 {
-                    r.y.into()
-                } else {
-                    (r.y * s).into()
-                };
+                *y = super::rows::scaled_y(all.mixed(), r).into();
                 *g = r.group;
             }
             Ok::<(), std::convert::Infallible>(())

@@ -26,7 +26,7 @@ use crate::Error;
 mod build;
 mod noise;
 mod runs;
-pub use noise::noise_scale;
+pub use noise::{noise_scale, scaled_y};
 pub use runs::run_length;
 
 /// Which kinds of rows there are: the core's, for its candidate rule.

@@ -20,6 +20,18 @@ pub fn noise_scale(mixed: bool, kind: RowKind) -> f64 {
     }
 }
 
+/// A row's left-hand side as the design holds it: `y` times
+/// [`noise_scale`] (not multiplied where the scale is 1): the same values
+/// wherever a pass needs them ([`super::super::design::Design`]).
+pub fn scaled_y(mixed: bool, row: &Row) -> Vector3<f64> {
+    let s = noise_scale(mixed, row.kind);
+    if s == 1.0 {
+        row.y
+    } else {
+        row.y * s
+    }
+}
+
 impl Rows {
     /// Whether the rows are of both kinds (deflections and absolute).
     pub fn mixed(&self) -> bool {
