@@ -14,6 +14,7 @@
 //! | positions on another scale than the robot | spread of the measured unloaded points over that of the nominal model's prediction beyond [`Policy::max_scale_ratio`] either way | error |
 //! | … | beyond [`Policy::warn_scale_ratio`] | warning |
 //! | poses that barely move the markers | spread of the nominal model's predicted unloaded points below [`Policy::min_spread_m`] (then no scale or unit check) | warning |
+//! | poses that barely move the markers off a line | the second principal spread of the same points (RMS off their best line) below [`Policy::min_spread_m`]: a rigid registration onto points on a line leaves the rotation about it undetermined, and a parameter whose column is zero at the nominal robot (a marker on the last joint's axis) may move the true robot's points (`spread::barely_moved`) | warning |
 //! | one joint column in the other angle unit | the nominal model registers onto the measured points [`Policy::unit_fit_ratio`] times better with that column converted (deg ↔ rad) | error |
 //! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |
@@ -37,6 +38,8 @@
 use nalgebra::Vector3;
 
 mod determined;
+mod spread;
+use spread::spread;
 
 use super::geometry::Geometry;
 use super::names::Names;
@@ -151,13 +154,6 @@ fn pairs(
         .collect()
 }
 
-/// RMS spread about the centroid of `v` \[m\].
-fn spread(v: impl Iterator<Item = Vector3<f64>> + Clone) -> f64 {
-    let n = v.clone().count().max(1) as f64;
-    let c = v.clone().sum::<Vector3<f64>>() / n;
-    (v.map(|p| (p - c).norm_squared()).sum::<f64>() / n).sqrt()
-}
-
 /// RMS \[m\] of the nominal prediction registered (rigidly) onto the
 /// measured points.
 fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
@@ -199,14 +195,9 @@ pub fn check_units(
     if base.len() < 4 {
         return Ok(warnings);
     }
+    let points: Vec<Vector3<f64>> = base.iter().map(|p| p.0).collect();
+    warnings.extend(spread::barely_moved(&data.file, &points, policy));
     if predicted < policy.min_spread_m {
-        warnings.push(format!(
-            "{}: the nominal model moves the markers over only {:.3} mm across the \
-             configurations: the poses barely move them, and what is left out as dependent \
-             at the nominal robot may matter at the true one",
-            data.file.display(),
-            predicted * 1e3
-        ));
         return Ok(warnings);
     }
     let measured = spread(base.iter().map(|p| p.1));

@@ -183,7 +183,10 @@ pub struct Policy {
     /// about their centroid) across the configurations: the data excite
     /// the geometry only by its errors, so parameters that are left out at
     /// the nominal robot may matter at the true one; a warning (and no
-    /// scale or unit check). 0.01.
+    /// scale or unit check). Also the bound on the points' spread off
+    /// their best line (their second principal spread): less, a warning
+    /// of its own (the rotation about the line not determined at the
+    /// nominal robot). 0.01.
     pub min_spread_m: f64,
     /// A compliance or backlash below zero by more than this many σ is an
     /// error; within it, a warning (consistent with zero). 3.
