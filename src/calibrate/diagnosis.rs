@@ -62,9 +62,17 @@ pub(super) fn first_fit(
         match e.fit_carrying(&params, carried) {
             Err(CalibrationError::Dependent(_)) => {}
             // The solver's refusal, by name (a candidate's is its rejection,
-            // `super::trial`).
+            // `super::trial`); of a weighted fit, with the unweighted one
+            // offered (the independence test passed the unweighted columns).
             Err(CalibrationError::Core("fit", err)) => {
-                return Err(CalibrationError::of_fit(err, &params, &e.names))
+                return Err(match CalibrationError::of_fit(err, &params, &e.names) {
+                    CalibrationError::Data(why) if e.fit_settings.method != Method::Ols => {
+                        CalibrationError::Data(format!(
+                            "{why}, or fit without weights (--method ols)"
+                        ))
+                    }
+                    other => other,
+                })
             }
             other => return other,
         }
