@@ -14,7 +14,7 @@
 //! | positions on another scale than the robot | spread of the measured unloaded points over that of the nominal model's prediction beyond [`Policy::max_scale_ratio`] either way | error |
 //! | … | beyond [`Policy::warn_scale_ratio`] | warning |
 //! | poses that barely move the markers | spread of the nominal model's predicted unloaded points below [`Policy::min_spread_m`] (then no scale or unit check) | warning |
-//! | poses that barely move the markers off a line | the second principal spread of the same points (RMS off their best line) below [`Policy::min_spread_m`]: a rigid registration onto points on a line leaves the rotation about it undetermined, and a parameter whose column is zero at the nominal robot (a marker on the last joint's axis) may move the true robot's points (`spread::barely_moved`) | warning |
+//! | poses that barely move the markers off a line, or off a plane | the second principal spread of the same points (RMS off their best line), or the third (off their best plane), below [`Policy::min_spread_m`]: a rigid registration onto points on a line leaves the rotation about it undetermined, and a parameter whose column is zero or dependent at the nominal robot (a marker on the last joint's axis, a tilt of parallel joints) may move the true robot's points (`spread::barely_moved`) | warning |
 //! | one joint column in the other angle unit | the nominal model registers onto the measured points [`Policy::unit_fit_ratio`] times better with that column converted (deg ↔ rad) | error |
 //! | negative compliance or backlash in the final model | more than [`Policy::negative_sigmas`] σ below 0 | error |
 //! | … | within [`Policy::negative_sigmas`] σ | warning (consistent with 0) |

@@ -184,9 +184,8 @@ pub struct Policy {
     /// the geometry only by its errors, so parameters that are left out at
     /// the nominal robot may matter at the true one; a warning (and no
     /// scale or unit check). Also the bound on the points' spread off
-    /// their best line (their second principal spread): less, a warning
-    /// of its own (the rotation about the line not determined at the
-    /// nominal robot). 0.01.
+    /// their best line and off their best plane (their second and third
+    /// principal spreads): less, a warning of its own. 0.01.
     pub min_spread_m: f64,
     /// A compliance or backlash below zero by more than this many σ is an
     /// error; within it, a warning (consistent with zero). 3.

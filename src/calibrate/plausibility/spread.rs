@@ -1,15 +1,21 @@
 //! How far the nominal model moves the markers across the configurations:
 //! the spread the scale check compares ([`spread`]) and the rules on
-//! poses that barely move the markers, overall or off a line
+//! poses that barely move the markers, overall, off a line or off a plane
 //! ([`barely_moved`]).
 //!
-//! Both rules are about the same thing: where the nominal robot's points
+//! The rules are about the same thing: where the nominal robot's points
 //! barely move in some direction, the data excite the geometry there only
 //! by its errors. A parameter whose column is zero or dependent at the
 //! nominal robot may then move the true robot's points, and the reduced
 //! model cannot follow. Points on a line are the sharpest case for the
 //! base frame: a rigid registration onto collinear points leaves the
-//! rotation about the line undetermined.
+//! rotation about the line undetermined. Points in a plane determine the
+//! base, but not what tilts the joints out of it: a random chain of the
+//! property tests (seed 5517115213884886855, two parallel joints and a
+//! marker on the third joint's axis; its measured points 0.87 mm RMS off
+//! their plane, the nominal ones none) ended "converged" at 85.8 µm
+//! against 32 µm of noise, with 14 of 21 parameters left out and no
+//! warning.
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -39,8 +45,8 @@ pub(super) fn principal(v: impl Iterator<Item = Vector3<f64>> + Clone) -> [f64; 
 
 /// The warning on the nominal model's predicted points `predicted`
 /// (unloaded rows) of the file `file`, if any: spread overall less than
-/// [`Policy::min_spread_m`], or within it of a line (the second principal
-/// spread) while along it beyond.
+/// [`Policy::min_spread_m`]; or within it of a line (the second principal
+/// spread), or of a plane (the third), while beyond it along them.
 pub(super) fn barely_moved(
     file: &std::path::Path,
     predicted: &[Vector3<f64>],
@@ -56,17 +62,30 @@ pub(super) fn barely_moved(
             overall * 1e3
         ));
     }
-    let [along, off, _] = principal(predicted.iter().copied());
-    (off < policy.min_spread_m).then(|| {
-        format!(
+    let [first, second, third] = principal(predicted.iter().copied());
+    if second < policy.min_spread_m {
+        return Some(format!(
             "{}: the nominal model moves the markers along a line only ({:.1} mm along it, \
              {:.3} mm off it, RMS across the configurations): the poses barely move them off \
              the line, a rotation about it is not determined at the nominal robot, and what \
              is left out as dependent there may matter at the true one; measure poses that \
              move the markers off the line (another joint, or a marker off the last axis)",
             file.display(),
-            along * 1e3,
-            off * 1e3
+            first * 1e3,
+            second * 1e3
+        ));
+    }
+    (third < policy.min_spread_m).then(|| {
+        format!(
+            "{}: the nominal model moves the markers in a plane only ({:.1} and {:.1} mm \
+             across it, {:.3} mm off it, RMS across the configurations): the poses barely \
+             move them off the plane, and what is left out as dependent at the nominal robot \
+             (a tilt of the joints out of the plane) may matter at the true one, whose joints \
+             need not be parallel; measure poses that move the markers off the plane",
+            file.display(),
+            first * 1e3,
+            second * 1e3,
+            third * 1e3
         )
     })
 }
@@ -114,10 +133,9 @@ mod tests {
     /// joint's axis behind a prismatic joint: its points lie on a line
     /// (158.4 mm along it, 0.33 mm off it in the data) and the fit ended at
     /// 470.6 µm against 33 µm of noise with no warning. Points on a line
-    /// are a warning; points over a plane or a volume are not, nor a line
-    /// moved off by more than the bound.
+    /// are a warning; a line moved off by more than the bound is not.
     #[test]
-    fn points_on_a_line_are_a_warning() {
+    fn points_on_a_line_or_in_a_plane_are_a_warning() {
         let policy = Policy::default();
         let file = std::path::Path::new("arm.csv");
         let dir = Vector3::new(0.1, 0.9, -0.2).normalize();
@@ -145,11 +163,23 @@ mod tests {
         let w = barely_moved(file, &around(5e-3 * 2f64.sqrt()), &policy).expect("a warning");
         assert!(w.contains("along a line only"), "{w}");
         assert!(barely_moved(file, &around(20e-3 * 2f64.sqrt()), &policy).is_none());
-        // A plane is not a line: a rigid registration onto it is determined.
+        // Points in a plane: their own warning; lifted off it by 20 mm RMS
+        // (alternately above and below), none.
         let plane: Vec<Vector3<f64>> = (0..36)
             .map(|k| Vector3::new((k % 6) as f64 * 0.1, (k / 6) as f64 * 0.1, 1.0))
             .collect();
-        assert!(barely_moved(file, &plane, &policy).is_none());
+        let w = barely_moved(file, &plane, &policy).expect("a warning");
+        assert!(
+            w.contains("in a plane only") && w.contains("0.000 mm off it"),
+            "{w}"
+        );
+        assert!(w.contains("barely move"), "{w}");
+        let lifted: Vec<Vector3<f64>> = plane
+            .iter()
+            .enumerate()
+            .map(|(k, p)| p + Vector3::z() * if (k + k / 6) % 2 == 0 { 0.02 } else { -0.02 })
+            .collect();
+        assert!(barely_moved(file, &lifted, &policy).is_none());
         // Overall under the bound: the first rule, its message unchanged.
         let still = points(|t| dir * (1e-3 * t));
         let w = barely_moved(file, &still, &policy).expect("a warning");
