@@ -99,7 +99,7 @@ mod tests {
     }
 
     /// Spread overall, along a line, off it: the principal spreads of
-    /// points on a line, on a circle and in a box, against the formula.
+    /// points on a line and on a circle, against their formulas.
     #[test]
     fn the_principal_spreads_are_those_of_the_points() {
         let line = points(|t| Vector3::new(0.3, -0.2, 1.0) * t + Vector3::new(2.0, 1.0, -3.0));
@@ -133,7 +133,8 @@ mod tests {
     /// joint's axis behind a prismatic joint: its points lie on a line
     /// (158.4 mm along it, 0.33 mm off it in the data) and the fit ended at
     /// 470.6 µm against 33 µm of noise with no warning. Points on a line
-    /// are a warning; a line moved off by more than the bound is not.
+    /// or in a plane are a warning; moved off them by more than the bound,
+    /// they are not.
     #[test]
     fn points_on_a_line_or_in_a_plane_are_a_warning() {
         let policy = Policy::default();
