@@ -195,8 +195,11 @@ pub fn check_units(
     if base.len() < 4 {
         return Ok(warnings);
     }
-    let points: Vec<Vector3<f64>> = base.iter().map(|p| p.0).collect();
-    warnings.extend(spread::barely_moved(&data.file, &points, policy));
+    warnings.extend(spread::barely_moved(
+        &data.file,
+        base.iter().map(|p| p.0),
+        policy,
+    ));
     if predicted < policy.min_spread_m {
         return Ok(warnings);
     }

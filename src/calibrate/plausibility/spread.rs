@@ -49,10 +49,10 @@ pub(super) fn principal(v: impl Iterator<Item = Vector3<f64>> + Clone) -> [f64; 
 /// spread), or of a plane (the third), while beyond it along them.
 pub(super) fn barely_moved(
     file: &std::path::Path,
-    predicted: &[Vector3<f64>],
+    predicted: impl Iterator<Item = Vector3<f64>> + Clone,
     policy: &Policy,
 ) -> Option<String> {
-    let overall = spread(predicted.iter().copied());
+    let overall = spread(predicted.clone());
     if overall < policy.min_spread_m {
         return Some(format!(
             "{}: the nominal model moves the markers over only {:.3} mm across the \
@@ -62,7 +62,7 @@ pub(super) fn barely_moved(
             overall * 1e3
         ));
     }
-    let [first, second, third] = principal(predicted.iter().copied());
+    let [first, second, third] = principal(predicted);
     if second < policy.min_spread_m {
         return Some(format!(
             "{}: the nominal model moves the markers along a line only ({:.1} mm along it, \
@@ -141,7 +141,7 @@ mod tests {
         let file = std::path::Path::new("arm.csv");
         let dir = Vector3::new(0.1, 0.9, -0.2).normalize();
         let line = points(|t| dir * (0.55 * t) + Vector3::new(0.0, -0.9, -2.9));
-        let w = barely_moved(file, &line, &policy).expect("a warning");
+        let w = barely_moved(file, line.iter().copied(), &policy).expect("a warning");
         assert!(
             w.starts_with("arm.csv: the nominal model moves the markers along a line only"),
             "{w}"
@@ -161,15 +161,16 @@ mod tests {
                 })
                 .collect::<Vec<_>>()
         };
-        let w = barely_moved(file, &around(5e-3 * 2f64.sqrt()), &policy).expect("a warning");
+        let w = barely_moved(file, around(5e-3 * 2f64.sqrt()).iter().copied(), &policy)
+            .expect("a warning");
         assert!(w.contains("along a line only"), "{w}");
-        assert!(barely_moved(file, &around(20e-3 * 2f64.sqrt()), &policy).is_none());
+        assert!(barely_moved(file, around(20e-3 * 2f64.sqrt()).iter().copied(), &policy).is_none());
         // Points in a plane: their own warning; lifted off it by 20 mm RMS
         // (alternately above and below), none.
         let plane: Vec<Vector3<f64>> = (0..36)
             .map(|k| Vector3::new((k % 6) as f64 * 0.1, (k / 6) as f64 * 0.1, 1.0))
             .collect();
-        let w = barely_moved(file, &plane, &policy).expect("a warning");
+        let w = barely_moved(file, plane.iter().copied(), &policy).expect("a warning");
         assert!(
             w.contains("in a plane only") && w.contains("0.000 mm off it"),
             "{w}"
@@ -180,10 +181,10 @@ mod tests {
             .enumerate()
             .map(|(k, p)| p + Vector3::z() * if (k + k / 6) % 2 == 0 { 0.02 } else { -0.02 })
             .collect();
-        assert!(barely_moved(file, &lifted, &policy).is_none());
+        assert!(barely_moved(file, lifted.iter().copied(), &policy).is_none());
         // Overall under the bound: the first rule, its message unchanged.
         let still = points(|t| dir * (1e-3 * t));
-        let w = barely_moved(file, &still, &policy).expect("a warning");
+        let w = barely_moved(file, still.iter().copied(), &policy).expect("a warning");
         assert!(w.contains("moves the markers over only"), "{w}");
     }
 }
