@@ -46,10 +46,13 @@ use super::setup::Setup;
 use super::urdf::Robot;
 use super::{ErrorKind, InputError, InputWarning};
 
+mod header;
 mod pairing;
 mod records;
+mod stream;
+use header::Header;
 use pairing::{pair, warnings, Stats};
-use records::{chunked, Layout};
+use records::chunked;
 
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
@@ -310,6 +313,10 @@ pub fn read_measurements_limited(
     max_bytes: u64,
 ) -> Result<Measurements, InputError> {
     let path = path.as_ref();
+    // A large file a block at a time, not all its bytes in memory.
+    if let Some(read) = stream::read(path, max_bytes, robot, setup) {
+        return read;
+    }
     let bytes = super::input::read_limited(path, "the measurements", max_bytes)?;
     parse_bytes(&bytes, path.to_path_buf(), robot, setup)
 }
@@ -366,9 +373,6 @@ fn parse_bytes(
     let err = |kind, line: usize, message: String| {
         InputError::new(file.clone(), kind, message).at_line(line)
     };
-    let cell_err = |kind, line: usize, column: &str, message: String| {
-        err(kind, line, message).in_column(column)
-    };
     let csv_err = |e: csv::Error| {
         let line = line_at(e.position());
         let kind = match e.kind() {
@@ -388,114 +392,9 @@ fn parse_bytes(
         .has_headers(true)
         .trim(csv::Trim::All)
         .from_reader(bytes);
-    let header = rdr.headers().map_err(csv_err)?.clone();
-    if header.iter().all(str::is_empty) {
-        return Err(err(ErrorKind::Syntax, 1, "no header row".into()));
-    }
-
-    // Header → column layout.
-    for name in &robot.joint_names {
-        if FIXED.iter().any(|(f, _)| f == name) {
-            return Err(cell_err(
-                ErrorKind::DuplicateColumn,
-                1,
-                name,
-                "a joint of the robot has the name of a fixed column".into(),
-            ));
-        }
-    }
-    let mut cols = Vec::with_capacity(header.len());
-    for (i, name) in header.iter().enumerate() {
-        let col = FIXED
-            .iter()
-            .find(|(f, _)| *f == name)
-            .map(|&(_, c)| c)
-            .or_else(|| robot.joint_index(name).map(Col::Joint))
-            .or_else(|| {
-                setup
-                    .ignore_columns
-                    .iter()
-                    .any(|c| c == name)
-                    .then_some(Col::Ignored)
-            })
-            .ok_or_else(|| {
-                cell_err(
-                    ErrorKind::UnknownColumn,
-                    1,
-                    name,
-                    format!(
-                        "neither a fixed column nor a movable joint of the chain \
-                         from '{}' to '{}' (joints: {}); to leave it out, add it to \
-                         the setup's ignore_columns",
-                        robot.base_link,
-                        robot.tip_link,
-                        robot.joint_names.join(", ")
-                    ),
-                )
-            })?;
-        if header.iter().take(i).any(|n| n == name) {
-            return Err(cell_err(
-                ErrorKind::DuplicateColumn,
-                1,
-                name,
-                "column appears twice".into(),
-            ));
-        }
-        cols.push(col);
-    }
-    // `rep`, `marker` and `load_kg` may be left out where the setup makes
-    // them unambiguous (data contract 7.2): one repetition, the one marker,
-    // no load.
-    let one_marker = setup.markers.len() == 1;
-    let optional = |name: &str| match name {
-        "rep" => true,
-        "marker" => one_marker,
-        "load_kg" => setup.load.is_none(),
-        _ => false,
-    };
-    let required = FIXED[..7]
-        .iter()
-        .map(|(n, _)| *n)
-        .chain(robot.joint_names.iter().map(String::as_str));
-    for name in required {
-        if !header.iter().any(|n| n == name) && !optional(name) {
-            let why = match name {
-                "marker" => "missing column (the setup declares more than one marker)",
-                "load_kg" => "missing column (the setup has a [load])",
-                _ => "missing column",
-            };
-            return Err(cell_err(ErrorKind::MissingColumn, 1, name, why.into()));
-        }
-    }
-    let has_time = cols.contains(&Col::Time);
-    // The record field of each joint.
-    let joint_field: Vec<Option<usize>> = (0..robot.dof())
-        .map(|j| cols.iter().position(|&c| c == Col::Joint(j)))
-        .collect();
-    // `sx, sy, sz` come together (data contract 7.2).
-    let sigma_cols = (0..3).filter(|&k| cols.contains(&Col::Sigma(k))).count();
-    if sigma_cols != 0 && sigma_cols != 3 {
-        let missing = ["sx", "sy", "sz"][(0..3)
-            .find(|&k| !cols.contains(&Col::Sigma(k)))
-            .unwrap_or(0)];
-        return Err(cell_err(
-            ErrorKind::MissingColumn,
-            1,
-            missing,
-            "the instrument's σ comes as three columns sx, sy, sz or none".into(),
-        ));
-    }
-
-    let layout = Layout {
-        file: &file,
-        robot,
-        setup,
-        header: &header,
-        cols: &cols,
-        joint_field: &joint_field,
-        markers: setup.markers.iter().map(|m| m.id).collect(),
-    };
-    let data_start = rdr.position().byte() as usize;
+    let head = Header::read(&mut rdr, &file, robot, setup, &csv_err)?;
+    let layout = head.layout(&file, robot, setup);
+    let data_start = head.data_start;
     let (observations, stats) = match chunked(bytes, data_start, &newlines, &layout, threads) {
         Some(done) => done,
         None => {
@@ -513,16 +412,30 @@ fn parse_bytes(
             (observations.finish(), stats)
         }
     };
+    finish(file, robot, setup, observations, &stats, head.has_time)
+}
+
+/// The measurements of `file` from its `observations` and their `stats`:
+/// its deflections paired, its warnings.
+///
+/// # Errors
+/// No observation; as [`pair`].
+fn finish(
+    file: PathBuf,
+    robot: &Robot,
+    setup: &Setup,
+    observations: Vec<Observation>,
+    stats: &Stats,
+    has_time: bool,
+) -> Result<Measurements, InputError> {
     if observations.is_empty() {
-        return Err(err(
-            ErrorKind::InvalidValue,
-            1,
-            "no measurement rows".into(),
-        ));
+        return Err(
+            InputError::new(file, ErrorKind::InvalidValue, "no measurement rows").at_line(1),
+        );
     }
 
     let (deflections, moved, shared) = pair(&observations, &file)?;
-    let warnings = warnings(&file, robot, setup.units, &stats, moved, shared);
+    let warnings = warnings(&file, robot, setup.units, stats, moved, shared);
 
     Ok(Measurements {
         file,

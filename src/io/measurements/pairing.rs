@@ -234,4 +234,17 @@ impl Stats {
             max_pos_written: 0.0,
         }
     }
+
+    /// Adds the stats of the rows after these (the first line outside a
+    /// joint's limits stays the earlier one).
+    pub(super) fn merge(&mut self, later: Stats) {
+        self.max_angle_written = self.max_angle_written.max(later.max_angle_written);
+        self.max_pos_written = self.max_pos_written.max(later.max_pos_written);
+        for (all, chunk) in self.outside.iter_mut().zip(later.outside) {
+            *all = match (*all, chunk) {
+                (Some((n, first)), Some((m, _))) => Some((n + m, first)),
+                (a, b) => a.or(b),
+            };
+        }
+    }
 }

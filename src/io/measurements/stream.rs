@@ -1,0 +1,170 @@
+//! A large measurement file read a block at a time (issue 16): the file's
+//! bytes are never all in memory, only [`BLOCK_BYTES`] of them and the
+//! observations read so far (a file of 10⁶ rows is 187 MB of text, a
+//! file at the default limit 1 GiB).
+//!
+//! Each block is cut after its last line end `\n`; its records are read as
+//! the whole file's are ([`super::records::in_chunks`]: in chunks on the
+//! engine's threads, joined in file order), the line numbers counted on
+//! from the blocks before, and the rest of the block carried to the next.
+//! The observations, stats and therefore the measurements are the ones the
+//! reading of the whole file makes (`tests` compare them). Anything else —
+//! a quote anywhere (a quoted cell may hold a line end), an error in any
+//! record or the header, a block without a `\n`, a file that grew past the
+//! limit, a read that fails — gives `None`, and the caller reads the whole
+//! file as before, which gives the error with its line and column.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use super::super::setup::Setup;
+use super::super::urdf::Robot;
+use super::super::InputError;
+use super::records::{in_chunks, line_ends, Read as Records};
+use super::{finish, Header, Measurements};
+
+/// Files at least this large are read a block at a time ([`read`]).
+pub(super) const STREAM_FROM_BYTES: u64 = 32 << 20;
+
+/// Bytes read from the file at a time.
+pub(super) const BLOCK_BYTES: usize = 4 << 20;
+
+/// Chunks of a block per thread: the threads take them in turn. (In
+/// chunks of at least 1 MiB, as the whole file's, a block of 2 MiB was one
+/// chunk: the parse of 10⁶ rows ran on one thread.)
+const CHUNKS_PER_THREAD: usize = 4;
+
+/// The measurements of the file `path` (at most `limit` bytes) read a
+/// block at a time, on the engine's threads; `None` when the file is not a
+/// regular file of at least [`STREAM_FROM_BYTES`] and at most `limit`
+/// bytes, there is one thread, or the file is not one the blocks can read
+/// (module doc): the caller reads the whole file.
+pub(super) fn read(
+    path: &Path,
+    limit: u64,
+    robot: &Robot,
+    setup: &Setup,
+) -> Option<Result<Measurements, InputError>> {
+    let threads = crate::calibrate::parallel::threads();
+    let blocks = Blocks::of(path, limit, threads, STREAM_FROM_BYTES)?;
+    let file = std::fs::File::open(path).ok()?;
+    blocks.read(file, robot, setup)
+}
+
+/// How a file is read a block at a time.
+struct Blocks {
+    /// The file, for the measurements and their errors.
+    file: PathBuf,
+    /// Its length as its metadata gave it \[bytes\] (for the room the
+    /// observations are given).
+    len: u64,
+    /// The most bytes it may have.
+    limit: u64,
+    /// Threads a block's records are read on.
+    threads: usize,
+    /// Bytes read at a time.
+    block: usize,
+}
+
+impl Blocks {
+    /// How the file `path` is read, in blocks of [`BLOCK_BYTES`] on
+    /// `threads` threads: `None` unless it is a regular file of at least
+    /// `from` and at most `limit` bytes, and `threads` are more than one.
+    fn of(path: &Path, limit: u64, threads: usize, from: u64) -> Option<Self> {
+        let meta = std::fs::metadata(path).ok()?;
+        let read = threads > 1 && meta.is_file() && (from..=limit).contains(&meta.len());
+        read.then(|| Self {
+            file: path.to_path_buf(),
+            len: meta.len(),
+            limit,
+            threads,
+            block: BLOCK_BYTES,
+        })
+    }
+
+    /// The measurements `reader` gives, read a block at a time; `None` as
+    /// [`read`].
+    fn read(
+        &self,
+        mut reader: impl Read,
+        robot: &Robot,
+        setup: &Setup,
+    ) -> Option<Result<Measurements, InputError>> {
+        let mut buf = Vec::with_capacity(2 * self.block);
+        let mut total = 0;
+        let mut eof = self.fill(&mut reader, &mut buf, &mut total)?;
+        // The header: the csv crate's reading of it, as for the whole file
+        // (its first line must be whole in the block).
+        memchr::memchr(b'\n', &buf)?;
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(&buf[..]);
+        let no = |_: csv::Error| InputError::new(&self.file, super::ErrorKind::Syntax, "");
+        let head = Header::read(&mut rdr, &self.file, robot, setup, &no).ok()?;
+        let layout = head.layout(&self.file, robot, setup);
+        let mut read = Records::new(robot.dof());
+        let (mut start, mut line0) = (head.data_start, 0);
+        loop {
+            // Up to the last `\n` (a line end whatever follows it), or to
+            // the end of the file.
+            let cut = if eof {
+                buf.len()
+            } else {
+                memchr::memrchr(b'\n', &buf)? + 1
+            };
+            let piece = &buf[..cut];
+            let newlines = line_ends(piece, 0..cut);
+            if cut > start {
+                let chunks = (self.threads, CHUNKS_PER_THREAD * self.threads);
+                let before = read.observations.len();
+                in_chunks(piece, start, &newlines, line0, &layout, chunks, &mut read)?;
+                if before == 0 && read.observations.capacity() < 2 * read.observations.len() {
+                    // Room for the file's rows at the first block's bytes
+                    // a row, and a tenth more (pages not written are not
+                    // memory used).
+                    let per = (cut - start) as f64 / read.observations.len().max(1) as f64;
+                    let rows = (self.len as f64 / per * 1.1) as usize + 16;
+                    read.observations.reserve(rows.min(self.len as usize));
+                }
+            }
+            line0 += newlines.len();
+            if eof {
+                break;
+            }
+            buf.drain(..cut);
+            start = 0;
+            eof = self.fill(&mut reader, &mut buf, &mut total)?;
+        }
+        Some(finish(
+            self.file.clone(),
+            robot,
+            setup,
+            read.observations,
+            &read.stats,
+            head.has_time,
+        ))
+    }
+
+    /// The next block of `reader` appended to `buf`: whether the file
+    /// ended. `None` when the read fails, the file has more than `limit`
+    /// bytes (`total` so far) or a quote.
+    fn fill(&self, reader: &mut impl Read, buf: &mut Vec<u8>, total: &mut u64) -> Option<bool> {
+        let old = buf.len();
+        buf.reserve(self.block);
+        let n = reader
+            .by_ref()
+            .take(self.block as u64)
+            .read_to_end(buf)
+            .ok()?;
+        *total += n as u64;
+        let fresh = &buf[old..];
+        if *total > self.limit || memchr::memchr(b'"', fresh).is_some() {
+            return None;
+        }
+        Some(n < self.block)
+    }
+}
+
+#[cfg(test)]
+mod tests;
