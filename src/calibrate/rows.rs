@@ -26,8 +26,10 @@ use crate::Error;
 mod build;
 mod noise;
 mod runs;
+mod values;
 pub use noise::{noise_scale, scaled_y};
 pub use runs::run_length;
+use values::Values;
 
 /// Which kinds of rows there are: the core's, for its candidate rule.
 pub use crate::model::effect::DataKinds;
@@ -79,10 +81,10 @@ pub struct Row {
     /// Predicted marker position \[m, measurement frame\] at `frames`.
     pub p: Vector3<f64>,
     /// Joint torques behind the row at `frames`: the load's (deflection
-    /// rows) or the links' own weight (absolute rows) \[N·m or N\]; empty
+    /// rows) or the links' own weight (absolute rows) \[N·m or N\]; none
     /// when every one is `+0.0` (no load and no link mass: 64 B a row fewer,
     /// 10⁶ allocations fewer at 10⁶ rows). Read through [`Row::tau`].
-    tau: Vec<f64>,
+    tau: Values,
     /// What only some rows have ([`RowExtra`]), boxed: absent (8 B) for an
     /// absolute row without time, instrument σ or the exact model's
     /// columns, where it was 152 B a row inline (152 MB at 10⁶ rows).
@@ -133,16 +135,16 @@ type Run<'a, S> = (&'a mut [Row], Option<S>, Result<(), Error>);
 /// bit (the equilibrium's frames are the forward kinematics at its `θ`).
 #[derive(Debug, Clone, Default)]
 pub struct RowFrames {
-    /// Index into [`Rows::chains`].
-    chain: usize,
-    /// `θ` \[rad or m\]; empty for the row's own `q`.
-    theta: Vec<f64>,
+    /// Index into [`Rows::chains`] (a `u32`: 8 B a row fewer).
+    chain: u32,
+    /// `θ` \[rad or m\]; none for the row's own `q`.
+    theta: Values,
 }
 
 impl RowFrames {
     /// The joint values the frames are at (the row's `q` when empty).
     pub fn theta(&self) -> &[f64] {
-        &self.theta
+        self.theta.as_slice()
     }
 }
 
@@ -175,10 +177,10 @@ impl Row {
     /// The joint torques behind the row \[N·m or N\], one per joint (zeros
     /// when none was stored).
     pub fn tau(&self) -> &[f64] {
-        if self.tau.is_empty() {
+        if self.tau.as_slice().is_empty() {
             &ZERO_TORQUES[..self.q.len().min(J)]
         } else {
-            &self.tau
+            self.tau.as_slice()
         }
     }
 
@@ -186,10 +188,9 @@ impl Row {
     /// [`Row::tau`] then gives the same bits).
     fn set_tau(&mut self, tau: &[f64]) {
         if tau.iter().all(|t| t.to_bits() == 0) {
-            self.tau = Vec::new();
-        } else {
             self.tau.clear();
-            self.tau.extend_from_slice(tau);
+        } else {
+            self.tau.set(tau);
         }
     }
 
@@ -343,9 +344,13 @@ impl Rows {
         // serial loop stops at that row: their starting points are put back,
         // so that the retry is the same on any number of threads. (Only the
         // exact model starts from them.)
-        let before: Option<Vec<Vec<f64>>> = (threads > 1
-            && lin.model == super::DeflectionModel::Exact)
-            .then(|| self.rows.iter().map(|r| r.frames.theta.clone()).collect());
+        let before: Option<Vec<Vec<f64>>> =
+            (threads > 1 && lin.model == super::DeflectionModel::Exact).then(|| {
+                self.rows
+                    .iter()
+                    .map(|r| r.frames.theta().to_vec())
+                    .collect()
+            });
         // `rigid`: the run's frames of a rigid row, filled in place; `sink`
         // gets the row and its frames.
         let one = |row: &mut Row,
@@ -361,7 +366,7 @@ impl Rows {
             // The chain of the row's marker's link (one end but for a tree).
             let end = geometry.end_of(row.marker).min(chains.len() - 1);
             let chain = &chains[end];
-            row.frames.chain = end;
+            row.frames.chain = u32::try_from(end).unwrap_or(u32::MAX);
             let loading = Loading {
                 load: (!absolute).then_some(PointLoad {
                     mass_kg: row.load_kg,
@@ -435,8 +440,8 @@ impl Rows {
                     };
                     // From the last equilibrium of this row when there is
                     // one (the law moves little between relinearisations).
-                    let guess: Vec<f64> = if row.frames.theta.len() == row.q.len() {
-                        row.frames.theta.clone()
+                    let guess: Vec<f64> = if row.frames.theta().len() == row.q.len() {
+                        row.frames.theta().to_vec()
                     } else {
                         row.q.to_vec()
                     };
@@ -481,8 +486,7 @@ impl Rows {
                     } else {
                         row.measured - (p - p_rigid) + linear
                     };
-                    row.frames.theta.clear();
-                    row.frames.theta.extend_from_slice(eq.frames.q());
+                    row.frames.theta.set(eq.frames.q());
                     row.p = p;
                     sink(row, &eq.frames);
                 }
@@ -514,7 +518,7 @@ impl Rows {
         if let Err((at, e)) = done {
             if let Some(before) = before {
                 for (row, theta) in self.rows.iter_mut().zip(before).skip(at + 1) {
-                    row.frames.theta = theta;
+                    row.frames.theta.set(&theta);
                 }
             }
             return Err(e);
@@ -540,20 +544,26 @@ impl Rows {
     /// # Errors
     /// As [`Rows::frames`].
     pub fn frames_into(&self, row: &Row, out: &mut Frames<f64, J>) -> Result<(), Error> {
-        let chain = self.chains.get(row.frames.chain).ok_or(Error::Mismatch {
-            what: "rows not evaluated at a geometry",
-        })?;
-        if row.frames.theta.is_empty() {
+        let chain = usize::try_from(row.frames.chain).ok();
+        let chain = chain
+            .and_then(|c| self.chains.get(c))
+            .ok_or(Error::Mismatch {
+                what: "rows not evaluated at a geometry",
+            })?;
+        if row.frames.theta().is_empty() {
             chain.frames_into(&row.q, out)
         } else {
-            chain.frames_into(&row.frames.theta, out)
+            chain.frames_into(row.frames.theta(), out)
         }
     }
 
     /// Where each row's next equilibrium starts: the `θ` of its last one
     /// (empty where it has none), for [`Rows::start_from`].
     pub fn start_points(&self) -> Vec<Vec<f64>> {
-        self.rows.iter().map(|r| r.frames.theta.clone()).collect()
+        self.rows
+            .iter()
+            .map(|r| r.frames.theta().to_vec())
+            .collect()
     }
 
     /// Makes `start` ([`Rows::start_points`] of these rows) the starting
@@ -563,7 +573,7 @@ impl Rows {
     /// frames are the forward kinematics at its `θ`.
     pub fn start_from(&mut self, start: &[Vec<f64>]) {
         for (row, theta) in self.rows.iter_mut().zip(start) {
-            row.frames.theta.clone_from(theta);
+            row.frames.theta.set(theta);
         }
     }
 

@@ -4,7 +4,7 @@
 
 use nalgebra::Vector3;
 
-use super::{DataKinds, Row, RowExtra, RowFrames, RowKind, Rows};
+use super::{DataKinds, Row, RowExtra, RowFrames, RowKind, Rows, Values};
 use crate::calibrate::names::Names;
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
@@ -127,7 +127,7 @@ impl Rows {
             line,
             frames: RowFrames::default(),
             p: Vector3::zeros(),
-            tau: Vec::new(),
+            tau: Values::default(),
             extra: (dt.is_some() || sigma.is_some()).then(|| {
                 Box::new(RowExtra {
                     dt,
