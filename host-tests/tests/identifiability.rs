@@ -503,10 +503,10 @@ fn markers_moved_along_a_line_only_are_a_warning() {
 fn markers_moved_in_a_plane_only_are_a_warning() {
     // Seed 5517115213884886855 of the property above (a CI run): j1 and j2
     // parallel, the marker on j3's axis, so the nominal points lie in a
-    // plane (193.3 and 153.1 mm across it, 0.001 mm off it; the measured
-    // ones 0.87 mm off it). 14 of the 21 declared parameters are left out
-    // and the fit ended "converged" at 85.8 µm against 32 µm of noise,
-    // with no warning. The report now says why.
+    // plane (193.3 and 153.1 mm across it, 0.001 mm off it). 14 of the 21
+    // declared parameters are left out and the fit ended "converged" at
+    // 85.8 µm against 32 µm of noise, with no warning. The report now says
+    // why.
     let c = case(5517115213884886855);
     let r = calibrate_case(&c).expect("calibrated");
     assert!(

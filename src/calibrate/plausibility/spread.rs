@@ -12,8 +12,8 @@
 //! rotation about the line undetermined. Points in a plane determine the
 //! base, but not what tilts the joints out of it: a random chain of the
 //! property tests (seed 5517115213884886855, two parallel joints and a
-//! marker on the third joint's axis; its measured points 0.87 mm RMS off
-//! their plane, the nominal ones none) ended "converged" at 85.8 µm
+//! marker on the third joint's axis; its nominal points in a plane, the
+//! measured ones off it by the robot's errors) ended "converged" at 85.8 µm
 //! against 32 µm of noise, with 14 of 21 parameters left out and no
 //! warning.
 
@@ -131,7 +131,7 @@ mod tests {
     /// A random chain of the property tests (seed 1202820159449195811 of
     /// `host-tests/tests/identifiability.rs`) whose marker sits on its last
     /// joint's axis behind a prismatic joint: its points lie on a line
-    /// (158.4 mm along it, 0.33 mm off it in the data) and the fit ended at
+    /// at the nominal robot (158.4 mm along it) and the fit ended at
     /// 470.6 µm against 33 µm of noise with no warning. Points on a line
     /// or in a plane are a warning; moved off them by more than the bound,
     /// they are not.
