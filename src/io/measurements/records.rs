@@ -361,8 +361,8 @@ pub(super) struct Read {
     /// the next call: a file read a block at a time ([`super::stream`])
     /// then allocates them once, not once a block. (Allocated and freed
     /// again in every block, they left memory to the threads' allocator:
-    /// the peak of a run of 10⁶ rows was 862–871 MB, against 836–843 MB
-    /// with the whole file read at once and 845–848 MB now.)
+    /// the peak of a run of 10⁶ rows was 842–851 MiB, against 816–824 MiB
+    /// with the whole file read at once and 825–828 MiB now.)
     parts: Vec<Vec<Observation>>,
 }
 
