@@ -35,10 +35,11 @@ pub(super) const BLOCK_BYTES: usize = 4 << 20;
 const CHUNKS_PER_THREAD: usize = 4;
 
 /// The measurements of the file `path` (at most `limit` bytes) read a
-/// block at a time, on the engine's threads; `None` when the file is not a
-/// regular file of at least [`STREAM_FROM_BYTES`] and at most `limit`
-/// bytes, there is one thread, or the file is not one the blocks can read
-/// (module doc): the caller reads the whole file.
+/// block at a time, on the engine's threads (or its one: the same
+/// measurements, the records split as on several); `None` when the file is
+/// not a regular file of at least [`STREAM_FROM_BYTES`] and at most `limit`
+/// bytes, or is not one the blocks can read (module doc): the caller reads
+/// the whole file.
 pub(super) fn read(
     path: &Path,
     limit: u64,
@@ -69,10 +70,10 @@ struct Blocks {
 impl Blocks {
     /// How the file `path` is read, in blocks of [`BLOCK_BYTES`] on
     /// `threads` threads: `None` unless it is a regular file of at least
-    /// `from` and at most `limit` bytes, and `threads` are more than one.
+    /// `from` and at most `limit` bytes.
     fn of(path: &Path, limit: u64, threads: usize, from: u64) -> Option<Self> {
         let meta = std::fs::metadata(path).ok()?;
-        let read = threads > 1 && meta.is_file() && (from..=limit).contains(&meta.len());
+        let read = meta.is_file() && (from..=limit).contains(&meta.len());
         read.then(|| Self {
             file: path.to_path_buf(),
             len: meta.len(),

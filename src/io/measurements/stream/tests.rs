@@ -162,9 +162,8 @@ fn a_pairing_error_is_the_whole_files() {
     assert_eq!(read.to_string(), whole.to_string());
 }
 
-/// A file is read in blocks when it is a regular file within the sizes
-/// and there are threads; read so, it is what the whole file's reading
-/// gives.
+/// A file is read in blocks when it is a regular file within the sizes;
+/// read so, it is what the whole file's reading gives.
 #[test]
 fn a_file_is_read_in_blocks_only_within_its_sizes() {
     let (robot, setup) = (robot(), setup());
@@ -179,7 +178,7 @@ fn a_file_is_read_in_blocks_only_within_its_sizes() {
     assert!(of(len, 2, len));
     assert!(!of(len - 1, 2, 0), "larger than the limit");
     assert!(!of(len, 2, len + 1), "smaller than where blocks start");
-    assert!(!of(len, 1, 0), "one thread");
+    assert!(of(len, 1, 0), "one thread");
     assert!(Blocks::of(&dir, u64::MAX, 2, 0).is_none(), "a directory");
     let mut blocks = Blocks::of(&path, len, 2, 0).expect("read in blocks");
     blocks.block = 8192;
