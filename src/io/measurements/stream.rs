@@ -123,10 +123,12 @@ impl Blocks {
                 if before == 0 && read.observations.capacity() < 2 * read.observations.len() {
                     // Room for the file's rows at the first block's bytes
                     // a row, and a tenth more (pages not written are not
-                    // memory used).
+                    // memory used); where the system refuses that much (an
+                    // estimate from short first rows), the vector grows as
+                    // the rows come instead.
                     let per = (cut - start) as f64 / read.observations.len().max(1) as f64;
                     let rows = (self.len as f64 / per * 1.1) as usize + 16;
-                    read.observations.reserve(rows.min(self.len as usize));
+                    let _ = read.observations.try_reserve(rows);
                 }
             }
             line0 += newlines.len();
