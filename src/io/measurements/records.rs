@@ -338,7 +338,7 @@ pub(super) fn chunked(
     // last one still parsed is the only work left (at 10⁶ rows a chunk in
     // four per thread was ~0.15 s of one thread alone at the end).
     let chunks = (16 * threads).min(data.len() / MIN_CHUNK_BYTES);
-    let mut read = Read::new(layout.robot.dof());
+    let mut read = Read::new(layout.robot.dof(), false);
     in_chunks(
         bytes,
         start,
@@ -364,15 +364,21 @@ pub(super) struct Read {
     /// the peak of a run of 10⁶ rows was 842–851 MiB, against 816–824 MiB
     /// with the whole file read at once and 825–828 MiB now.)
     parts: Vec<Vec<Observation>>,
+    /// Whether `parts` are kept (else each is freed once joined: the file
+    /// read at once has one call, and its parts kept to its end would
+    /// double its rows' memory there).
+    keep: bool,
 }
 
 impl Read {
-    /// Nothing read yet, for a robot of `dof` joints.
-    pub(super) fn new(dof: usize) -> Self {
+    /// Nothing read yet, for a robot of `dof` joints; `keep`: whether the
+    /// chunks' vectors are kept for the next call.
+    pub(super) fn new(dof: usize, keep: bool) -> Self {
         Self {
             observations: Vec::new(),
             stats: Stats::new(dof),
             parts: Vec::new(),
+            keep,
         }
     }
 }
@@ -462,7 +468,9 @@ pub(super) fn in_chunks(
         let (mut obs, s) = part?;
         read.observations.append(&mut obs);
         read.stats.merge(s);
-        *slot = obs;
+        if read.keep {
+            *slot = obs;
+        }
     }
     Some(())
 }

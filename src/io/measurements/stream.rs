@@ -104,7 +104,7 @@ impl Blocks {
         let no = |_: csv::Error| InputError::new(&self.file, super::ErrorKind::Syntax, "");
         let head = Header::read(&mut rdr, &self.file, robot, setup, &no).ok()?;
         let layout = head.layout(&self.file, robot, setup);
-        let mut read = Records::new(robot.dof());
+        let mut read = Records::new(robot.dof(), true);
         let (mut start, mut line0) = (head.data_start, 0);
         loop {
             // Up to the last `\n` (a line end whatever follows it), or to
