@@ -388,10 +388,7 @@ fn parse_bytes(
         err(kind, line, message)
     };
 
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .trim(csv::Trim::All)
-        .from_reader(bytes);
+    let mut rdr = Header::reader(bytes);
     let head = Header::read(&mut rdr, &file, robot, setup, &csv_err)?;
     let layout = head.layout(&file, robot, setup);
     let data_start = head.data_start;

@@ -26,6 +26,16 @@ pub(super) struct Header {
 }
 
 impl Header {
+    /// The csv crate's reader of a measurement file's `bytes` from its
+    /// start, as [`Header::read`] takes it: the whole file's and the first
+    /// block's ([`super::stream`]) alike, so that both read the same header.
+    pub(super) fn reader(bytes: &[u8]) -> csv::Reader<&[u8]> {
+        csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(bytes)
+    }
+
     /// The header of the file `rdr` reads (at its start), checked against
     /// `robot` and `setup`; `csv_err` makes the csv reader's errors ours.
     ///

@@ -97,10 +97,7 @@ impl Blocks {
         // The header: the csv crate's reading of it, as for the whole file
         // (its first line must be whole in the block).
         memchr::memchr(b'\n', &buf)?;
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .trim(csv::Trim::All)
-            .from_reader(&buf[..]);
+        let mut rdr = Header::reader(&buf);
         let no = |_: csv::Error| InputError::new(&self.file, super::ErrorKind::Syntax, "");
         let head = Header::read(&mut rdr, &self.file, robot, setup, &no).ok()?;
         let layout = head.layout(&self.file, robot, setup);
