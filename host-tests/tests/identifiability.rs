@@ -628,15 +628,14 @@ fn the_columns_themselves_find_an_exact_dependence() {
         b[(i, 4)] = b[(i, 0)] + 3e-3 * b[(i, 4)];
         b[(i, 5)] = 0.0;
     }
-    let d = calibrate::design::Design {
-        params: Vec::new(),
+    let d = calibrate::design::Design::from_columns(
+        Vec::new(),
         b,
-        y: vec![0.0; 3 * rows],
-        group: (0..rows).collect(),
-        groups: rows,
-        instrument_sigma: None,
-        unit_sums: None,
-    };
+        vec![0.0; 3 * rows],
+        (0..rows).collect(),
+        rows,
+        None,
+    );
     let kept = d.kept_by_columns(&[0, 1, 2, 3, 4, 5], 1e-6);
     assert_eq!(kept, [true, true, true, false, true, false]);
     // Well conditioned after the exact ones are gone: the check is not

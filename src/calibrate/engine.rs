@@ -6,21 +6,20 @@ use std::sync::{Arc, Mutex};
 
 use nalgebra::Vector3;
 
+mod heldout;
+
 use super::calibrated::CalibratedModel;
 use super::design::Design;
-use super::fit::{fit, fit_known, fit_moments, information, leading, FitOut, FitSettings, Method};
+use super::fit::{fit, fit_known, information, leading, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
-use super::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
 use super::linearisation::Linearisation;
-use super::moments::DesignMoments;
 use super::names::Names;
 use super::report::{Absorbed, LeftOut, Parameter};
-use super::residuals::{rms_um, SquareSum};
+use super::residuals::rms_um;
 use super::rows::{RowKind, Rows};
 use super::settings::{CalibrationError, Policy, Progress};
 use crate::estimate::Accumulator;
 use crate::model::Param;
-use crate::Error;
 
 /// A fitted model: its parameters, estimate and errors, and the
 /// linearisation it was fitted at.
@@ -55,8 +54,12 @@ pub struct Fitted {
 /// The problem being solved: rows, names, the current linearisation, and
 /// how to fit.
 pub struct Engine<'a> {
-    /// The rows at the current linearisation.
-    pub rows: Rows,
+    /// The rows at the current linearisation, shared with the designs
+    /// that recompute their columns from them ([`Design`]'s columns are
+    /// held, or recomputed from these rows where a pass reads them: see
+    /// [`Policy::max_held_design_rows`]). Changed through
+    /// [`Engine::rows_mut`].
+    pub rows: Arc<Rows>,
     /// Names of joints, markers, bins.
     pub names: Names,
     /// The current geometry (Gauss–Newton).
@@ -104,12 +107,22 @@ impl Engine<'_> {
         }
         // Dropped before the next is built: one design in memory, not two;
         // its storage reused when nobody else holds it.
-        let old = last.take().and_then(|(_, _, d)| Arc::try_unwrap(d).ok());
-        let d = match old {
-            Some(old) => Design::new_from(old, &self.rows, params, &self.lin, &self.names),
-            None => Design::new(&self.rows, params, &self.lin, &self.names),
-        };
-        let d = Arc::new(d.map_err(|e| CalibrationError::Core("columns", e))?);
+        let old = last
+            .take()
+            .and_then(|(_, _, d)| Arc::try_unwrap(d).ok())
+            .map(Design::into_storage);
+        let d = Design::built(
+            &self.rows,
+            params,
+            &self.lin,
+            &self.names,
+            old,
+            self.policy.max_held_design_rows,
+        );
+        let d = Arc::new(
+            d.map_err(|e| CalibrationError::Core("columns", e))?
+                .reading(&self.rows),
+        );
         if let Some(at) = &self.rows.at {
             *last = Some((params.to_vec(), at.clone(), Arc::clone(&d)));
         }
@@ -121,7 +134,22 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn relinearise(&mut self) -> Result<(), CalibrationError> {
-        self.rows.relinearise(&self.geometry, &self.lin)
+        let (geometry, lin) = (self.geometry.clone(), self.lin.clone());
+        self.rows_mut().relinearise(&geometry, &lin)
+    }
+
+    /// The rows, to change: the last design let go first when it reads
+    /// them (it is of the rows before the change), so that they are not
+    /// copied ([`Arc::make_mut`] copies rows someone else still holds).
+    pub fn rows_mut(&mut self) -> &mut Rows {
+        let last = self
+            .last_design
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if last.as_ref().is_some_and(|(_, _, d)| !d.is_held()) {
+            *last = None;
+        }
+        Arc::make_mut(&mut self.rows)
     }
 
     /// [`Engine::relinearise`], with the design of `params` there built in
@@ -133,21 +161,31 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn relinearise_for(&mut self, params: &[Param]) -> Result<(), CalibrationError> {
-        let mut last = self
+        let last = self
             .last_design
-            .lock()
+            .get_mut()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let old = last.take().and_then(|(_, _, d)| Arc::try_unwrap(d).ok());
+        // (Its storage only: a design that reads the rows lets them go.)
+        let old = last
+            .take()
+            .and_then(|(_, _, d)| Arc::try_unwrap(d).ok())
+            .map(Design::into_storage);
         let d = Design::relinearised(
-            &mut self.rows,
+            Arc::make_mut(&mut self.rows),
             &self.geometry,
             &self.lin,
             params,
             &self.names,
             old,
+            self.policy.max_held_design_rows,
         )?;
         if let (Ok(d), Some(at)) = (d, &self.rows.at) {
-            *last = Some((params.to_vec(), at.clone(), Arc::new(d)));
+            let d = d.reading(&self.rows);
+            *self
+                .last_design
+                .get_mut()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) =
+                Some((params.to_vec(), at.clone(), Arc::new(d)));
         }
         Ok(())
     }
@@ -399,7 +437,7 @@ impl Engine<'_> {
     /// As [`Rows::relinearise`].
     pub fn restore_from(&mut self, f: &Fitted, start: &[Vec<f64>]) -> Result<(), CalibrationError> {
         if !self.rows_at(f) {
-            self.rows.start_from(start);
+            self.rows_mut().start_from(start);
         }
         self.restore(f)
     }
@@ -409,112 +447,6 @@ impl Engine<'_> {
     fn rows_at(&self, f: &Fitted) -> bool {
         let at = |(g, l): &(Geometry, Linearisation)| *g == f.geometry && *l == f.linearisation;
         self.rows.at.as_ref().is_some_and(at)
-    }
-
-    /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
-    /// configuration predicted by a fit (same method, same linearisation)
-    /// without it. Parameters the other configurations cannot identify are
-    /// held at zero (their error then shows in the prediction).
-    ///
-    /// # Errors
-    /// [`CalibrationError::Core`] from the estimator.
-    pub fn heldout(&mut self, fitted: &Fitted) -> Result<Option<f64>, CalibrationError> {
-        if !self.heldout || self.rows.configs.len() < 2 {
-            return Ok(None);
-        }
-        self.restore(fitted)?;
-        let d = self.design(&fitted.params)?;
-        let cols: Vec<usize> = (0..fitted.params.len()).collect();
-        // The held-out residuals' squares summed in row order as they come
-        // (their [`rms_um`], without a vector of them all).
-        let mut res = SquareSum::default();
-        (self.progress)(&format!(
-            "held-out RMS: {} fits, one without each configuration",
-            self.rows.configs.len()
-        ));
-        // OLS: the closed form of `heldout` (exact at one linearisation);
-        // a group no other can replace, and weighted fits, are refitted.
-        let Some(by) = d.group_rows() else {
-            return Ok(None);
-        };
-        let ols = self.fit_settings.method == Method::Ols;
-        let fast = ols.then(|| ols_heldout(&d, &cols)).flatten();
-        // Its residuals a window of groups (`WINDOW_ROWS` rows) at a time.
-        let mut window: Option<HeldOut> = None;
-        // Weighted fits: each fold from the moments per configuration and
-        // axis, built once (`moments`); a fold that leaves a parameter
-        // unidentified is refitted from the rows below.
-        let moments =
-            (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
-        // The folds from the moments are independent: on worker threads
-        // (`parallel`; bit for bit the serial loop's), unless the problem
-        // is too small for threads to pay.
-        let groups = self.rows.configs.len();
-        let settings = self.fit_settings;
-        // Residuals in metres again ([`Rows::unscaled`]).
-        let rows = &self.rows;
-        let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
-            Some(m) => {
-                let small = groups * groups * cols.len() * cols.len() < 20_000;
-                let threads = if small { 1 } else { super::parallel::threads() };
-                super::parallel::map(groups, threads, |g| {
-                    // An error is left to the refit below, which decides as
-                    // before (a column dropped, no held-out error, or the
-                    // error).
-                    let out = fit_moments(m, &d, &cols, Some(g), &settings).ok()?;
-                    Some(
-                        by.of(g)
-                            .iter()
-                            .map(|&i| rows.unscaled(i, d.residual(&cols, &out.x, i)))
-                            .collect(),
-                    )
-                })
-            }
-            None => Vec::new(),
-        };
-        for g in 0..groups {
-            if let Some(f) = &fast {
-                if window.as_ref().is_none_or(|w| g >= w.first + w.ok.len()) {
-                    window = Some(f.groups(&by, OlsHeldOut::window(&by, g, WINDOW_ROWS)));
-                }
-            }
-            if let Some(r) = window.as_ref().and_then(|w| w.of(&by, g)) {
-                for (&i, &r) in by.of(g).iter().zip(r) {
-                    res.extend(&[self.rows.unscaled(i, r)]);
-                }
-                continue;
-            }
-            if let Some(r) = folds.get(g).and_then(Option::as_ref) {
-                res.extend(r);
-                continue;
-            }
-            let mut use_cols = cols.clone();
-            let out = loop {
-                match fit(&d, &use_cols, Some(g), &self.fit_settings) {
-                    Ok(f) => break Some(f),
-                    Err(Error::NotIdentifiable { column, .. }) if column < use_cols.len() => {
-                        use_cols.remove(column);
-                    }
-                    Err(Error::TooFewEquations { .. }) => break None,
-                    Err(e) => return Err(CalibrationError::Core("held-out fit", e)),
-                }
-            };
-            let Some(out) = out else { return Ok(None) };
-            for &i in by.of(g) {
-                res.extend(&[self.rows.unscaled(i, d.residual(&use_cols, &out.x, i))]);
-            }
-        }
-        self.restore(fitted)?;
-        Ok(Some(res.rms_um()))
-    }
-
-    /// `f` with its held-out RMS.
-    ///
-    /// # Errors
-    /// As [`Engine::heldout`].
-    pub fn with_heldout(&mut self, mut f: Fitted) -> Result<Fitted, CalibrationError> {
-        f.heldout_rms_um = self.heldout(&f)?;
-        Ok(f)
     }
 
     /// The identifiability report of `params` at the current linearisation

@@ -78,8 +78,8 @@ impl HeldOut {
 /// them all were 24 MB at the run's peak.
 pub struct OlsHeldOut<'a> {
     d: &'a Design,
-    /// The columns (the design's own when they are all of them in order).
-    b: Cow<'a, DMatrix<f64>>,
+    /// The columns of the fit.
+    cols: Vec<usize>,
     x: DVector<f64>,
     chol: Cholesky<f64, Dyn>,
     /// `L` of `Λ = L Lᵀ` by rows: row `r`'s `L_rc`, `c < r`, at
@@ -102,31 +102,36 @@ pub fn ols_heldout<'a>(d: &'a Design, cols: &[usize]) -> Option<OlsHeldOut<'a>> 
 
 /// [`ols_heldout`] on `threads` threads.
 fn ols_heldout_on<'a>(d: &'a Design, cols: &[usize], threads: usize) -> Option<OlsHeldOut<'a>> {
-    // All columns in order (the engine's case): the design itself, not a
-    // copy of it (with many rows the copy is the largest allocation).
-    let b = if cols.len() == d.b.ncols() && cols.iter().enumerate().all(|(i, &c)| i == c) {
-        Cow::Borrowed(&d.b)
-    } else {
-        Cow::Owned(d.b.select_columns(cols))
-    };
     // `Λ = BᵀB` and `Bᵀ Δp` as nalgebra's `tr_mul` computes them (each
     // element the `dot` of two columns), the upper triangle's dots mirrored
     // (a product commutes): all of them in one pass over the rows per
     // thread ([`dots::column_dots`], the same bits).
     let n = cols.len();
-    let m = b.nrows();
+    let m = 3 * d.rows();
     if d.y.len() != m {
         return None;
     }
-    let columns: Vec<&[f64]> = (0..n)
-        .map(|c| &b.as_slice()[c * m..(c + 1) * m])
-        .chain([d.y.as_slice()])
-        .collect();
     let pairs: Vec<(usize, usize)> = (0..n)
         .flat_map(|i| (i..n).map(move |j| (i, j)))
         .chain((0..n).map(|i| (i, n)))
         .collect();
-    let dots = dots::column_dots(&columns, &pairs, threads);
+    let dots = if d.is_held() {
+        // All columns in order (the engine's case): the design itself, not
+        // a copy of it (with many rows the copy is the largest allocation).
+        let every = cols.len() == d.params.len() && cols.iter().enumerate().all(|(i, &c)| i == c);
+        let b = if every {
+            d.held()
+        } else {
+            Cow::Owned(d.held().select_columns(cols))
+        };
+        let columns: Vec<&[f64]> = (0..n)
+            .map(|c| &b.as_slice()[c * m..(c + 1) * m])
+            .chain([d.y.as_slice()])
+            .collect();
+        dots::column_dots(&columns, &pairs, threads)
+    } else {
+        dots::design_dots(d, cols, &pairs, threads)
+    };
     let mut lambda = DMatrix::zeros(n, n);
     let mut eta = DVector::zeros(n);
     for (&(i, j), &v) in pairs.iter().zip(&dots) {
@@ -152,7 +157,7 @@ fn ols_heldout_on<'a>(d: &'a Design, cols: &[usize], threads: usize) -> Option<O
     let l_inv_diag = (0..n).map(|r| 1.0 / l[(r, r)]).collect();
     Some(OlsHeldOut {
         d,
-        b,
+        cols: cols.to_vec(),
         x,
         chol,
         l_rows,
@@ -174,14 +179,16 @@ impl OlsHeldOut<'_> {
                 range.start + (k + 1) * count / threads,
             );
             let mut z = vec![0.0; 3 * n];
+            let mut b = Vec::new();
             let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
             let mut ok = Vec::with_capacity(hi - lo);
             for g in lo..hi {
                 let rs = by.of(g);
+                self.d.rows_into(rs, &self.cols, &mut b);
                 let done = match rs {
                     [] => true,
-                    [i] => self.one(*i, &mut z, &mut res),
-                    _ => self.many(rs, &mut res),
+                    [i] => self.one(*i, &b, &mut z, &mut res),
+                    _ => self.many(rs, &b, &mut res),
                 };
                 if !done {
                     res.extend(rs.iter().map(|_| Vector3::zeros()));
@@ -224,8 +231,9 @@ impl OlsHeldOut<'_> {
         first..lo.min(groups)
     }
 
-    /// A group of one row (one point per configuration: the case with the
-    /// most groups) in fixed-size arithmetic without an allocation per
+    /// A group of one row `i` (one point per configuration: the case with
+    /// the most groups), its columns `b` ([`Design::rows_into`]: axis `a`
+    /// at `[a n..(a + 1) n]`), in fixed-size arithmetic without an allocation per
     /// group: `z_a = L⁻¹ b_aᵀ` by forward substitution (`z` holds the three
     /// axes of each column side by side, `[3c..3c + 3]`),
     /// `H_ab = z_a · z_b`, and `(I − H) e(−g) = e` solved by Cholesky once
@@ -233,12 +241,12 @@ impl OlsHeldOut<'_> {
     /// ([`definite_beyond`]). (The inverse of `Λ` times each axis and a
     /// 3 × 3 eigendecomposition were half of a million rows' held-out
     /// error.)
-    fn one(&self, i: usize, z: &mut [f64], out: &mut Vec<Vector3<f64>>) -> bool {
-        let (b, n) = (&*self.b, self.x.len());
+    fn one(&self, i: usize, b: &[f64], z: &mut [f64], out: &mut Vec<Vector3<f64>>) -> bool {
+        let n = self.x.len();
         let mut e = Vector3::from_fn(|a, _| self.d.y[3 * i + a]);
         for (c, xc) in self.x.iter().enumerate() {
             for a in 0..3 {
-                e[a] -= b[(3 * i + a, c)] * xc;
+                e[a] -= b[a * n + c] * xc;
             }
         }
         // The three axes' substitutions side by side (three independent
@@ -248,7 +256,7 @@ impl OlsHeldOut<'_> {
         let z = &mut z[..n];
         for r in 0..n {
             let lr = &self.l_rows[r * n..r * n + r];
-            let mut s = [b[(3 * i, r)], b[(3 * i + 1, r)], b[(3 * i + 2, r)]];
+            let mut s = [b[r], b[n + r], b[2 * n + r]];
             for (l, zc) in lr.iter().zip(&z[..r]) {
                 s[0] -= l * zc[0];
                 s[1] -= l * zc[1];
@@ -281,12 +289,13 @@ impl OlsHeldOut<'_> {
         true
     }
 
-    /// A group of several rows: `I − H_gg` from the factorisation of `Λ`,
+    /// A group of several rows `rs`, their columns `b`
+    /// ([`Design::rows_into`]): `I − H_gg` from the factorisation of `Λ`,
     /// its eigendecomposition, the residuals through it.
-    fn many(&self, rs: &[usize], out: &mut Vec<Vector3<f64>>) -> bool {
-        let (b, y, n) = (&*self.b, &self.d.y, self.x.len());
+    fn many(&self, rs: &[usize], b: &[f64], out: &mut Vec<Vector3<f64>>) -> bool {
+        let (y, n) = (&self.d.y, self.x.len());
         let m = 3 * rs.len();
-        let bg = DMatrix::from_fn(m, n, |r, c| b[(3 * rs[r / 3] + r % 3, c)]);
+        let bg = DMatrix::from_fn(m, n, |r, c| b[r * n + c]);
         let eg = DVector::from_fn(m, |r, _| y[3 * rs[r / 3] + r % 3]) - &bg * &self.x;
         // I − H_gg, symmetric positive semidefinite.
         let ih = DMatrix::identity(m, m) - &bg * self.chol.solve(&bg.transpose());
@@ -331,15 +340,14 @@ mod tests {
         let rows = groups * per;
         let b = DMatrix::from_fn(3 * rows, n, |_, _| next());
         let y = (0..3 * rows).map(|_| next()).collect();
-        Design {
-            params: Vec::new(),
+        Design::from_columns(
+            Vec::new(),
             b,
             y,
-            group: (0..rows).map(|i| i / per).collect(),
+            (0..rows).map(|i| i / per).collect(),
             groups,
-            instrument_sigma: None,
-            unit_sums: None,
-        }
+            None,
+        )
     }
 
     fn ols() -> FitSettings {
@@ -392,8 +400,9 @@ mod tests {
         // Groups of one, two and three rows, one singular (column 0 only in
         // group 0).
         let mut d = mixed(40, 6, 5, 4 * 6);
-        for r in 3..d.b.nrows() {
-            d.b[(r, 0)] = 0.0;
+        let b = d.held_mut().expect("held");
+        for r in 3..b.nrows() {
+            b[(r, 0)] = 0.0;
         }
         let by = d.group_rows().expect("groups in range");
         let cols: Vec<usize> = (0..6).collect();
@@ -435,8 +444,9 @@ mod tests {
     fn a_group_no_other_can_replace_is_left_to_the_refit() {
         // Column 0 is non-zero in group 0 only.
         let mut d = design(6, 1, 3, 4);
-        for r in 3..d.b.nrows() {
-            d.b[(r, 0)] = 0.0;
+        let b = d.held_mut().expect("held");
+        for r in 3..b.nrows() {
+            b[(r, 0)] = 0.0;
         }
         let by = d.group_rows().expect("groups in range");
         let fast = ols_heldout(&d, &[0, 1, 2])

@@ -190,7 +190,7 @@ fn calibrate_rows(
             &markers,
             &marker_ends(job),
         ),
-        rows,
+        rows: std::sync::Arc::new(rows),
         names,
         lin: Linearisation::nominal(settings.deflection_model),
         fit_settings: fit::FitSettings {

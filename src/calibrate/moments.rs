@@ -67,22 +67,21 @@ impl DesignMoments {
             yy: vec![0.0; cells],
             rows: vec![0; cells],
         };
-        let mut b = vec![0.0; n];
+        let mut row = Vec::new();
         for (i, &g) in d.group.iter().enumerate() {
             if g >= d.groups {
                 continue;
             }
+            d.rows_into(&[i], cols, &mut row);
             for a in 0..3 {
                 let (r, cell) = (3 * i + a, 3 * g + a);
-                for (v, &c) in b.iter_mut().zip(cols) {
-                    *v = d.b[(r, c)];
-                }
+                let b = &row[a * n..(a + 1) * n];
                 let y = d.y[r];
                 let s = &mut m.s[cell * p..(cell + 1) * p];
                 let u = &mut m.u[cell * n..(cell + 1) * n];
                 let mut k = 0;
                 for (j, &bj) in b.iter().enumerate() {
-                    for (sij, &bi) in s[k..=k + j].iter_mut().zip(&b) {
+                    for (sij, &bi) in s[k..=k + j].iter_mut().zip(b) {
                         *sij += bi * bj;
                     }
                     k += j + 1;
@@ -390,19 +389,13 @@ mod tests {
                 (0..n).map(|c| b[(r, c)] * x[c]).sum::<f64>() * 1e-3 + noise
             })
             .collect();
-        Design {
-            params: Vec::new(),
-            b,
-            y,
-            group: (0..rows).map(|i| i / per).collect(),
-            groups,
-            instrument_sigma: sigma.then(|| {
-                (0..groups)
-                    .map(|g| Vector3::repeat(2e-6 * (1 + g % 3) as f64))
-                    .collect()
-            }),
-            unit_sums: None,
-        }
+        let instrument_sigma = sigma.then(|| {
+            (0..groups)
+                .map(|g| Vector3::repeat(2e-6 * (1 + g % 3) as f64))
+                .collect()
+        });
+        let group = (0..rows).map(|i| i / per).collect();
+        Design::from_columns(Vec::new(), b, y, group, groups, instrument_sigma)
     }
 
     fn settings(method: Method, weighting: Weighting) -> FitSettings {

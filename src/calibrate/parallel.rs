@@ -398,18 +398,48 @@ mod tests {
                 &lin,
                 &params,
                 &names,
-                Some(old),
+                Some(old.into_storage()),
                 threads,
+                true,
             )
             .expect("relinearise")
             .expect("columns");
             let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(
-                bits(fused.b.as_slice()),
-                bits(d.b.as_slice()),
+                bits(fused.held().as_slice()),
+                bits(d.held().as_slice()),
                 "{threads} threads"
             );
             assert_eq!(bits(&fused.y), bits(&d.y));
+            // And not held: the columns computed where read from the same
+            // rows are the held ones, and so are the unit-weight sums.
+            let computed = Design::relinearised_on(
+                &mut rows, &geometry, &lin, &params, &names, None, threads, false,
+            )
+            .expect("relinearise")
+            .expect("columns")
+            .reading(&std::sync::Arc::new(rows.clone()));
+            assert!(!computed.is_held());
+            assert_eq!(
+                bits(computed.held().as_slice()),
+                bits(d.held().as_slice()),
+                "{threads} threads, computed"
+            );
+            let both = |d: &Design| {
+                d.unit_sums
+                    .as_ref()
+                    .map(|s| bits(s.information().as_slice()))
+            };
+            assert_eq!(both(&computed), both(&fused));
+            let mut block = (Vec::new(), Vec::new());
+            let some: Vec<usize> = (0..rows.rows.len()).step_by(3).collect();
+            let cols = [2, 0, 2];
+            computed.rows_into(&some, &cols, &mut block.0);
+            d.rows_into(&some, &cols, &mut block.1);
+            assert_eq!(bits(&block.0), bits(&block.1));
+            computed.columns_into(1, rows.rows.len() - 2, &cols, &mut block.0);
+            d.columns_into(1, rows.rows.len() - 2, &cols, &mut block.1);
+            assert_eq!(bits(&block.0), bits(&block.1));
             // Its unit-weight sums, when the pass made them (runs of whole
             // blocks, or one run), are the view's of the design.
             assert_eq!(fused.unit_sums.is_some(), threads == 1);
@@ -425,9 +455,12 @@ mod tests {
                 assert_eq!(bits(sums.eta().as_slice()), bits(view.eta().as_slice()));
                 assert_eq!(sums.weighted_yy().to_bits(), view.weighted_yy().to_bits());
             }
-            assert_eq!((fused.b.shape(), &fused.group), (d.b.shape(), &d.group));
+            assert_eq!(
+                (fused.held().shape(), &fused.group),
+                (d.held().shape(), &d.group)
+            );
             assert!(state(&rows) == r, "{threads} threads");
-            (r, d.b, d.y)
+            (r, d.held().into_owned(), d.y)
         };
         let one = at(1);
         assert!(one.0.iter().any(|r| !r.3.is_empty()), "equilibria");

@@ -127,7 +127,7 @@ struct Seed<'s> {
 
 /// The state a trial on a copy of the engine ends at.
 struct State {
-    rows: Rows,
+    rows: std::sync::Arc<Rows>,
     geometry: Geometry,
     lin: Linearisation,
     last_design: Mutex<Option<LastDesign>>,
@@ -145,7 +145,7 @@ impl Seed<'_> {
         let mut quiet = |_: &str| {};
         let mut e = Engine {
             cancel: Some(cancel),
-            rows: self.rows.clone(),
+            rows: std::sync::Arc::new(self.rows.clone()),
             names: self.names.clone(),
             geometry: self.geometry.clone(),
             lin: self.lin.clone(),

@@ -195,11 +195,6 @@ impl<'a> View<'a> {
         self
     }
 
-    /// Column `k` of axis `a` of design row `i`.
-    fn at(&self, i: usize, a: usize, k: usize) -> f64 {
-        self.d.b[(3 * i + a, self.cols[k])]
-    }
-
     /// `Δp` of design row `i`.
     fn y(&self, i: usize) -> [f64; 3] {
         [self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]]
@@ -225,11 +220,13 @@ impl<'a> View<'a> {
         let mut acc = Accumulator::zeros(Dyn(n));
         // One block, refilled for every row.
         let mut block = Block::new(OMatrix::<f64, U3, Dyn>::zeros(n), Vector3::zeros());
+        let mut row = Vec::new();
         for &i in rows {
             let g = self.d.group[i];
+            self.d.rows_into(&[i], self.cols, &mut row);
             for a in 0..3 {
                 for k in 0..n {
-                    block.b[(a, k)] = self.at(i, a, k);
+                    block.b[(a, k)] = row[a * n + k];
                 }
             }
             block.dp = Vector3::from(self.y(i));
@@ -284,7 +281,7 @@ impl<'a> View<'a> {
     fn made(&self, weights: &[Vector3<f64>]) -> Option<Accumulator<f64, Dyn>> {
         let sums = self.d.unit_sums.as_ref()?;
         let every = self.rows.len() == self.d.rows()
-            && self.cols.len() == self.d.b.ncols()
+            && self.cols.len() == self.d.params.len()
             && self.cols.iter().enumerate().all(|(k, &c)| k == c)
             && weights.iter().all(|w| *w == Vector3::repeat(1.0));
         every.then(|| sums.clone())
@@ -440,20 +437,25 @@ impl Reweightable<f64, Dyn> for View<'_> {
         let x = fit.x.as_slice();
         let batch_run = |rows: &[usize]| {
             let mut b = vec![0.0; 3 * p * LANES];
+            let mut copy = Vec::new();
             let mut out = Vec::with_capacity(rows.len());
             for batch in rows.chunks(LANES) {
                 b.fill(0.0);
-                for (j, &i) in batch.iter().enumerate() {
+                self.d.rows_into(batch, self.cols, &mut copy);
+                for j in 0..batch.len() {
                     for a in 0..3 {
                         for k in 0..p {
-                            b[(3 * k + a) * LANES + j] = self.at(i, a, k);
+                            b[(3 * k + a) * LANES + j] = copy[(3 * j + a) * p + k];
                         }
                     }
                 }
                 let q = leverage3_rows(inv, p, &b);
                 for (j, &i) in batch.iter().enumerate() {
                     let q = [q[j], q[LANES + j], q[2 * LANES + j]];
-                    out.push((q, self.d.residual(self.cols, x, i)));
+                    out.push((
+                        q,
+                        self.d.residual_of(i, &copy[3 * j * p..3 * (j + 1) * p], x),
+                    ));
                 }
             }
             out

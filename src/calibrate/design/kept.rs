@@ -22,14 +22,17 @@ impl Design {
         let mut r = DMatrix::<f64>::zeros(0, n);
         let per = QR_ROWS.max(n);
         let mut start = 0;
+        let mut block = Vec::new();
         while start < self.rows() {
             let end = (start + per).min(self.rows());
             let k = r.nrows();
-            let stacked = DMatrix::from_fn(k + 3 * (end - start), n, |i, j| {
+            let h = 3 * (end - start);
+            self.columns_into(start, end - start, cols, &mut block);
+            let stacked = DMatrix::from_fn(k + h, n, |i, j| {
                 if i < k {
                     r[(i, j)]
                 } else {
-                    self.b[(3 * start + i - k, cols[j])]
+                    block[j * h + i - k]
                 }
             });
             r = stacked.qr().r();

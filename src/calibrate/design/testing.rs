@@ -20,13 +20,14 @@ pub(crate) fn rng(seed: u64) -> impl FnMut() -> f64 {
 pub(crate) fn design(groups: usize, per: usize, n: usize, seed: u64) -> Design {
     let mut next = rng(seed);
     let rows = groups * per;
-    Design {
-        params: Vec::new(),
-        b: DMatrix::from_fn(3 * rows, n, |_, _| next()),
-        y: (0..3 * rows).map(|_| next() * 1e-3).collect(),
-        group: (0..rows).map(|i| i / per).collect(),
+    let b = DMatrix::from_fn(3 * rows, n, |_, _| next());
+    let y = (0..3 * rows).map(|_| next() * 1e-3).collect();
+    Design::from_columns(
+        Vec::new(),
+        b,
+        y,
+        (0..rows).map(|i| i / per).collect(),
         groups,
-        instrument_sigma: None,
-        unit_sums: None,
-    }
+        None,
+    )
 }

@@ -36,12 +36,17 @@ impl RunSums {
         }
     }
 
-    /// Row `k` of the run, its columns just written at `3k..3k + 3` of each
-    /// of the `n` columns' `piece`, its `Δp` `y` as the design's.
-    pub(super) fn add(&mut self, piece: &[&mut [f64]], k: usize, y: [f64; 3]) {
-        let n = piece.len();
+    /// Row `k` of the run, axis `a` of its column `c` `at(c, a)` (of `n`
+    /// columns), its `Δp` `y` as the design's.
+    pub(super) fn add(
+        &mut self,
+        n: usize,
+        at: impl Fn(usize, usize) -> f64,
+        k: usize,
+        y: [f64; 3],
+    ) {
         for a in 0..3 {
-            self.b.extend(piece.iter().map(|column| column[3 * k + a]));
+            self.b.extend((0..n).map(|c| at(c, a)));
         }
         self.y.push(y);
         if self.y.len() == BLOCK_ROWS || k + 1 == self.len {
@@ -103,14 +108,15 @@ mod tests {
                 .map(|first| {
                     let len = per.min(m - first);
                     let mut columns: Vec<Vec<f64>> = (0..n)
-                        .map(|c| (0..3 * len).map(|r| d.b[(3 * first + r, c)]).collect())
+                        .map(|c| (0..3 * len).map(|r| d.held()[(3 * first + r, c)]).collect())
                         .collect();
                     let piece: Vec<&mut [f64]> =
                         columns.iter_mut().map(Vec::as_mut_slice).collect();
                     let mut sums = RunSums::new(len);
                     for k in 0..len {
                         let i = first + k;
-                        sums.add(&piece, k, [d.y[3 * i], d.y[3 * i + 1], d.y[3 * i + 2]]);
+                        let y = [d.y[3 * i], d.y[3 * i + 1], d.y[3 * i + 2]];
+                        sums.add(n, |c, a| piece[c][3 * k + a], k, y);
                     }
                     sums
                 })

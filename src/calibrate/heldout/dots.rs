@@ -11,6 +11,7 @@
 //! per pair (the held-out's `Λ` of 15 columns of 3·10⁶ rows: 135 dots were
 //! 135 passes over two 24 MB columns).
 
+use super::super::design::Design;
 use super::super::widest::{widest, Kernel};
 
 /// Rows a block (8 KiB of a column): the block of every column (128 KiB
@@ -60,6 +61,91 @@ pub(super) fn column_dots(
     });
     runs.concat()
 }
+
+/// [`column_dots`] of the columns `cols` of `d` then its `Δp` (column
+/// `cols.len()` of `pairs`), the columns computed a block of rows at a time
+/// where `d` does not hold them ([`Design::columns_into`], each block's
+/// halves on two threads): each block's values go to every pair's sums in
+/// the order of the whole columns (a block is a multiple of eight values),
+/// so each result is [`column_dots`]' of the whole columns, bit for bit.
+pub(super) fn design_dots(
+    d: &Design,
+    cols: &[usize],
+    pairs: &[(usize, usize)],
+    threads: usize,
+) -> Vec<f64> {
+    let m = 3 * d.rows();
+    let whole = m - m % 8;
+    let parts = threads.clamp(1, pairs.len().max(1));
+    let runs: Vec<&[(usize, usize)]> = (0..parts)
+        .map(|k| &pairs[k * pairs.len() / parts..(k + 1) * pairs.len() / parts])
+        .collect();
+    let mut sums: Vec<Vec<[f64; 8]>> = runs.iter().map(|r| vec![[0.0; 8]; r.len()]).collect();
+    // The last block's columns (the values past the last whole run of
+    // eight are in it).
+    let mut last: Vec<Vec<f64>> = Vec::new();
+    let mut first = 0;
+    while first < d.rows() {
+        let len = DESIGN_BLOCK_ROWS.min(d.rows() - first);
+        let half = (len / 2).next_multiple_of(8).min(len);
+        let halves = crate::calibrate::parallel::map(2, 2, |h| {
+            let (lo, n) = if h == 0 {
+                (first, half)
+            } else {
+                (first + half, len - half)
+            };
+            let mut b = Vec::new();
+            d.columns_into(lo, n, cols, &mut b);
+            (lo, n, b)
+        });
+        for (lo, n, b) in halves.iter().filter(|(_, n, _)| *n > 0) {
+            let h = 3 * n;
+            let mut columns: Vec<&[f64]> =
+                (0..cols.len()).map(|j| &b[j * h..(j + 1) * h]).collect();
+            columns.push(&d.y[3 * lo..3 * (lo + n)]);
+            // This piece's whole runs of eight (all of it but for the
+            // design's last values).
+            let upto = whole.saturating_sub(3 * lo).min(h);
+            let _ = crate::calibrate::parallel::for_each_mut(&mut sums, parts, |k, s| {
+                widest(Block {
+                    columns: &columns,
+                    run: runs[k],
+                    sums: s,
+                    rows: 0..upto,
+                });
+                Ok::<(), std::convert::Infallible>(())
+            });
+            if 3 * (lo + n) == m {
+                last = columns[..].iter().map(|c| c[upto..].to_vec()).collect();
+            }
+        }
+        first += len;
+    }
+    runs.iter()
+        .zip(&sums)
+        .flat_map(|(run, sums)| run.iter().zip(sums))
+        .map(|(&(i, j), s)| {
+            let mut r = 0.0;
+            r += s[0] + s[4];
+            r += s[1] + s[5];
+            r += s[2] + s[6];
+            r += s[3] + s[7];
+            for (a, b) in last
+                .get(i)
+                .into_iter()
+                .flatten()
+                .zip(last.get(j).into_iter().flatten())
+            {
+                r += a * b;
+            }
+            r
+        })
+        .collect()
+}
+
+/// Rows of a block of [`design_dots`] (a multiple of eight: its values
+/// are whole runs of eight).
+const DESIGN_BLOCK_ROWS: usize = 4096;
 
 /// The rows `rows` (whole runs of eight) into every pair's eight sums.
 struct Block<'a, 'b> {

@@ -12,32 +12,15 @@ impl View<'_> {
     /// axis `a` at `[(3k + a) n..(3k + a + 1) n]`.
     pub(super) fn copy(&self, first: usize, len: usize) -> Vec<f64> {
         let mut b = Vec::new();
-        self.copy_into(first, len, self.cols.len(), &mut b);
+        self.copy_into(first, len, &mut b);
         b
     }
 
-    /// [`View::copy`]'s first `upto` columns into `b` (resized; the other
-    /// columns of each run are left as they were). Row by row, a run of
-    /// each axis written in order: the copy went column by column, writing
-    /// one value in `n` of the whole block on every pass over it (7 % of a
-    /// million rows' run).
-    fn copy_into(&self, first: usize, len: usize, upto: usize, b: &mut Vec<f64>) {
-        let n = self.cols.len();
-        let m3 = self.d.b.nrows();
-        let data = self.d.b.as_slice();
-        let columns: Vec<&[f64]> = self.cols[..upto]
-            .iter()
-            .map(|&c| &data[c * m3..(c + 1) * m3])
-            .collect();
-        b.resize(3 * n * len, 0.0);
-        for (r, &i) in self.rows[first..first + len].iter().enumerate() {
-            for a in 0..3 {
-                let run = &mut b[(3 * r + a) * n..(3 * r + a) * n + upto];
-                for (v, column) in run.iter_mut().zip(&columns) {
-                    *v = column[3 * i + a];
-                }
-            }
-        }
+    /// [`View::copy`] into `b` (resized): [`super::Design::rows_into`],
+    /// held or computed.
+    fn copy_into(&self, first: usize, len: usize, b: &mut Vec<f64>) {
+        self.d
+            .rows_into(&self.rows[first..first + len], self.cols, b);
     }
 
     /// `f(t, rows, b, columns)` for each block of the included rows, in
@@ -63,7 +46,7 @@ impl View<'_> {
             let first = k * self.block;
             let len = self.block.min(self.rows.len() - first);
             let mut b = Vec::new();
-            self.copy_into(first, len, n, &mut b);
+            self.copy_into(first, len, &mut b);
             vec![(0..n, f(0, &self.rows[first..first + len], &b, 0..n))]
         })
     }

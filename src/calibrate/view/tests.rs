@@ -193,7 +193,8 @@ fn the_information_is_the_unit_weight_blocks_bit_for_bit() {
             .expect("finite");
         let mut core = Accumulator::<f64, Dyn>::zeros(Dyn(cols.len()));
         for i in 0..d.rows() {
-            let b = OMatrix::<f64, U3, Dyn>::from_fn(cols.len(), |a, k| d.b[(3 * i + a, cols[k])]);
+            let b =
+                OMatrix::<f64, U3, Dyn>::from_fn(cols.len(), |a, k| d.held()[(3 * i + a, cols[k])]);
             core.update(&Block::new(b, Vector3::zeros()))
                 .expect("finite");
         }

@@ -1,0 +1,126 @@
+//! The engine's leave-one-configuration-out prediction error
+//! ([`Engine::heldout`]): OLS in closed form ([`super::super::heldout`]),
+//! weighted fits from the moments per configuration and axis, refits where
+//! those cannot.
+
+use nalgebra::Vector3;
+
+use super::super::fit::{fit, fit_moments, Method};
+use super::super::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
+use super::super::moments::DesignMoments;
+use super::super::residuals::SquareSum;
+use super::super::settings::CalibrationError;
+use super::{Engine, Fitted};
+use crate::Error;
+
+impl Engine<'_> {
+    /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
+    /// configuration predicted by a fit (same method, same linearisation)
+    /// without it. Parameters the other configurations cannot identify are
+    /// held at zero (their error then shows in the prediction).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Core`] from the estimator.
+    pub fn heldout(&mut self, fitted: &Fitted) -> Result<Option<f64>, CalibrationError> {
+        if !self.heldout || self.rows.configs.len() < 2 {
+            return Ok(None);
+        }
+        self.restore(fitted)?;
+        let d = self.design(&fitted.params)?;
+        let cols: Vec<usize> = (0..fitted.params.len()).collect();
+        // The held-out residuals' squares summed in row order as they come
+        // (their [`rms_um`], without a vector of them all).
+        let mut res = SquareSum::default();
+        (self.progress)(&format!(
+            "held-out RMS: {} fits, one without each configuration",
+            self.rows.configs.len()
+        ));
+        // OLS: the closed form of `heldout` (exact at one linearisation);
+        // a group no other can replace, and weighted fits, are refitted.
+        let Some(by) = d.group_rows() else {
+            return Ok(None);
+        };
+        let ols = self.fit_settings.method == Method::Ols;
+        let fast = ols.then(|| ols_heldout(&d, &cols)).flatten();
+        // Its residuals a window of groups (`WINDOW_ROWS` rows) at a time.
+        let mut window: Option<HeldOut> = None;
+        // Weighted fits: each fold from the moments per configuration and
+        // axis, built once (`moments`); a fold that leaves a parameter
+        // unidentified is refitted from the rows below.
+        let moments =
+            (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
+        // The folds from the moments are independent: on worker threads
+        // (`parallel`; bit for bit the serial loop's), unless the problem
+        // is too small for threads to pay.
+        let groups = self.rows.configs.len();
+        let settings = self.fit_settings;
+        // Residuals in metres again ([`Rows::unscaled`]).
+        let rows = &self.rows;
+        let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
+            Some(m) => {
+                let small = groups * groups * cols.len() * cols.len() < 20_000;
+                let threads = if small {
+                    1
+                } else {
+                    super::super::parallel::threads()
+                };
+                super::super::parallel::map(groups, threads, |g| {
+                    // An error is left to the refit below, which decides as
+                    // before (a column dropped, no held-out error, or the
+                    // error).
+                    let out = fit_moments(m, &d, &cols, Some(g), &settings).ok()?;
+                    Some(
+                        by.of(g)
+                            .iter()
+                            .map(|&i| rows.unscaled(i, d.residual(&cols, &out.x, i)))
+                            .collect(),
+                    )
+                })
+            }
+            None => Vec::new(),
+        };
+        for g in 0..groups {
+            if let Some(f) = &fast {
+                if window.as_ref().is_none_or(|w| g >= w.first + w.ok.len()) {
+                    window = Some(f.groups(&by, OlsHeldOut::window(&by, g, WINDOW_ROWS)));
+                }
+            }
+            if let Some(r) = window.as_ref().and_then(|w| w.of(&by, g)) {
+                for (&i, &r) in by.of(g).iter().zip(r) {
+                    res.extend(&[self.rows.unscaled(i, r)]);
+                }
+                continue;
+            }
+            if let Some(r) = folds.get(g).and_then(Option::as_ref) {
+                res.extend(r);
+                continue;
+            }
+            let mut use_cols = cols.clone();
+            let out = loop {
+                match fit(&d, &use_cols, Some(g), &self.fit_settings) {
+                    Ok(f) => break Some(f),
+                    Err(Error::NotIdentifiable { column, .. }) if column < use_cols.len() => {
+                        use_cols.remove(column);
+                    }
+                    Err(Error::TooFewEquations { .. }) => break None,
+                    Err(e) => return Err(CalibrationError::Core("held-out fit", e)),
+                }
+            };
+            let Some(out) = out else { return Ok(None) };
+            for &i in by.of(g) {
+                res.extend(&[self.rows.unscaled(i, d.residual(&use_cols, &out.x, i))]);
+            }
+        }
+        self.restore(fitted)?;
+        Ok(Some(res.rms_um()))
+    }
+
+    /// `f` with its held-out RMS.
+    ///
+    /// # Errors
+    /// As [`Engine::heldout`].
+    pub fn with_heldout(&mut self, mut f: Fitted) -> Result<Fitted, CalibrationError> {
+        f.heldout_rms_um = self.heldout(&f)?;
+        Ok(f)
+    }
+}
