@@ -22,6 +22,7 @@ use std::borrow::Cow;
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn, Matrix3, Vector3};
 
 use super::design::{Design, GroupRows};
+use crate::estimate::Accumulator;
 
 mod dots;
 
@@ -93,14 +94,29 @@ pub struct OlsHeldOut<'a> {
 /// The OLS fit on the columns `cols` of `d`, ready for the held-out
 /// residuals of its groups; `None` when `Λ` itself is not positive
 /// definite or the estimate is not finite (and for a design whose `Δp` is
-/// not one value per row, which none is). The groups on worker threads
-/// ([`super::parallel`]), each independent of the others: the same bits on
-/// any number of threads.
-pub fn ols_heldout<'a>(d: &'a Design, cols: &[usize]) -> Option<OlsHeldOut<'a>> {
-    ols_heldout_on(d, cols, super::parallel::for_rows(d.rows()))
+/// not one value per row, which none is). `Λ` and `Bᵀ Δp` are `sums`, the
+/// fit's own unit-weight sums of these columns when given (the engine's:
+/// no pass of their own), else the columns' dots. The groups on worker
+/// threads ([`super::parallel`]), each independent of the others: the same
+/// bits on any number of threads.
+pub fn ols_heldout<'a>(
+    d: &'a Design,
+    cols: &[usize],
+    sums: Option<&Accumulator<f64, Dyn>>,
+) -> Option<OlsHeldOut<'a>> {
+    let threads = super::parallel::for_rows(d.rows());
+    if d.y.len() != 3 * d.rows() {
+        return None;
+    }
+    match sums {
+        Some(s) if s.eta().len() == cols.len() => {
+            solved(d, cols, s.information(), s.eta().clone(), threads)
+        }
+        _ => ols_heldout_on(d, cols, threads),
+    }
 }
 
-/// [`ols_heldout`] on `threads` threads.
+/// [`ols_heldout`] from the columns' dots, on `threads` threads.
 fn ols_heldout_on<'a>(d: &'a Design, cols: &[usize], threads: usize) -> Option<OlsHeldOut<'a>> {
     // `Λ = BᵀB` and `Bᵀ Δp` as nalgebra's `tr_mul` computes them (each
     // element the `dot` of two columns), the upper triangle's dots mirrored
@@ -142,6 +158,19 @@ fn ols_heldout_on<'a>(d: &'a Design, cols: &[usize], threads: usize) -> Option<O
             lambda[(j, i)] = v;
         }
     }
+    solved(d, cols, lambda, eta, threads)
+}
+
+/// The OLS fit of `Λ x = η` on the columns `cols` of `d`, factorised for
+/// the held-out residuals of its groups on `threads` threads.
+fn solved<'a>(
+    d: &'a Design,
+    cols: &[usize],
+    lambda: DMatrix<f64>,
+    eta: DVector<f64>,
+    threads: usize,
+) -> Option<OlsHeldOut<'a>> {
+    let n = cols.len();
     let chol = lambda.cholesky()?;
     let x = chol.solve(&eta);
     if !x.iter().all(|v| v.is_finite()) {
@@ -366,19 +395,24 @@ mod tests {
             let d = design(groups, per, n, seed);
             let cols: Vec<usize> = (0..n).collect();
             let by = d.group_rows().expect("groups in range");
-            let fast = ols_heldout(&d, &cols)
-                .expect("positive definite")
-                .groups(&by, 0..groups);
-            for g in 0..groups {
-                assert!(fast.ok[g], "identifiable without the group");
-                let res = &fast.res[by.range(g)];
-                let f = fit(&d, &cols, Some(g), &ols()).expect("refit");
-                let refit: Vec<_> = (0..d.rows())
-                    .filter(|&i| d.group[i] == g)
-                    .map(|i| d.residual(&cols, &f.x, i))
-                    .collect();
-                for (a, b) in res.iter().zip(&refit) {
-                    assert!((a - b).norm() <= 1e-10 * (1.0 + b.norm()), "{a} vs {b}");
+            // From the columns' dots, and from the fit's own sums (the
+            // engine's).
+            let sums = crate::calibrate::fit::information(&d, &cols).expect("finite");
+            for sums in [None, Some(&sums)] {
+                let fast = ols_heldout(&d, &cols, sums)
+                    .expect("positive definite")
+                    .groups(&by, 0..groups);
+                for g in 0..groups {
+                    assert!(fast.ok[g], "identifiable without the group");
+                    let res = &fast.res[by.range(g)];
+                    let f = fit(&d, &cols, Some(g), &ols()).expect("refit");
+                    let refit: Vec<_> = (0..d.rows())
+                        .filter(|&i| d.group[i] == g)
+                        .map(|i| d.residual(&cols, &f.x, i))
+                        .collect();
+                    for (a, b) in res.iter().zip(&refit) {
+                        assert!((a - b).norm() <= 1e-10 * (1.0 + b.norm()), "{a} vs {b}");
+                    }
                 }
             }
         }
@@ -449,7 +483,7 @@ mod tests {
             b[(r, 0)] = 0.0;
         }
         let by = d.group_rows().expect("groups in range");
-        let fast = ols_heldout(&d, &[0, 1, 2])
+        let fast = ols_heldout(&d, &[0, 1, 2], None)
             .expect("positive definite")
             .groups(&by, 0..6);
         assert!(!fast.ok[0]);
@@ -462,7 +496,7 @@ mod tests {
         let d = mixed(50, 5, 9, 4 * 8);
         let by = d.group_rows().expect("groups in range");
         let cols: Vec<usize> = (0..5).collect();
-        let fit = ols_heldout(&d, &cols).expect("positive definite");
+        let fit = ols_heldout(&d, &cols, None).expect("positive definite");
         let all = fit.groups(&by, 0..by.groups());
         for rows in [1, 2, 5, 1000] {
             let mut first = 0;

@@ -41,7 +41,9 @@ impl Engine<'_> {
             return Ok(None);
         };
         let ols = self.fit_settings.method == Method::Ols;
-        let fast = ols.then(|| ols_heldout(&d, &cols)).flatten();
+        let fast = ols
+            .then(|| ols_heldout(&d, &cols, fitted.information.as_ref()))
+            .flatten();
         // Its residuals a window of groups (`WINDOW_ROWS` rows) at a time.
         let mut window: Option<HeldOut> = None;
         // Weighted fits: each fold from the moments per configuration and
