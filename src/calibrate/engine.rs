@@ -10,7 +10,7 @@ mod heldout;
 
 use super::calibrated::CalibratedModel;
 use super::design::Design;
-use super::fit::{fit, fit_known, information, leading, FitOut, FitSettings, Method};
+use super::fit::{fit_with_residuals, information, leading, FitOut, FitSettings, Method};
 use super::geometry::Geometry;
 use super::linearisation::Linearisation;
 use super::names::Names;
@@ -286,7 +286,7 @@ impl Engine<'_> {
                 }
             }
             let full_fit = || {
-                fit(&d, &cols, None, &self.fit_settings)
+                fit_with_residuals(&d, &cols, None, &self.fit_settings)
                     .map_err(|e| CalibrationError::Core("fit", e))
             };
             let by_sigma = iterates && params.iter().any(Linearisation::tracks);
@@ -302,7 +302,7 @@ impl Engine<'_> {
                 Some(s) => s.x.as_slice().to_vec(),
                 None => {
                     let o = full_fit()?;
-                    let x = o.x.clone();
+                    let x = o.0.x.clone();
                     out = Some(o);
                     x
                 }
@@ -313,7 +313,7 @@ impl Engine<'_> {
                 .filter(|(p, _)| p.is_geometric())
                 .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
             let moved = match &out {
-                Some(out) if by_sigma => params
+                Some((out, _)) if by_sigma => params
                     .iter()
                     .zip(out.x.iter().zip(&out.std))
                     .filter(|(p, _)| Linearisation::tracks(p))
@@ -338,14 +338,25 @@ impl Engine<'_> {
                 }
                 settled = false;
             }
-            let out = match (out, &ols) {
+            let (out, kept) = match (out, &ols) {
                 (Some(out), _) => out,
                 // OLS: the fit's sums are the ones just made.
-                (None, Some(acc)) => fit_known(&d, &cols, acc.clone(), &self.fit_settings)
-                    .map_err(|e| CalibrationError::Core("fit", e))?,
+                (None, Some(acc)) => {
+                    fit_with_residuals(&d, &cols, Some(acc.clone()), &self.fit_settings)
+                        .map_err(|e| CalibrationError::Core("fit", e))?
+                }
                 (None, None) => full_fit()?,
             };
-            let residuals = d.residuals(&self.rows, &cols, &out.x);
+            // The residuals of the fit's last σ pass when it made them at
+            // its estimate (the same bits as a pass of their own).
+            let residuals = match kept {
+                Some(r) => r
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, r)| self.rows.unscaled(i, r))
+                    .collect(),
+                None => d.residuals(&self.rows, &cols, &out.x),
+            };
             let fitted = Fitted {
                 params: params.to_vec(),
                 rms_um: rms_um(&residuals),

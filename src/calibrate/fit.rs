@@ -108,6 +108,34 @@ pub fn fit_known(
     fit_source(&view, cols, instrument, s)
 }
 
+/// The residuals of every row \[m, scaled: [`Design::residual`]\].
+pub type Residuals = Vec<Vector3<f64>>;
+
+/// [`fit`] of `cols` on every row (the sums at unit weights `known` when
+/// made before: [`fit_known`]), with the rows' residuals \[m, scaled:
+/// [`Design::residual`]\] at the estimate when its last σ pass computed
+/// them there (the same bits; `None` else).
+///
+/// # Errors
+/// As [`fit`].
+pub fn fit_with_residuals(
+    d: &Design,
+    cols: &[usize],
+    known: Option<Accumulator<f64, Dyn>>,
+    s: &FitSettings,
+) -> Result<(FitOut, Option<Residuals>), Error> {
+    let instrument = d.instrument_sigma.as_deref();
+    let floor = instrument.filter(|_| s.weighting == Weighting::Both);
+    let view = View::new(d, cols, None, floor).capturing();
+    let view = match known {
+        Some(known) => view.knowing(known),
+        None => view,
+    };
+    let out = fit_source(&view, cols, instrument, s)?;
+    let residuals = view.residuals_at(&out.x);
+    Ok((out, residuals))
+}
+
 /// `Λ = Σ BᵀB` and `η = Σ BᵀΔp` of the columns `cols` of `d` at unit
 /// weights: the sums the OLS [`fit`] solves, bit for bit (and the
 /// information of the independence test, [`Design::identifiability`]).

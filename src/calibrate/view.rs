@@ -29,6 +29,8 @@
 //! the rows in order: it gives the errors it always gave. `tests` compare
 //! both ways bit for bit (the core's per block, merged).
 
+use std::sync::Mutex;
+
 use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3, U3};
 
 use super::design::Design;
@@ -62,7 +64,13 @@ pub(super) struct View<'a> {
     b: Vec<f64>,
     /// The sums at unit weights when already made ([`View::knowing`]).
     known: Option<Accumulator<f64, Dyn>>,
+    /// The residuals of every row from the last σ pass, with the estimate
+    /// they are at, when asked for ([`View::capturing`]).
+    captured: Option<Mutex<Option<Captured>>>,
 }
+
+/// Residuals of every row \[m, scaled\] and the estimate they are at.
+type Captured = (Vec<f64>, Vec<Vector3<f64>>);
 
 /// One block's sums: `Λ` (upper triangle), `η`, `Σ Δpᵀ W² Δp` and the
 /// equations with a positive weight.
@@ -181,11 +189,33 @@ impl<'a> View<'a> {
             block,
             b: Vec::new(),
             known: None,
+            captured: None,
         };
         if view.rows.len() <= block {
             view.b = view.copy(0, view.rows.len());
         }
         view
+    }
+
+    /// The view that keeps the residuals of its last σ pass
+    /// ([`View::residuals_at`]) when it has every row (a pass fewer after
+    /// the fit when the design does not hold its columns).
+    pub(super) fn capturing(mut self) -> Self {
+        if self.rows.len() == self.d.rows() {
+            self.captured = Some(Mutex::new(None));
+        }
+        self
+    }
+
+    /// The residuals of every row at `x` ([`super::design::Design::residual`],
+    /// bit for bit), when the view's last σ pass was at `x`.
+    pub(super) fn residuals_at(&self, x: &[f64]) -> Option<Vec<Vector3<f64>>> {
+        let mut slot = self.captured.as_ref()?.lock().ok()?;
+        let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        match slot.take() {
+            Some((at, r)) if bits(&at) == bits(x) => Some(r),
+            _ => None,
+        }
     }
 
     /// The view whose sums at unit weights ([`View::information`]) are
@@ -425,6 +455,10 @@ impl Reweightable<f64, Dyn> for View<'_> {
         dof.fill(Vector3::zeros());
         let (ss, h) = (&mut *sigma, &mut *dof);
         let mut n = vec![0_u32; groups];
+        let mut kept = self
+            .captured
+            .as_ref()
+            .map(|_| Vec::with_capacity(self.rows.len()));
         // `LANES` rows at a time, their three axes side by side:
         // `b[(3k + a) LANES + j]` is column `k`, axis `a` of the batch's row
         // `j` (unused lanes zero). Each row's leverages and residual on
@@ -467,6 +501,9 @@ impl Reweightable<f64, Dyn> for View<'_> {
                 batch_run(&chunk[t * per..((t + 1) * per).min(chunk.len())])
             });
             for (&i, (q, r)) in chunk.iter().zip(parts.into_iter().flatten()) {
+                if let Some(kept) = &mut kept {
+                    kept.push(r);
+                }
                 let g = self.d.group[i];
                 ss[g] += r.component_mul(&r);
                 for a in 0..3 {
@@ -482,6 +519,11 @@ impl Reweightable<f64, Dyn> for View<'_> {
                 sigma[g] = sigma[g].sup(floor);
             }
             dof[g] = Vector3::from_fn(|a, _| group_dof(n, h[a]));
+        }
+        if let (Some(slot), Some(kept)) = (&self.captured, kept) {
+            if let Ok(mut slot) = slot.lock() {
+                *slot = Some((x.to_vec(), kept));
+            }
         }
         Ok(())
     }

@@ -221,3 +221,35 @@ fn bad_weights_give_the_cores_errors() {
         );
     }
 }
+
+#[test]
+fn the_residuals_kept_from_the_sigma_pass_are_the_designs() {
+    // More rows than a chunk of the σ pass, OLS and IRLS (whose last σ
+    // pass is at its estimate or not: kept only when it is).
+    use crate::calibrate::fit::{fit_with_residuals, FitSettings, Method, Weighting};
+    let d = design(LEVERAGE_CHUNK + 1000, 1, 6, 13);
+    let cols: Vec<usize> = (0..6).collect();
+    for method in [Method::Ols, Method::Irls] {
+        let s = FitSettings {
+            method,
+            weight: RobustWeight::new(1e-3, 1.0).expect("valid weight"),
+            max_iterations: 20,
+            tolerance: 1e-3,
+            weighting: Weighting::Estimated,
+        };
+        let (out, kept) = fit_with_residuals(&d, &cols, None, &s).expect("fit");
+        if method == Method::Ols {
+            assert!(kept.is_some(), "an OLS fit's σ pass is at its estimate");
+        }
+        if let Some(kept) = kept {
+            assert_eq!(kept.len(), d.rows());
+            for (i, r) in kept.iter().enumerate() {
+                let want = d.residual(&cols, &out.x, i);
+                assert_eq!(r.map(f64::to_bits), want.map(f64::to_bits), "row {i}");
+            }
+        }
+    }
+    // A view without a group keeps none.
+    let v = View::new(&d, &cols, Some(0), None).capturing();
+    assert!(v.captured.is_none());
+}
