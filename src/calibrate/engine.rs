@@ -89,6 +89,17 @@ pub struct Engine<'a> {
 /// A design and what it was built from: [`Engine::last_design`].
 pub type LastDesign = (Vec<Param>, (Geometry, Linearisation), Arc<Design>);
 
+/// [`Engine::rows_mut`] of the engine's `rows` and `last` design.
+fn rows_mut<'r>(rows: &'r mut Arc<Rows>, last: &mut Mutex<Option<LastDesign>>) -> &'r mut Rows {
+    let last = last
+        .get_mut()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if last.as_ref().is_some_and(|(_, _, d)| !d.is_held()) {
+        *last = None;
+    }
+    Arc::make_mut(rows)
+}
+
 impl Engine<'_> {
     /// The design of `params` at the rows' current linearisation (the
     /// last one built again when nothing changed since).
@@ -134,22 +145,14 @@ impl Engine<'_> {
     /// # Errors
     /// As [`Rows::relinearise`].
     pub fn relinearise(&mut self) -> Result<(), CalibrationError> {
-        let (geometry, lin) = (self.geometry.clone(), self.lin.clone());
-        self.rows_mut().relinearise(&geometry, &lin)
+        rows_mut(&mut self.rows, &mut self.last_design).relinearise(&self.geometry, &self.lin)
     }
 
     /// The rows, to change: the last design let go first when it reads
     /// them (it is of the rows before the change), so that they are not
     /// copied ([`Arc::make_mut`] copies rows someone else still holds).
     pub fn rows_mut(&mut self) -> &mut Rows {
-        let last = self
-            .last_design
-            .get_mut()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if last.as_ref().is_some_and(|(_, _, d)| !d.is_held()) {
-            *last = None;
-        }
-        Arc::make_mut(&mut self.rows)
+        rows_mut(&mut self.rows, &mut self.last_design)
     }
 
     /// [`Engine::relinearise`], with the design of `params` there built in

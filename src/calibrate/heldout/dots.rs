@@ -179,6 +179,44 @@ mod tests {
     use super::*;
     use nalgebra::DVector;
 
+    /// A design's columns and `Δp` a block of rows at a time give the
+    /// whole columns' dots, bit for bit: rows around the runs of eight
+    /// and the blocks, all columns and some.
+    #[test]
+    fn a_designs_dots_by_blocks_are_the_whole_columns() {
+        use crate::calibrate::design::testing::design;
+        for rows in [
+            1,
+            2,
+            3,
+            7,
+            8,
+            9,
+            100,
+            DESIGN_BLOCK_ROWS + 5,
+            2 * DESIGN_BLOCK_ROWS + 11,
+        ] {
+            let d = design(rows, 1, 4, rows as u64);
+            for cols in [vec![0, 1, 2, 3], vec![3, 1]] {
+                let n = cols.len();
+                let b = d.held().select_columns(&cols);
+                let m = b.nrows();
+                let columns: Vec<&[f64]> = (0..n)
+                    .map(|c| &b.as_slice()[c * m..(c + 1) * m])
+                    .chain([d.y.as_slice()])
+                    .collect();
+                let pairs: Vec<(usize, usize)> =
+                    (0..n).flat_map(|i| (i..=n).map(move |j| (i, j))).collect();
+                for threads in [1, 2, 3] {
+                    let want = column_dots(&columns, &pairs, threads);
+                    let got = design_dots(&d, &cols, &pairs, threads);
+                    let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "{rows} rows, {threads} threads");
+                }
+            }
+        }
+    }
+
     /// Against nalgebra's `dot` itself, bit for bit, for lengths around
     /// the runs of eight and the blocks, on one and several threads.
     #[test]
