@@ -574,3 +574,31 @@ fn a_point_off_by_millimetres_is_named_as_a_likely_measurement_error() {
     assert!(w[0].contains(": config 7 marker 1 "), "{}", w[0]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn designs_not_held_give_the_same_report_and_a_bad_value_is_refused() {
+    // `ROBCAL_MAX_HELD_DESIGN_ROWS=0`: no design holds its columns (each
+    // pass computes them again from the rows); the report is the same
+    // bytes. A value that is not a number is a one-line error.
+    let mut args = NAIVE.to_vec();
+    args.push("--json");
+    let run = |value: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_robcal"));
+        c.current_dir(root()).args(&args);
+        match value {
+            Some(v) => c.env("ROBCAL_MAX_HELD_DESIGN_ROWS", v),
+            None => c.env_remove("ROBCAL_MAX_HELD_DESIGN_ROWS"),
+        };
+        c.output().expect("run robcal")
+    };
+    let held = run(None);
+    let computed = run(Some("0"));
+    assert!(held.status.success() && computed.status.success());
+    assert_eq!(held.stdout, computed.stdout);
+    let bad = run(Some("lots"));
+    assert_eq!(bad.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("ROBCAL_MAX_HELD_DESIGN_ROWS"), "{err}");
+    assert!(bad.stdout.is_empty());
+}

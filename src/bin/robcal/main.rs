@@ -367,6 +367,10 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         } else {
             DeflectionModel::Exact
         },
+        policy: robcal::calibrate::Policy {
+            max_held_design_rows: max_held_design_rows()?,
+            ..Default::default()
+        },
         ..Settings::default()
     };
     // On a terminal, a spinner with the current step once the run has
@@ -505,4 +509,19 @@ fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String>
         }
     }
     result
+}
+
+/// `ROBCAL_MAX_HELD_DESIGN_ROWS`: a design of more rows does not hold its
+/// columns but computes them again where a pass reads them
+/// (`Policy::max_held_design_rows`: the same report, less memory, more
+/// time); unset, every design is held.
+fn max_held_design_rows() -> Result<usize, String> {
+    match std::env::var("ROBCAL_MAX_HELD_DESIGN_ROWS") {
+        Err(std::env::VarError::NotPresent) => Ok(usize::MAX),
+        Ok(v) => v
+            .trim()
+            .parse()
+            .map_err(|_| format!("ROBCAL_MAX_HELD_DESIGN_ROWS={v:?}: expected a number of rows")),
+        Err(e) => Err(format!("ROBCAL_MAX_HELD_DESIGN_ROWS: {e}")),
+    }
 }
