@@ -28,7 +28,7 @@
 //! | [`names`] | contract names of parameters, joints, markers, angle bins |
 //! | [`rows`] | [`Row`]s from the measurements, recomputed at the current geometry |
 //! | [`declared`] | the setup's `[model]` as parameters |
-//! | [`design`] | the stacked columns of some parameters (or built in a relinearisation's pass, `Design::relinearised`); the independence test |
+//! | [`design`] | the stacked columns of some parameters (or built in a relinearisation's pass, `Design::relinearised`), held or computed again from the rows where read (`Policy::max_held_design_rows`); the independence test |
 //! | [`fit`] | the core's fits and nested test on a design, at the exact size |
 //! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
