@@ -102,10 +102,7 @@ pub fn fit_known(
     known: Accumulator<f64, Dyn>,
     s: &FitSettings,
 ) -> Result<FitOut, Error> {
-    let instrument = d.instrument_sigma.as_deref();
-    let floor = instrument.filter(|_| s.weighting == Weighting::Both);
-    let view = View::new(d, cols, None, floor).knowing(known);
-    fit_source(&view, cols, instrument, s)
+    fit_with_residuals(d, cols, Some(known), s).map(|(out, _)| out)
 }
 
 /// The residuals of every row \[m, scaled: [`Design::residual`]\].

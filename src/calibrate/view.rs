@@ -211,11 +211,9 @@ impl<'a> View<'a> {
     /// bit for bit), when the view's last σ pass was at `x`.
     pub(super) fn residuals_at(&self, x: &[f64]) -> Option<Vec<Vector3<f64>>> {
         let mut slot = self.captured.as_ref()?.lock().ok()?;
-        let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        match slot.take() {
-            Some((at, r)) if bits(&at) == bits(x) => Some(r),
-            _ => None,
-        }
+        let (at, r) = slot.take()?;
+        let same = at.len() == x.len() && at.iter().zip(x).all(|(a, b)| a.to_bits() == b.to_bits());
+        same.then_some(r)
     }
 
     /// The view whose sums at unit weights ([`View::information`]) are

@@ -46,17 +46,7 @@ pub(super) fn column_dots(
         }
         run.iter()
             .zip(&sums)
-            .map(|(&(i, j), s)| {
-                let mut r = 0.0;
-                r += s[0] + s[4];
-                r += s[1] + s[5];
-                r += s[2] + s[6];
-                r += s[3] + s[7];
-                for t in whole..m {
-                    r += columns[i][t] * columns[j][t];
-                }
-                r
-            })
+            .map(|(&(i, j), s)| finished(s, (whole..m).map(|t| (columns[i][t], columns[j][t]))))
             .collect::<Vec<f64>>()
     });
     runs.concat()
@@ -125,22 +115,24 @@ pub(super) fn design_dots(
         .zip(&sums)
         .flat_map(|(run, sums)| run.iter().zip(sums))
         .map(|(&(i, j), s)| {
-            let mut r = 0.0;
-            r += s[0] + s[4];
-            r += s[1] + s[5];
-            r += s[2] + s[6];
-            r += s[3] + s[7];
-            for (a, b) in last
-                .get(i)
-                .into_iter()
-                .flatten()
-                .zip(last.get(j).into_iter().flatten())
-            {
-                r += a * b;
-            }
-            r
+            let tail = |c: usize| last.get(c).into_iter().flatten().copied();
+            finished(s, tail(i).zip(tail(j)))
         })
         .collect()
+}
+
+/// A dot from its eight running sums `s` and the values past the last
+/// whole run of eight, `tail` (pairs, in order): nalgebra's ending.
+fn finished(s: &[f64; 8], tail: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let mut r = 0.0;
+    r += s[0] + s[4];
+    r += s[1] + s[5];
+    r += s[2] + s[6];
+    r += s[3] + s[7];
+    for (a, b) in tail {
+        r += a * b;
+    }
+    r
 }
 
 /// Rows of a block of [`design_dots`] (a multiple of eight: its values

@@ -1,0 +1,353 @@
+//! The worker threads give the serial loop's answers, in order; the rows and
+//! designs built on threads are the serial ones.
+
+use super::*;
+
+#[test]
+fn results_come_back_in_order() {
+    for threads in [1, 2, 3, 8] {
+        let out = map(50, threads, |i| i * i);
+        assert_eq!(out, (0..50).map(|i| i * i).collect::<Vec<_>>());
+    }
+    assert!(map(0, 4, |i| i).is_empty());
+}
+
+#[test]
+fn a_stop_ends_the_list_there_as_the_serial_loop() {
+    for threads in [1, 2, 4] {
+        let out = map_until(40, threads, |i| i, |&i| i % 7 == 6);
+        assert_eq!(out, (0..7).collect::<Vec<_>>());
+        let out = map_until(5, threads, |i| i, |_| false);
+        assert_eq!(out, vec![0, 1, 2, 3, 4]);
+    }
+}
+
+/// Threads the system refuses (none, some, all) leave their work to
+/// the calling thread: the same results, in order.
+#[test]
+fn refused_threads_leave_their_work_here() {
+    for refused in [1, 2, 3, 10] {
+        REFUSE.with(|r| r.set(refused));
+        let out = map(50, 4, |i| i * i);
+        assert_eq!(out, (0..50).map(|i| i * i).collect::<Vec<_>>());
+        REFUSE.with(|r| r.set(refused));
+        let out = map_until(40, 4, |i| i, |&i| i % 7 == 6);
+        assert_eq!(out, (0..7).collect::<Vec<_>>());
+        REFUSE.with(|r| r.set(refused));
+        let mut items: Vec<usize> = (0..30).collect();
+        let r = for_runs_mut(&mut items, 4, |first, run| {
+            for (k, v) in run.iter_mut().enumerate() {
+                *v = 10 * (first + k) + usize::from(threads() == 1);
+            }
+            if first == 16 {
+                return Err(first);
+            }
+            Ok(())
+        });
+        assert_eq!(r, Err(16), "{refused} refused");
+        assert_eq!(items, (0..30).map(|i| 10 * i + 1).collect::<Vec<_>>());
+    }
+    REFUSE.with(|r| r.set(0));
+}
+
+#[test]
+fn work_on_a_worker_is_serial() {
+    let inner = map(4, 4, |_| threads());
+    assert_eq!(inner, vec![1; 4]);
+}
+
+use crate::calibrate::design::Design;
+use crate::calibrate::{declared, DeflectionModel, Geometry, Linearisation, Names, Rows};
+use nalgebra::Vector3;
+
+/// The KR-270 job and its measurements (`data/kr270`).
+fn kr270() -> (crate::io::Job, crate::io::Measurements) {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/data/kr270");
+    let job = crate::io::Job::load(format!("{dir}/setup.toml")).expect("job");
+    let data =
+        crate::io::read_measurements(format!("{dir}/measurements.csv"), &job.robot, &job.setup)
+            .expect("data");
+    (job, data)
+}
+
+/// The contract names of `job` (no angle bins yet).
+fn names_of(job: &crate::io::Job) -> Names {
+    Names {
+        joints: job.robot.joint_names.clone(),
+        kinds: job.robot.chain.joints().iter().map(|j| j.kind).collect(),
+        markers: job
+            .setup
+            .markers
+            .iter()
+            .map(|m| (m.id, Vector3::from(m.xyz)))
+            .collect(),
+        bins: Default::default(),
+    }
+}
+
+/// The KR-270 job's rows (loaded: the exact model's equilibria) and its
+/// declared design, relinearised and built on 1 and on 3 threads at a
+/// joint law with every compliance at 1 (the reported unit): the same
+/// bits.
+#[test]
+fn rows_and_design_do_not_depend_on_the_threads() {
+    let (job, data) = kr270();
+    let mut names = names_of(&job);
+    let policy = crate::calibrate::Policy::default();
+    let mut rows = Rows::new(
+        &job,
+        &data,
+        declared::needs_absolute(&job),
+        &mut names,
+        &policy,
+    )
+    .expect("rows");
+    let params = declared::declared(&job, &data.file, &rows, &names).expect("model");
+    let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
+    let geometry = Geometry::nominal_tree(
+        &job.robot.chain,
+        &job.robot.ends,
+        &markers,
+        &crate::calibrate::marker_ends(&job),
+    );
+    let x = vec![1.0; params.len()];
+    let lin = Linearisation::of(DeflectionModel::Exact, &params, &x, &names);
+    let mut at = |threads: usize| {
+        rows.relinearise_on(&geometry, &lin, threads)
+            .expect("relinearise");
+        let d = Design::new_on(&rows, &params, &lin, &names, threads).expect("design");
+        let state = |rows: &Rows| -> Vec<_> {
+            rows.rows
+                .iter()
+                .map(|r| (r.y, r.p, r.tau().to_vec(), r.twists().to_vec()))
+                .collect()
+        };
+        let r = state(&rows);
+        // Again with the design built in the relinearisation's pass
+        // (from the equilibria just found: the same rows), into the
+        // storage of another design: the same rows and design.
+        let old = Design::new_on(&rows, &params[..1], &lin, &names, 1).expect("design");
+        let fused = Design::relinearised_on(
+            &mut rows,
+            &geometry,
+            &lin,
+            &params,
+            &names,
+            Some(old.into_storage()),
+            threads,
+            true,
+        )
+        .expect("relinearise")
+        .expect("columns");
+        let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(fused.held().as_slice()),
+            bits(d.held().as_slice()),
+            "{threads} threads"
+        );
+        assert_eq!(bits(&fused.y), bits(&d.y));
+        // And not held: the columns computed where read from the same
+        // rows are the held ones, and so are the unit-weight sums.
+        let computed = Design::relinearised_on(
+            &mut rows, &geometry, &lin, &params, &names, None, threads, false,
+        )
+        .expect("relinearise")
+        .expect("columns")
+        .reading(&std::sync::Arc::new(rows.clone()));
+        assert!(!computed.is_held());
+        assert_eq!(
+            bits(computed.held().as_slice()),
+            bits(d.held().as_slice()),
+            "{threads} threads, computed"
+        );
+        let both = |d: &Design| {
+            d.unit_sums
+                .as_ref()
+                .map(|s| bits(s.information().as_slice()))
+        };
+        assert_eq!(both(&computed), both(&fused));
+        let mut block = (Vec::new(), Vec::new());
+        let some: Vec<usize> = (0..rows.rows.len()).step_by(3).collect();
+        let cols = [2, 0, 2];
+        computed.rows_into(&some, &cols, &mut block.0);
+        d.rows_into(&some, &cols, &mut block.1);
+        assert_eq!(bits(&block.0), bits(&block.1));
+        computed.columns_into(1, rows.rows.len() - 2, &cols, &mut block.0);
+        d.columns_into(1, rows.rows.len() - 2, &cols, &mut block.1);
+        assert_eq!(bits(&block.0), bits(&block.1));
+        // Its unit-weight sums, when the pass made them (runs of whole
+        // blocks, or one run), are the view's of the design.
+        assert_eq!(fused.unit_sums.is_some(), threads == 1);
+        if let Some(sums) = &fused.unit_sums {
+            let cols: Vec<usize> = (0..params.len()).collect();
+            let view = crate::calibrate::view::View::new(&d, &cols, None, None)
+                .information()
+                .expect("finite");
+            assert_eq!(
+                bits(sums.information().as_slice()),
+                bits(view.information().as_slice())
+            );
+            assert_eq!(bits(sums.eta().as_slice()), bits(view.eta().as_slice()));
+            assert_eq!(sums.weighted_yy().to_bits(), view.weighted_yy().to_bits());
+        }
+        assert_eq!(
+            (fused.held().shape(), &fused.group),
+            (d.held().shape(), &d.group)
+        );
+        assert!(state(&rows) == r, "{threads} threads");
+        (r, d.held().into_owned(), d.y)
+    };
+    let one = at(1);
+    assert!(one.0.iter().any(|r| !r.3.is_empty()), "equilibria");
+    for threads in [2, 3, 7] {
+        assert!(one == at(threads), "{threads} threads");
+    }
+
+    // A relinearisation that fails part way (compliances so large that
+    // the heavier loads have no equilibrium near the measured pose),
+    // then another from the starting points it left: the same rows and
+    // the same error on 1 and 3 threads.
+    let first_line = rows.rows[0].line;
+    let mut part_way = 0;
+    for scale in [100.0, 300.0, 1e3, 3e3, 1e4, 3e4] {
+        let bad = Linearisation::of(
+            DeflectionModel::Exact,
+            &params,
+            &vec![scale; x.len()],
+            &names,
+        );
+        let after = Linearisation::of(DeflectionModel::Exact, &params, &vec![1.5; x.len()], &names);
+        let run = |threads: usize| {
+            let mut r = rows.clone();
+            let e = r
+                .relinearise_on(&geometry, &bad, threads)
+                .err()
+                .map(|e| e.to_string());
+            r.relinearise_on(&geometry, &after, threads)
+                .expect("relinearise");
+            let state: Vec<_> = r
+                .rows
+                .iter()
+                .map(|r| (r.y, r.p, r.tau().to_vec(), r.frames.theta().to_vec()))
+                .collect();
+            (e, state)
+        };
+        let serial = run(1);
+        assert!(serial == run(3), "scale {scale}");
+        if let Some(e) = &serial.0 {
+            if !e.contains(&format!(":{first_line}:")) {
+                part_way += 1;
+            }
+        }
+    }
+    assert!(part_way > 0, "no relinearisation failed part way");
+}
+
+/// Rows built on worker threads (more rows than one thread takes) are
+/// the rows built on one (inside a worker), in the same order: the
+/// KR-270's data sixteen times, each copy its own configurations, every
+/// other copy's in decreasing order (the group hints then miss).
+#[test]
+fn rows_built_on_threads_are_the_serial_ones() {
+    let (job, data) = kr270();
+    let n = data.observations.len();
+    let mut big = data.clone();
+    let config = |c: i64, r: i64| {
+        if r % 2 == 0 {
+            c + 1000 * r
+        } else {
+            1_000_000 - c - 1000 * r
+        }
+    };
+    for r in 1..16 {
+        for o in &data.observations {
+            let mut o = o.clone();
+            o.config = config(o.config, r);
+            big.observations.push(o);
+        }
+        for d in &data.deflections {
+            let mut d = d.clone();
+            d.config = config(d.config, r);
+            d.rows = d.rows.map(|i| i + r as usize * n);
+            big.deflections.push(d);
+        }
+    }
+    let build = || {
+        let mut names = names_of(&job);
+        let policy = crate::calibrate::Policy::default();
+        let rows = Rows::new(&job, &big, true, &mut names, &policy).expect("rows");
+        rows.rows
+            .iter()
+            .map(|r| {
+                (
+                    r.kind,
+                    r.group,
+                    r.config,
+                    r.marker,
+                    r.q.clone(),
+                    r.measured,
+                    r.line,
+                    r.y,
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let threads = build();
+    assert!(
+        threads.len() >= 2 * MIN_ROWS_PER_THREAD,
+        "{} rows",
+        threads.len()
+    );
+    let serial = map(2, 2, |k| (k == 0).then(build))
+        .into_iter()
+        .flatten()
+        .next()
+        .expect("serial");
+    assert!(threads == serial);
+}
+
+/// Every item once, the first error in item order, every item before
+/// it done; with none, some or all threads refused.
+#[test]
+fn items_taken_in_turn() {
+    for (threads, refused) in [(1, 0), (2, 0), (3, 0), (8, 0), (4, 2), (4, 10)] {
+        let mut items = vec![0_usize; 200];
+        REFUSE.with(|r| r.set(refused));
+        let r = for_each_mut(&mut items, threads, |k, v| {
+            *v += k + 1;
+            Ok::<(), usize>(())
+        });
+        assert_eq!(r, Ok(()));
+        assert_eq!(items, (1..=200).collect::<Vec<_>>(), "{threads} threads");
+        REFUSE.with(|r| r.set(refused));
+        let r = for_each_mut(&mut items, threads, |k, v| {
+            if k % 50 == 37 {
+                return Err(k);
+            }
+            *v = 0;
+            Ok(())
+        });
+        assert_eq!(r, Err(37), "{threads} threads");
+        assert!(items[..37].iter().all(|&v| v == 0));
+        assert_eq!(items[37], 38);
+    }
+    REFUSE.with(|r| r.set(0));
+}
+
+#[test]
+fn the_first_error_in_item_order() {
+    for t in [1, 2, 5] {
+        let mut v: Vec<u32> = (0..100).collect();
+        let r = for_runs_mut(&mut v, t, |_, run| {
+            for x in run.iter_mut() {
+                if *x == 40 || *x == 90 {
+                    return Err(*x);
+                }
+                *x += 1000;
+            }
+            Ok(())
+        });
+        assert_eq!(r, Err(40));
+        assert_eq!(v[0], 1000);
+    }
+}
