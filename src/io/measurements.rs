@@ -107,15 +107,19 @@ pub const INLINE_JOINTS: usize = 7;
 pub type JointValues = smallvec::SmallVec<[f64; INLINE_JOINTS]>;
 
 /// A row's joint cells as written in the CSV, in chain order: a range of a
-/// text shared by the rows read with it (one allocation per ~1 MiB of
-/// cells, not one per row: a file of a million rows held ~300 MB of cells
-/// as separate strings, then ~130 MB as one string per row, whose freed
-/// blocks the heap kept). The cells are joined by the unit separator
-/// `\u{1f}`, which a cell that parsed as a number cannot hold.
+/// text shared by the rows read with it (one allocation for the whole
+/// file's cells up to 2 GiB of them, not one per row: a file of a million
+/// rows held ~300 MB of cells as separate strings, then ~130 MB as one
+/// string per row, whose freed blocks the heap kept; then ~115 MB in texts
+/// of ~1 MiB, which the heap kept too once freed). The cells are joined by
+/// the unit separator `\u{1f}`, which a cell that parsed as a number
+/// cannot hold.
 #[derive(Clone, Default)]
 pub struct WrittenCells {
-    /// The shared text (`None`: no cell, or not yet attached by the reader).
-    text: Option<std::sync::Arc<str>>,
+    /// The shared text (`None`: no cell, or not yet attached by the
+    /// reader). An `Arc<String>`, not an `Arc<str>`: the text is not
+    /// copied when attached.
+    text: Option<std::sync::Arc<String>>,
     /// This row's part of `text`.
     start: u32,
     /// End of this row's part of `text`.
@@ -147,13 +151,14 @@ impl WrittenCells {
     {
         let mut text = String::new();
         let mut cells = Self::pending(&mut text, cells);
-        cells.text = Some(text.into());
+        cells.text = Some(std::sync::Arc::new(text));
         cells
     }
 
     /// The cells appended to `text`, a batch's shared text: this row's
     /// range of it, without the text until [`WrittenCells::attach`].
-    /// (`text` stays under 4 GiB: the reader attaches every ~1 MiB.)
+    /// (`text` stays under 4 GiB: the reader attaches before
+    /// [`WrittenCells::JOINED_BYTES`].)
     pub(crate) fn pending<'a, I>(text: &mut String, cells: I) -> Self
     where
         I: IntoIterator<Item = &'a str>,
@@ -173,10 +178,23 @@ impl WrittenCells {
         }
     }
 
+    /// Bytes of cells past which a reader gives its text to its rows
+    /// (the offsets are `u32`).
+    pub(crate) const JOINED_BYTES: usize = (u32::MAX / 2) as usize;
+
+    /// The cells made by [`WrittenCells::pending`] into a text that is
+    /// then appended at byte `by` of another (not attached yet).
+    pub(crate) fn shift(&mut self, by: u32) {
+        self.start = self.start.saturating_add(by);
+        self.end = self.end.saturating_add(by);
+    }
+
     /// Gives `text` (the batch's, emptied) to every row's cells in `rows`,
     /// each made by [`WrittenCells::pending`] into it.
     pub(crate) fn attach<'r>(text: &mut String, rows: impl Iterator<Item = &'r mut Self>) {
-        let shared: std::sync::Arc<str> = std::mem::take(text).into();
+        let mut text = std::mem::take(text);
+        text.shrink_to_fit();
+        let shared = std::sync::Arc::new(text);
         for r in rows {
             r.text = Some(std::sync::Arc::clone(&shared));
         }

@@ -219,7 +219,6 @@ const BATCH_BYTES: usize = 1 << 20;
 
 /// Observations read in order, their joint cells as written in one text
 /// per ~[`BATCH_BYTES`] ([`super::WrittenCells`]).
-#[derive(Default)]
 pub(super) struct Batch {
     /// The observations.
     pub(super) out: Vec<Observation>,
@@ -227,16 +226,32 @@ pub(super) struct Batch {
     text: String,
     /// The first observation whose cells are in `text`.
     first: usize,
+    /// Bytes of `text` past which it is attached.
+    limit: usize,
+}
+
+impl Default for Batch {
+    fn default() -> Self {
+        Self {
+            out: Vec::new(),
+            text: String::new(),
+            first: 0,
+            limit: BATCH_BYTES,
+        }
+    }
 }
 
 impl Batch {
     /// An empty batch in `out` (emptied) with room for `rows`
-    /// observations.
+    /// observations, whose text is not attached (up to
+    /// [`WrittenCells::JOINED_BYTES`]) but given to the caller with them
+    /// ([`Batch::pending`]).
     pub(super) fn into(mut out: Vec<Observation>, rows: usize) -> Self {
         out.clear();
         out.reserve(rows);
         Self {
             out,
+            limit: WrittenCells::JOINED_BYTES,
             ..Self::default()
         }
     }
@@ -255,7 +270,7 @@ impl Batch {
     ) -> Result<(), InputError> {
         let o = layout.observation(record, line, stats, &mut self.text)?;
         self.out.push(o);
-        if self.text.len() >= BATCH_BYTES {
+        if self.text.len() >= self.limit {
             self.attach();
         }
         Ok(())
@@ -272,6 +287,12 @@ impl Batch {
     pub(super) fn finish(mut self) -> Vec<Observation> {
         self.attach();
         self.out
+    }
+
+    /// The observations, the text of the cells not attached, and the
+    /// first observation whose cells are in it.
+    pub(super) fn pending(self) -> (Vec<Observation>, String, usize) {
+        (self.out, self.text, self.first)
     }
 }
 
@@ -348,7 +369,7 @@ pub(super) fn chunked(
         (threads, chunks),
         &mut read,
     )?;
-    Some((read.observations, read.stats))
+    Some(read.finish())
 }
 
 /// Where [`in_chunks`] puts what it reads.
@@ -368,6 +389,18 @@ pub(super) struct Read {
     /// read at once has one call, and its parts kept to its end would
     /// double its rows' memory there).
     keep: bool,
+    /// The joint cells as written of `observations[first..]`, not yet
+    /// attached: the chunks' texts joined, one allocation that grows in
+    /// place and is given back whole when freed (the chunks' own, of a
+    /// few MiB each, are freed as they are joined, and reused by the next
+    /// chunks: at 10⁶ rows ~115 MB of texts of ~1 MiB stayed with the
+    /// threads' allocator once the rows were built).
+    text: String,
+    /// The first observation whose cells are in `text`.
+    first: usize,
+    /// Bytes of `text` past which it is attached
+    /// ([`WrittenCells::JOINED_BYTES`]; fewer in tests).
+    joined: usize,
 }
 
 impl Read {
@@ -379,7 +412,41 @@ impl Read {
             stats: Stats::new(dof),
             parts: Vec::new(),
             keep,
+            text: String::new(),
+            first: 0,
+            joined: WrittenCells::JOINED_BYTES,
         }
+    }
+
+    /// Appends a chunk's observations `obs` (taken), whose cells from
+    /// `obs[first..]` on are in `text` (the others attached).
+    fn join(&mut self, obs: &mut Vec<Observation>, text: &str, first: usize) {
+        let at = self.observations.len();
+        if first > 0 || self.text.len() + text.len() > self.joined {
+            self.attach(at);
+            self.first = at + first;
+        }
+        let by = u32::try_from(self.text.len()).unwrap_or(u32::MAX);
+        for o in &mut obs[first..] {
+            o.q_written.shift(by);
+        }
+        self.text.push_str(text);
+        self.observations.append(obs);
+    }
+
+    /// Gives `text` to `observations[first..end]`.
+    fn attach(&mut self, end: usize) {
+        let rows = self.observations[self.first..end]
+            .iter_mut()
+            .map(|o| &mut o.q_written);
+        WrittenCells::attach(&mut self.text, rows);
+        self.first = end;
+    }
+
+    /// The observations read, every one's cells attached, and their stats.
+    pub(super) fn finish(mut self) -> (Vec<Observation>, Stats) {
+        self.attach(self.observations.len());
+        (self.observations, self.stats)
     }
 }
 
@@ -458,26 +525,85 @@ pub(super) fn in_chunks(
                 out.read(layout, &cells, line0 + before + 1, &mut stats)
                     .ok()
             });
-            done.map(|()| (out.finish(), stats))
+            done.map(|()| (out.pending(), stats))
         },
         Option::is_none,
     );
     read.observations
-        .reserve(parts.iter().flatten().map(|p| p.0.len()).sum());
-    for (part, slot) in parts.into_iter().zip(&mut read.parts) {
-        let (mut obs, s) = part?;
-        read.observations.append(&mut obs);
+        .reserve(parts.iter().flatten().map(|p| p.0 .0.len()).sum());
+    let mut slots = std::mem::take(&mut read.parts);
+    for (part, slot) in parts.into_iter().zip(&mut slots) {
+        let ((mut obs, text, first), s) = part?;
+        read.join(&mut obs, &text, first);
         read.stats.merge(s);
         if read.keep {
             *slot = obs;
         }
     }
+    read.parts = slots;
     Some(())
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{each_record, line_ends};
+    use super::{each_record, line_ends, Observation, Read, WrittenCells};
+
+    /// Chunks' observations joined keep their cells as written: with the
+    /// texts joined whole, attached past the limit, and after a chunk that
+    /// attached some of its own.
+    #[test]
+    fn joined_chunks_keep_their_cells() {
+        let cells = |i: usize| [format!("{i}.0"), format!("-{i}e-3"), " ".repeat(i % 3)];
+        // A chunk of `n` observations from `i0`, the first `attached`
+        // of them with a text of their own.
+        let chunk = |i0: usize, n: usize, attached: usize| {
+            let mut text = String::new();
+            let mut obs: Vec<Observation> = (i0..i0 + n)
+                .map(|i| Observation {
+                    q_written: WrittenCells::pending(
+                        &mut text,
+                        cells(i).iter().map(String::as_str),
+                    ),
+                    line: i,
+                    ..Observation::default()
+                })
+                .collect();
+            if attached > 0 {
+                let mut own = String::new();
+                for (o, i) in obs[..attached].iter_mut().zip(i0..) {
+                    o.q_written =
+                        WrittenCells::pending(&mut own, cells(i).iter().map(String::as_str));
+                }
+                WrittenCells::attach(
+                    &mut own,
+                    obs[..attached].iter_mut().map(|o| &mut o.q_written),
+                );
+                text.clear();
+                for (o, i) in obs[attached..].iter_mut().zip(i0 + attached..) {
+                    o.q_written =
+                        WrittenCells::pending(&mut text, cells(i).iter().map(String::as_str));
+                }
+            }
+            (obs, text, attached)
+        };
+        for joined in [usize::MAX, 0, 40, 200] {
+            let mut read = Read::new(3, false);
+            read.joined = joined;
+            let mut i0 = 0;
+            for (n, attached) in [(5, 0), (0, 0), (7, 3), (4, 0), (1, 1), (9, 0)] {
+                let (mut obs, text, first) = chunk(i0, n, attached);
+                read.join(&mut obs, &text, first);
+                i0 += n;
+            }
+            let (obs, _) = read.finish();
+            assert_eq!(obs.len(), i0);
+            for (i, o) in obs.iter().enumerate() {
+                assert_eq!(o.line, i);
+                let got: Vec<&str> = o.q_written.iter().collect();
+                assert_eq!(got, cells(i), "observation {i}, joined at {joined}");
+            }
+        }
+    }
 
     /// The records and trimmed cells [`each_record`] finds are the csv
     /// crate's (the reader the chunks had before, and the one reader of

@@ -136,12 +136,13 @@ impl Blocks {
             start = 0;
             eof = self.fill(&mut reader, &mut buf, &mut total)?;
         }
+        let (observations, stats) = read.finish();
         Some(finish(
             self.file.clone(),
             robot,
             setup,
-            read.observations,
-            &read.stats,
+            observations,
+            &stats,
             head.has_time,
         ))
     }
