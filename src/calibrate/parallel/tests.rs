@@ -351,3 +351,69 @@ fn the_first_error_in_item_order() {
         assert_eq!(v[0], 1000);
     }
 }
+
+/// Rows built from taken measurements (the absolute rows from the last
+/// observation back, a chunk at a time, each chunk freed) are the rows
+/// built from borrowed ones, with their bins and the names of the bins:
+/// the KR-270's data (loaded and unloaded rows, each with a time and an
+/// instrument σ) copied into more observations than two chunks hold,
+/// with absolute rows and without.
+#[test]
+fn rows_of_taken_measurements_are_those_of_borrowed_ones() {
+    let (job, data) = kr270();
+    let n = data.observations.len();
+    let copies = 70_000 / n + 1;
+    let mut big = data.clone();
+    big.observations.clear();
+    big.deflections.clear();
+    big.has_time = true;
+    for r in 0..copies {
+        for o in &data.observations {
+            let mut o = o.clone();
+            o.config += 1000 * r as i64;
+            o.line += 10 * r * n;
+            o.t_s = Some(0.25 * o.line as f64);
+            o.sigma_m = Some([1e-5, 2e-5, 3e-5 * (1 + r % 3) as f64]);
+            big.observations.push(o);
+        }
+        for d in &data.deflections {
+            let mut d = d.clone();
+            d.config += 1000 * r as i64;
+            d.rows = d.rows.map(|i| i + r * n);
+            d.lines = d.lines.map(|l| l + 10 * r * n);
+            big.deflections.push(d);
+        }
+    }
+    assert!(big.observations.len() > 70_000 && !big.deflections.is_empty());
+    let policy = crate::calibrate::Policy::default();
+    for absolute in [true, false] {
+        let mut names = names_of(&job);
+        let borrowed = Rows::new(&job, &big, absolute, &mut names, &policy).expect("rows");
+        let mut taken_names = names_of(&job);
+        let taken = Rows::from_measurements(&job, big.clone(), absolute, &mut taken_names, &policy)
+            .expect("rows");
+        assert_eq!(borrowed.rows.len(), taken.rows.len());
+        assert!(borrowed.rows.len() > if absolute { 70_000 } else { 0 });
+        // The deflections, then the absolute rows in file order.
+        let d = big.deflections.len();
+        assert!(taken.rows[..d]
+            .iter()
+            .all(|r| r.kind == crate::calibrate::RowKind::Deflection));
+        assert!(taken.rows[d..]
+            .iter()
+            .all(|r| r.kind == crate::calibrate::RowKind::Absolute));
+        assert!(taken.rows[d..].windows(2).all(|w| w[0].line < w[1].line));
+        for (k, (a, b)) in borrowed.rows.iter().zip(&taken.rows).enumerate() {
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "row {k}");
+        }
+        let rest = |r: &Rows| {
+            format!(
+                "{:?} {:?} {:?} {:?} {}",
+                r.configs, r.kinds, r.bins, r.compensator_ok, r.file
+            )
+        };
+        assert_eq!(rest(&borrowed), rest(&taken));
+        assert_eq!(names.bins, taken_names.bins);
+        assert!(!names.bins.is_empty(), "the KR-270's joints have bins");
+    }
+}

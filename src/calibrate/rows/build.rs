@@ -26,6 +26,38 @@ impl Rows {
         names: &mut Names,
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
+        Self::build(job, Source::Borrowed(data), absolute, names, policy)
+    }
+
+    /// [`Rows::new`], taking the measurements: the absolute rows are built
+    /// from the last observation back, a chunk at a time, each chunk of
+    /// observations freed once its rows are made (and every joint cell as
+    /// written once the bins are named). At 10⁶ rows the parsed
+    /// observations (~230 MB) and their cells (~115 MB) were held whole
+    /// while the rows (~224 MB) were built: that was the peak memory of a
+    /// calibration. The rows are the same, bit for bit.
+    ///
+    /// # Errors
+    /// As [`Rows::new`].
+    pub fn from_measurements(
+        job: &Job,
+        data: Measurements,
+        absolute: bool,
+        names: &mut Names,
+        policy: &Policy,
+    ) -> Result<Self, CalibrationError> {
+        Self::build(job, Source::Owned(data), absolute, names, policy)
+    }
+
+    /// [`Rows::new`] and [`Rows::from_measurements`].
+    fn build(
+        job: &Job,
+        mut source: Source<'_>,
+        absolute: bool,
+        names: &mut Names,
+        policy: &Policy,
+    ) -> Result<Self, CalibrationError> {
+        let data = source.get();
         let setup = &job.setup;
         let dof = job.robot.dof();
         let use_absolute = absolute || data.deflections.is_empty();
@@ -99,13 +131,11 @@ impl Rows {
             compensator_ok.push(ok);
             bins.push(jb);
         }
+        // The cells as written were read for the bins' names only.
+        source.forget_cells();
+        let data = source.get();
 
         let index_of = |id: u32| names.marker_index(id).unwrap_or(0);
-        let absolute: Vec<&crate::io::Observation> = if use_absolute {
-            data.unloaded().collect()
-        } else {
-            Vec::new()
-        };
         let deflections = data.deflections.len();
         let row = |kind,
                    config,
@@ -137,63 +167,89 @@ impl Rows {
             }),
             y: Vector3::from(measured),
         };
-        // Row `k`: the deflections first, then the absolute positions.
-        let make = |k: usize, hint: &mut usize| match data.deflections.get(k) {
-            Some(d) => {
-                let (loaded, unloaded) =
-                    (&data.observations[d.rows[0]], &data.observations[d.rows[1]]);
-                let dt = loaded.t_s.zip(unloaded.t_s).map(|(a, b)| a - b);
-                row(
-                    RowKind::Deflection,
-                    d.config,
-                    d.marker,
-                    d.load_kg,
-                    &d.q,
-                    dt,
-                    d.dp_m,
-                    d.lines[0],
-                    loaded
-                        .sigma_m
-                        .zip(unloaded.sigma_m)
-                        .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
-                    hint,
-                )
-            }
-            None => {
-                let o = absolute[k - deflections];
-                let dt = o.t_s.map(|t| t - t_mean);
-                row(
-                    RowKind::Absolute,
-                    o.config,
-                    o.marker,
-                    0.0,
-                    &o.q,
-                    dt,
-                    o.p_m,
-                    o.line,
-                    o.sigma_m,
-                    hint,
-                )
-            }
+        let absolute_row = |o: &crate::io::Observation, hint: &mut usize| {
+            row(
+                RowKind::Absolute,
+                o.config,
+                o.marker,
+                0.0,
+                &o.q,
+                o.t_s.map(|t| t - t_mean),
+                o.p_m,
+                o.line,
+                o.sigma_m,
+                hint,
+            )
         };
-        // Runs of rows on worker threads, joined in order (one thread built
-        // a million rows in 0.3 s).
-        let total = deflections + absolute.len();
-        let threads = crate::calibrate::parallel::for_rows(total);
-        let per = total.div_ceil(threads).max(1);
-        let mut runs = crate::calibrate::parallel::map(total.div_ceil(per), threads, |t| {
+        // The deflections first: runs of rows on worker threads, joined in
+        // order (one thread built a million rows in 0.3 s).
+        let deflection_row = |k: usize, hint: &mut usize| {
+            let d = &data.deflections[k];
+            let (loaded, unloaded) = (&data.observations[d.rows[0]], &data.observations[d.rows[1]]);
+            let dt = loaded.t_s.zip(unloaded.t_s).map(|(a, b)| a - b);
+            row(
+                RowKind::Deflection,
+                d.config,
+                d.marker,
+                d.load_kg,
+                &d.q,
+                dt,
+                d.dp_m,
+                d.lines[0],
+                loaded
+                    .sigma_m
+                    .zip(unloaded.sigma_m)
+                    .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
+                hint,
+            )
+        };
+        let unloaded = if use_absolute {
+            data.unloaded().count()
+        } else {
+            0
+        };
+        let total = deflections + unloaded;
+        let mut rows = Vec::with_capacity(total);
+        let threads = crate::calibrate::parallel::for_rows(deflections);
+        let per = deflections.div_ceil(threads).max(1);
+        for run in crate::calibrate::parallel::map(deflections.div_ceil(per), threads, |t| {
             let mut hint = 0;
-            (t * per..((t + 1) * per).min(total))
-                .map(|k| make(k, &mut hint))
+            (t * per..((t + 1) * per).min(deflections))
+                .map(|k| deflection_row(k, &mut hint))
                 .collect::<Vec<Row>>()
-        })
-        .into_iter();
-        let mut rows = runs.next().unwrap_or_default();
-        rows.reserve_exact(total - rows.len());
-        for run in runs {
+        }) {
             rows.extend(run);
         }
-        drop(absolute);
+        // Then the absolute positions, from the last observation back, a
+        // chunk at a time (its runs on worker threads), each chunk's rows
+        // appended in reverse and the whole reversed at the end; with the
+        // observations taken, each chunk is freed once its rows are made.
+        let threads = crate::calibrate::parallel::for_rows(unloaded);
+        let mut end = if use_absolute {
+            data.observations.len()
+        } else {
+            0
+        };
+        while end > 0 {
+            let start = end.saturating_sub(CHUNK);
+            let chunk = &source.get().observations[start..end];
+            let per = chunk.len().div_ceil(threads).max(1);
+            let runs = crate::calibrate::parallel::map(chunk.len().div_ceil(per), threads, |t| {
+                let mut hint = 0;
+                chunk[t * per..((t + 1) * per).min(chunk.len())]
+                    .iter()
+                    .filter(|o| o.load_kg == 0.0)
+                    .map(|o| absolute_row(o, &mut hint))
+                    .collect::<Vec<Row>>()
+            });
+            for run in runs.into_iter().rev() {
+                rows.extend(run.into_iter().rev());
+            }
+            source.release_from(start);
+            end = start;
+        }
+        rows[deflections..].reverse();
+        let data = source.get();
         if rows.is_empty() {
             return Err(CalibrationError::Data(format!(
                 "{}: no rows to calibrate from",
@@ -218,6 +274,49 @@ impl Rows {
             gravity_unit: Vector3::zeros(),
             at: None,
         })
+    }
+}
+
+/// Observations a chunk of absolute rows is made from
+/// ([`Rows::from_measurements`]): ~6 MB of them, ~7 MB of rows.
+const CHUNK: usize = 1 << 15;
+
+/// The measurements rows are built from: borrowed, or taken (and freed as
+/// the rows are made).
+enum Source<'a> {
+    /// [`Rows::new`]'s.
+    Borrowed(&'a Measurements),
+    /// [`Rows::from_measurements`]'s.
+    Owned(Measurements),
+}
+
+impl Source<'_> {
+    /// The measurements (those left, when taken).
+    fn get(&self) -> &Measurements {
+        match self {
+            Source::Borrowed(m) => m,
+            Source::Owned(m) => m,
+        }
+    }
+
+    /// Taken measurements without their observations from `start` on
+    /// (their memory given back); nothing when borrowed.
+    fn release_from(&mut self, start: usize) {
+        if let Source::Owned(m) = self {
+            m.observations.truncate(start);
+            m.observations.shrink_to_fit();
+        }
+    }
+
+    /// Taken measurements without their joint cells as written (each
+    /// ~1 MiB batch of text freed with its last row); nothing when
+    /// borrowed.
+    fn forget_cells(&mut self) {
+        if let Source::Owned(m) = self {
+            for o in &mut m.observations {
+                o.q_written = crate::io::WrittenCells::default();
+            }
+        }
     }
 }
 
