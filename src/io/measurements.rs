@@ -273,7 +273,14 @@ pub struct Measurements {
 impl Measurements {
     /// The unloaded rows: absolute positions (geometric data).
     pub fn unloaded(&self) -> impl Iterator<Item = &Observation> {
-        self.observations.iter().filter(|o| o.load_kg == 0.0)
+        self.observations.iter().filter(|o| o.is_unloaded())
+    }
+}
+
+impl Observation {
+    /// Whether the row is unloaded (`load_kg` 0): an absolute position.
+    pub fn is_unloaded(&self) -> bool {
+        self.load_kg == 0.0
     }
 }
 

@@ -238,7 +238,7 @@ impl Rows {
                 let mut hint = 0;
                 chunk[t * per..((t + 1) * per).min(chunk.len())]
                     .iter()
-                    .filter(|o| o.load_kg == 0.0)
+                    .filter(|o| o.is_unloaded())
                     .map(|o| absolute_row(o, &mut hint))
                     .collect::<Vec<Row>>()
             });
@@ -308,9 +308,8 @@ impl Source<'_> {
         }
     }
 
-    /// Taken measurements without their joint cells as written (each
-    /// ~1 MiB batch of text freed with its last row); nothing when
-    /// borrowed.
+    /// Taken measurements without their joint cells as written (their
+    /// text freed with the last); nothing when borrowed.
     fn forget_cells(&mut self) {
         if let Source::Owned(m) = self {
             for o in &mut m.observations {
