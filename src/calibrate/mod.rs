@@ -160,10 +160,7 @@ fn prepare(
     let mut warnings: Vec<String> = data.warnings.iter().map(ToString::to_string).collect();
     let units = plausibility::check_units(job, &data, policy);
     let absolute = declared::needs_absolute(job);
-    let rows = match data {
-        std::borrow::Cow::Borrowed(d) => Rows::new(job, d, absolute, &mut names, policy),
-        std::borrow::Cow::Owned(d) => Rows::from_measurements(job, d, absolute, &mut names, policy),
-    }?;
+    let rows = Rows::build(job, data, absolute, &mut names, policy)?;
     warnings.extend(units?);
     Ok((rows, names, warnings))
 }

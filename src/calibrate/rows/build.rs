@@ -2,6 +2,8 @@
 //! per measured point, grouped by configuration, with the joints' angle
 //! bins; [`Rows::relinearise`] then evaluates them.
 
+use std::borrow::Cow;
+
 use nalgebra::Vector3;
 
 use super::{DataKinds, Row, RowExtra, RowFrames, RowKind, Rows, Values};
@@ -26,7 +28,7 @@ impl Rows {
         names: &mut Names,
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
-        Self::build(job, Source::Borrowed(data), absolute, names, policy)
+        Self::build(job, Cow::Borrowed(data), absolute, names, policy)
     }
 
     /// [`Rows::new`], taking the measurements: the absolute rows are built
@@ -46,18 +48,19 @@ impl Rows {
         names: &mut Names,
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
-        Self::build(job, Source::Owned(data), absolute, names, policy)
+        Self::build(job, Cow::Owned(data), absolute, names, policy)
     }
 
-    /// [`Rows::new`] and [`Rows::from_measurements`].
-    fn build(
+    /// [`Rows::new`] (`data` borrowed) and [`Rows::from_measurements`]
+    /// (taken).
+    pub(crate) fn build(
         job: &Job,
-        mut source: Source<'_>,
+        mut source: Cow<'_, Measurements>,
         absolute: bool,
         names: &mut Names,
         policy: &Policy,
     ) -> Result<Self, CalibrationError> {
-        let data = source.get();
+        let data = &*source;
         let setup = &job.setup;
         let dof = job.robot.dof();
         let use_absolute = absolute || data.deflections.is_empty();
@@ -132,8 +135,8 @@ impl Rows {
             bins.push(jb);
         }
         // The cells as written were read for the bins' names only.
-        source.forget_cells();
-        let data = source.get();
+        forget_cells(&mut source);
+        let data = &*source;
 
         let index_of = |id: u32| names.marker_index(id).unwrap_or(0);
         let deflections = data.deflections.len();
@@ -232,7 +235,7 @@ impl Rows {
         };
         while end > 0 {
             let start = end.saturating_sub(CHUNK);
-            let chunk = &source.get().observations[start..end];
+            let chunk = &source.observations[start..end];
             let per = chunk.len().div_ceil(threads).max(1);
             let runs = crate::calibrate::parallel::map(chunk.len().div_ceil(per), threads, |t| {
                 let mut hint = 0;
@@ -245,11 +248,11 @@ impl Rows {
             for run in runs.into_iter().rev() {
                 rows.extend(run.into_iter().rev());
             }
-            source.release_from(start);
+            release_from(&mut source, start);
             end = start;
         }
         rows[deflections..].reverse();
-        let data = source.get();
+        let data = &*source;
         if rows.is_empty() {
             return Err(CalibrationError::Data(format!(
                 "{}: no rows to calibrate from",
@@ -281,40 +284,21 @@ impl Rows {
 /// ([`Rows::from_measurements`]): ~6 MB of them, ~7 MB of rows.
 const CHUNK: usize = 1 << 15;
 
-/// The measurements rows are built from: borrowed, or taken (and freed as
-/// the rows are made).
-enum Source<'a> {
-    /// [`Rows::new`]'s.
-    Borrowed(&'a Measurements),
-    /// [`Rows::from_measurements`]'s.
-    Owned(Measurements),
+/// Taken measurements without their observations from `start` on (their
+/// memory given back); nothing when borrowed.
+fn release_from(data: &mut Cow<'_, Measurements>, start: usize) {
+    if let Cow::Owned(m) = data {
+        m.observations.truncate(start);
+        m.observations.shrink_to_fit();
+    }
 }
 
-impl Source<'_> {
-    /// The measurements (those left, when taken).
-    fn get(&self) -> &Measurements {
-        match self {
-            Source::Borrowed(m) => m,
-            Source::Owned(m) => m,
-        }
-    }
-
-    /// Taken measurements without their observations from `start` on
-    /// (their memory given back); nothing when borrowed.
-    fn release_from(&mut self, start: usize) {
-        if let Source::Owned(m) = self {
-            m.observations.truncate(start);
-            m.observations.shrink_to_fit();
-        }
-    }
-
-    /// Taken measurements without their joint cells as written (their
-    /// text freed with the last); nothing when borrowed.
-    fn forget_cells(&mut self) {
-        if let Source::Owned(m) = self {
-            for o in &mut m.observations {
-                o.q_written = crate::io::WrittenCells::default();
-            }
+/// Taken measurements without their joint cells as written (their text
+/// freed with the last); nothing when borrowed.
+fn forget_cells(data: &mut Cow<'_, Measurements>) {
+    if let Cow::Owned(m) = data {
+        for o in &mut m.observations {
+            o.q_written = crate::io::WrittenCells::default();
         }
     }
 }
