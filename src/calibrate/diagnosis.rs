@@ -536,7 +536,7 @@ pub fn run(
         .iter()
         .zip(&residuals)
         .map(|(r, res)| RowError {
-            config: r.config,
+            config: e.rows.configs.get(r.group).copied().unwrap_or_default(),
             marker: e.names.marker_id(r.marker),
             deflection: r.kind == RowKind::Deflection,
             nominal_um: Vector3::zeros(),

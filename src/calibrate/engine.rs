@@ -209,7 +209,10 @@ impl Engine<'_> {
         if !model.iter().any(|p| matches!(p, Param::Base { .. })) || absolute.len() < 3 {
             return Ok(());
         }
-        let predicted: Vec<Vector3<f64>> = absolute.iter().map(|r| r.p).collect();
+        let predicted = self
+            .rows
+            .points_m(&absolute)
+            .map_err(|e| CalibrationError::Core("forward kinematics", e))?;
         let measured: Vec<Vector3<f64>> = absolute.iter().map(|r| r.measured).collect();
         self.geometry.register(&predicted, &measured);
         self.relinearise_for(model)
@@ -536,7 +539,7 @@ impl Engine<'_> {
                 f.params.len(),
                 f.fit.covariance.iter().copied(),
             ),
-            heaviest_payload_kg: self.rows.rows.iter().fold(0.0, |m, r| r.load_kg.max(m)),
+            heaviest_payload_kg: self.rows.rows.iter().fold(0.0, |m, r| r.load_kg().max(m)),
         }
     }
 }

@@ -109,7 +109,7 @@ pub fn check_torques(
     if unloaded.is_empty() {
         return Ok(());
     }
-    let loaded = rows.rows.iter().filter(|r| r.load_kg > 0.0).count();
+    let loaded = rows.rows.iter().filter(|r| r.load_kg() > 0.0).count();
     let why = if loaded > 0 {
         format!(
             "{loaded} loaded rows, but their load acts through the joint's axis: \

@@ -173,7 +173,7 @@ fn variables(rows: &Rows, names: &Names) -> Vec<Variable> {
     if rows.kinds.deflections {
         out.push(var(
             "load_kg".into(),
-            r.iter().map(|r| r.load_kg).collect(),
+            r.iter().map(|r| r.load_kg()).collect(),
             false,
         ));
     }
@@ -323,9 +323,9 @@ pub fn traced_variable(rows: &Rows, names: &Names, c: &Candidate) -> (String, Ve
                 r.iter().map(|r| r.dt().unwrap_or(0.0)).collect(),
             ),
             super::effects::Effect::LoadCom => {
-                ("load_kg".into(), r.iter().map(|r| r.load_kg).collect())
+                ("load_kg".into(), r.iter().map(|r| r.load_kg()).collect())
             }
-            _ => ("config".into(), r.iter().map(|r| r.config as f64).collect()),
+            _ => ("config".into(), configs_per_row(rows)),
         },
     }
 }
@@ -337,5 +337,13 @@ pub fn variable_values(rows: &Rows, names: &Names, name: &str) -> Vec<f64> {
         .into_iter()
         .find(|v| v.name == name)
         .map(|v| v.values)
-        .unwrap_or_else(|| rows.rows.iter().map(|r| r.config as f64).collect())
+        .unwrap_or_else(|| configs_per_row(rows))
+}
+
+/// Each row's configuration id (as in the CSV), as a value.
+fn configs_per_row(rows: &Rows) -> Vec<f64> {
+    rows.rows
+        .iter()
+        .map(|r| rows.configs.get(r.group).map_or(f64::NAN, |&c| c as f64))
+        .collect()
 }

@@ -54,18 +54,24 @@ pub enum RowKind {
 }
 
 /// One row (three equations) of the identification problem.
+///
+/// 144 B (a 7-joint arm's joint values inline): what every row has. What
+/// only some have is boxed ([`RowExtra`]), and what follows from the rest
+/// is computed where read: the configuration id (`Rows::configs[group]`),
+/// the predicted point ([`Rows::point_m`], from the frames). At 10⁶ rows
+/// the row was 224 B.
 #[derive(Debug, Clone)]
 pub struct Row {
     /// Deflection or absolute position.
     pub kind: RowKind,
-    /// Index of the configuration (the group of the noise estimate).
-    pub group: usize,
-    /// `config` as in the CSV.
-    pub config: i64,
     /// Marker index (into [`Names::markers`]).
     pub marker: u8,
-    /// Load \[kg\] (0 for absolute rows).
-    pub load_kg: f64,
+    /// Index into [`Rows::chains`] of the chain the row's frames are on
+    /// (see [`Rows::frames`]; a `u32`: 8 B a row fewer).
+    chain: u32,
+    /// Index of the configuration (the group of the noise estimate); its
+    /// `config` as in the CSV is `Rows::configs[group]`.
+    pub group: usize,
     /// Joint values \[rad or m\] (inline up to [`crate::io::INLINE_JOINTS`]).
     pub q: crate::io::JointValues,
     /// What was measured \[m\]: the position (absolute rows, measurement
@@ -73,21 +79,9 @@ pub struct Row {
     pub measured: Vector3<f64>,
     /// CSV line (of the loaded row for deflections).
     pub line: usize,
-    /// Where the frames of the current model in the measurement frame are,
-    /// at the pose the row's point is at: `q`, or with the exact deflection
-    /// model the equilibrium (the loaded one for a deflection); see
-    /// [`Rows::frames`].
-    pub frames: RowFrames,
-    /// Predicted marker position \[m, measurement frame\] at `frames`.
-    pub p: Vector3<f64>,
-    /// Joint torques behind the row at `frames`: the load's (deflection
-    /// rows) or the links' own weight (absolute rows) \[N·m or N\]; none
-    /// when every one is `+0.0` (no load and no link mass: 64 B a row fewer,
-    /// 10⁶ allocations fewer at 10⁶ rows). Read through [`Row::tau`].
-    tau: Values,
     /// What only some rows have ([`RowExtra`]), boxed: absent (8 B) for an
-    /// absolute row without time, instrument σ or the exact model's
-    /// columns, where it was 152 B a row inline (152 MB at 10⁶ rows).
+    /// absolute row without time, instrument σ, weight of its own or the
+    /// exact model's equilibrium (at 10⁶ such rows, ~200 MB fewer).
     pub extra: Option<Box<RowExtra>>,
     /// The row's left-hand side \[m\], linearised at the current model
     /// ([`super::linearisation`]): measured minus predicted plus the
@@ -101,6 +95,8 @@ pub struct Row {
 /// [`Row`]'s accessor of the same name (none, zero or empty without it).
 #[derive(Debug, Clone, Default)]
 pub struct RowExtra {
+    /// Load \[kg\] (deflection rows; 0 for absolute rows).
+    pub load_kg: f64,
     /// Time \[s\] relative to the data's mean time (absolute rows) or between
     /// the unloaded and the loaded measurement (deflection rows).
     pub dt: Option<f64>,
@@ -108,16 +104,26 @@ pub struct RowExtra {
     /// contract 7.2): the point's, or for a deflection the root sum of
     /// squares of its two points'.
     pub sigma: Option<Vector3<f64>>,
-    /// The load's wrench at `frames` (deflection rows).
+    /// The load's wrench at the row's frames (deflection rows).
     pub load: Option<Wrench<f64>>,
+    /// Joint torques behind the row at its frames: the load's (deflection
+    /// rows) or the links' own weight (absolute rows) \[N·m or N\]; none
+    /// when every one is `+0.0` (no load and no link mass). Read through
+    /// [`Row::tau`].
+    tau: Values,
+    /// The joint values \[rad or m\] the row's frames are at, with the
+    /// exact deflection model: its equilibrium (the loaded one for a
+    /// deflection); none for the row's own `q`. Read through
+    /// [`Row::theta`].
+    theta: Values,
     /// With the exact model, the column of each joint's yield at the
     /// equilibrium ([`crate::robot::Equilibrium::twist_column`]); empty for
-    /// the first-order columns at `frames`.
+    /// the first-order columns at the row's frames.
     pub twists: Vec<Vector3<f64>>,
     /// Per joint, the components of the gravity direction on its basis at
     /// the commanded pose `q` ([`Linearisation::gravity_at`]): an absolute
-    /// row's, when the exact model's law has a gravity compliance (`frames`
-    /// are then at the equilibrium, not at `q`); else empty.
+    /// row's, when the exact model's law has a gravity compliance (its
+    /// frames are then at the equilibrium, not at `q`); else empty.
     pub gravity_q: Vec<[f64; 2]>,
 }
 
@@ -125,30 +131,12 @@ pub struct RowExtra {
 /// first error from `then`.
 type Run<'a, S> = (&'a mut [Row], Option<S>, Result<(), Error>);
 
-/// Where a row's [`Frames`] are: the joint values they are at (the
-/// commanded `q`, or with the exact deflection model the equilibrium) and
-/// the chain of the row's marker, placed at the geometry of the last
-/// relinearisation ([`Rows::chains`]). A `Frames` holds room for `J`
-/// joints (~2.5 KB) and its joints alone are ~150 B each: kept per row they
-/// were most of the memory of a calibration with many rows, and copying
-/// them a good part of its time. [`Rows::frames`] recomputes them, bit for
-/// bit (the equilibrium's frames are the forward kinematics at its `θ`).
-#[derive(Debug, Clone, Default)]
-pub struct RowFrames {
-    /// Index into [`Rows::chains`] (a `u32`: 8 B a row fewer).
-    chain: u32,
-    /// `θ` \[rad or m\]; none for the row's own `q`.
-    theta: Values,
-}
-
-impl RowFrames {
-    /// The joint values the frames are at (the row's `q` when empty).
-    pub fn theta(&self) -> &[f64] {
-        self.theta.as_slice()
-    }
-}
-
 impl Row {
+    /// [`RowExtra::load_kg`] (0 without it).
+    pub fn load_kg(&self) -> f64 {
+        self.extra.as_ref().map_or(0.0, |e| e.load_kg)
+    }
+
     /// [`RowExtra::dt`].
     pub fn dt(&self) -> Option<f64> {
         self.extra.as_ref().and_then(|e| e.dt)
@@ -174,13 +162,19 @@ impl Row {
         self.extra.as_ref().map_or(&[], |e| &e.gravity_q)
     }
 
+    /// The joint values the row's frames are at: its equilibrium's `θ`
+    /// (the exact deflection model), or empty for the row's own `q`
+    /// ([`Rows::frames`]).
+    pub fn theta(&self) -> &[f64] {
+        self.extra.as_ref().map_or(&[], |e| e.theta.as_slice())
+    }
+
     /// The joint torques behind the row \[N·m or N\], one per joint (zeros
     /// when none was stored).
     pub fn tau(&self) -> &[f64] {
-        if self.tau.as_slice().is_empty() {
-            &ZERO_TORQUES[..self.q.len().min(J)]
-        } else {
-            self.tau.as_slice()
+        match self.extra.as_ref().map(|e| e.tau.as_slice()) {
+            Some(t) if !t.is_empty() => t,
+            _ => &ZERO_TORQUES[..self.q.len().min(J)],
         }
     }
 
@@ -188,9 +182,22 @@ impl Row {
     /// [`Row::tau`] then gives the same bits).
     fn set_tau(&mut self, tau: &[f64]) {
         if tau.iter().all(|t| t.to_bits() == 0) {
-            self.tau.clear();
+            if let Some(e) = &mut self.extra {
+                e.tau.clear();
+            }
         } else {
-            self.tau.set(tau);
+            self.extra_mut().tau.set(tau);
+        }
+    }
+
+    /// Stores the frames' joint values `theta` (none: the row's own `q`).
+    fn set_theta(&mut self, theta: &[f64]) {
+        if theta.is_empty() {
+            if let Some(e) = &mut self.extra {
+                e.theta.clear();
+            }
+        } else {
+            self.extra_mut().theta.set(theta);
         }
     }
 
@@ -209,13 +216,16 @@ impl Row {
     }
 
     /// The row as a [`Sample`] for the columns at `frames` (the row's own,
-    /// [`Rows::frames`]), with the effective compliance of each joint
+    /// [`Rows::frames`]) and its predicted point there `point_m` \[m,
+    /// measurement frame\] ([`Rows::point_m`]), with the effective
+    /// compliance of each joint
     /// (may be empty) and the unit direction of gravity \[measurement
     /// frame\] ([`Rows::gravity_unit`]; an absolute row's only: for a
     /// deflection the robot's weight is the same loaded and unloaded).
     pub fn sample<'a>(
         &'a self,
         frames: &'a Frames<f64, J>,
+        point_m: Vector3<f64>,
         compliance: &'a [f64],
         gravity_unit: Vector3<f64>,
     ) -> Sample<'a, f64, J> {
@@ -224,7 +234,7 @@ impl Row {
             frames,
             q: &self.q,
             twists: self.twists(),
-            point_m: self.p,
+            point_m,
             marker: self.marker,
             tau: self.tau(),
             load: self.load(),
@@ -265,6 +275,10 @@ pub struct Rows {
     /// The chains of the markers' links placed at the geometry of the last
     /// [`Rows::relinearise`] ([`Geometry::placed_chains`]); empty before.
     pub chains: Vec<Chain<f64, J>>,
+    /// The markers' positions on their links \[m\] at the geometry of the
+    /// last [`Rows::relinearise`] ([`Geometry::markers`]; empty before):
+    /// with a row's frames, its predicted point ([`Rows::point_m`]).
+    pub markers: Vec<Vector3<f64>>,
     /// The unit direction of gravity \[measurement frame\] at the geometry
     /// of the last [`Rows::relinearise`] (zero before, and without
     /// gravity).
@@ -330,6 +344,7 @@ impl Rows {
     ) -> Result<Result<(), Error>, CalibrationError> {
         self.at = None;
         self.chains = geometry.placed_chains();
+        self.markers.clone_from(&geometry.markers);
         let chains = &self.chains;
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
@@ -344,32 +359,24 @@ impl Rows {
         // serial loop stops at that row: their starting points are put back,
         // so that the retry is the same on any number of threads. (Only the
         // exact model starts from them.)
-        let before: Option<Vec<Vec<f64>>> =
-            (threads > 1 && lin.model == super::DeflectionModel::Exact).then(|| {
-                self.rows
-                    .iter()
-                    .map(|r| r.frames.theta().to_vec())
-                    .collect()
-            });
+        let before: Option<Vec<Vec<f64>>> = (threads > 1
+            && lin.model == super::DeflectionModel::Exact)
+            .then(|| self.rows.iter().map(|r| r.theta().to_vec()).collect());
         // `rigid`: the run's frames of a rigid row, filled in place; `sink`
         // gets the row and its frames.
         let one = |row: &mut Row,
                    rigid: &mut Frames<f64, J>,
                    sink: &mut dyn FnMut(&Row, &Frames<f64, J>)|
          -> Result<(), CalibrationError> {
-            let m = geometry
-                .markers
-                .get(usize::from(row.marker))
-                .copied()
-                .unwrap_or_default();
+            let m = marker_m(&geometry.markers, row);
             let absolute = row.kind == RowKind::Absolute;
             // The chain of the row's marker's link (one end but for a tree).
             let end = geometry.end_of(row.marker).min(chains.len() - 1);
             let chain = &chains[end];
-            row.frames.chain = u32::try_from(end).unwrap_or(u32::MAX);
+            row.chain = u32::try_from(end).unwrap_or(u32::MAX);
             let loading = Loading {
                 load: (!absolute).then_some(PointLoad {
-                    mass_kg: row.load_kg,
+                    mass_kg: row.load_kg(),
                     com_m: com,
                     gravity_mps2: gravity,
                 }),
@@ -415,8 +422,7 @@ impl Rows {
                         .map_err(core("torques"))?;
                     row.set_tau(tau);
                     row.set_load(loading.load.map(|l| l.wrench(rigid)));
-                    row.frames.theta.clear();
-                    row.p = p_rigid;
+                    row.set_theta(&[]);
                     if let Some(e) = &mut row.extra {
                         e.twists.clear();
                     }
@@ -440,8 +446,8 @@ impl Rows {
                     };
                     // From the last equilibrium of this row when there is
                     // one (the law moves little between relinearisations).
-                    let guess: Vec<f64> = if row.frames.theta().len() == row.q.len() {
-                        row.frames.theta().to_vec()
+                    let guess: Vec<f64> = if row.theta().len() == row.q.len() {
+                        row.theta().to_vec()
                     } else {
                         row.q.to_vec()
                     };
@@ -486,8 +492,7 @@ impl Rows {
                     } else {
                         row.measured - (p - p_rigid) + linear
                     };
-                    row.frames.theta.set(eq.frames.q());
-                    row.p = p;
+                    row.set_theta(eq.frames.q());
                     sink(row, &eq.frames);
                 }
             }
@@ -518,7 +523,7 @@ impl Rows {
         if let Err((at, e)) = done {
             if let Some(before) = before {
                 for (row, theta) in self.rows.iter_mut().zip(before).skip(at + 1) {
-                    row.frames.theta.set(&theta);
+                    row.set_theta(&theta);
                 }
             }
             return Err(e);
@@ -544,26 +549,55 @@ impl Rows {
     /// # Errors
     /// As [`Rows::frames`].
     pub fn frames_into(&self, row: &Row, out: &mut Frames<f64, J>) -> Result<(), Error> {
-        let chain = usize::try_from(row.frames.chain).ok();
+        let chain = usize::try_from(row.chain).ok();
         let chain = chain
             .and_then(|c| self.chains.get(c))
             .ok_or(Error::Mismatch {
                 what: "rows not evaluated at a geometry",
             })?;
-        if row.frames.theta().is_empty() {
+        if row.theta().is_empty() {
             chain.frames_into(&row.q, out)
         } else {
-            chain.frames_into(row.frames.theta(), out)
+            chain.frames_into(row.theta(), out)
         }
+    }
+
+    /// The predicted position of `row`'s marker \[m, measurement frame\]
+    /// at its `frames` ([`Rows::frames`]): the current model's, as
+    /// [`Rows::relinearise`] computed it (bit for bit).
+    pub fn point_m(&self, row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
+        frames.point_m(&marker_m(&self.markers, row))
+    }
+
+    /// [`Rows::point_m`] of each of `rows` (some of these rows), at their
+    /// frames (recomputed: on worker threads with many rows).
+    ///
+    /// # Errors
+    /// As [`Rows::frames`].
+    pub fn points_m(&self, rows: &[&Row]) -> Result<Vec<Vector3<f64>>, Error> {
+        let threads = super::parallel::for_rows(rows.len());
+        let per = rows.len().div_ceil(threads).max(1);
+        let runs = super::parallel::map(rows.len().div_ceil(per), threads, |t| {
+            let mut frames = Frames::empty();
+            rows[t * per..((t + 1) * per).min(rows.len())]
+                .iter()
+                .map(|row| {
+                    self.frames_into(row, &mut frames)?;
+                    Ok(self.point_m(row, &frames))
+                })
+                .collect::<Result<Vec<_>, Error>>()
+        });
+        let mut points = Vec::with_capacity(rows.len());
+        for run in runs {
+            points.extend(run?);
+        }
+        Ok(points)
     }
 
     /// Where each row's next equilibrium starts: the `θ` of its last one
     /// (empty where it has none), for [`Rows::start_from`].
     pub fn start_points(&self) -> Vec<Vec<f64>> {
-        self.rows
-            .iter()
-            .map(|r| r.frames.theta().to_vec())
-            .collect()
+        self.rows.iter().map(|r| r.theta().to_vec()).collect()
     }
 
     /// Makes `start` ([`Rows::start_points`] of these rows) the starting
@@ -573,7 +607,7 @@ impl Rows {
     /// frames are the forward kinematics at its `θ`.
     pub fn start_from(&mut self, start: &[Vec<f64>]) {
         for (row, theta) in self.rows.iter_mut().zip(start) {
-            row.frames.theta.set(theta);
+            row.set_theta(theta);
         }
     }
 
@@ -585,6 +619,15 @@ impl Rows {
         }
         n
     }
+}
+
+/// `row`'s marker's position on its link \[m\] among `markers` (zero
+/// for one not there).
+pub(crate) fn marker_m(markers: &[Vector3<f64>], row: &Row) -> Vector3<f64> {
+    markers
+        .get(usize::from(row.marker))
+        .copied()
+        .unwrap_or_default()
 }
 
 /// Whether a joint is revolute in `names`.

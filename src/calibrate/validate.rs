@@ -72,7 +72,7 @@ pub fn validate(
             RowKind::Absolute => robot.predict_marker(m, &row.q, None),
             RowKind::Deflection => {
                 let payload = Payload {
-                    mass_kg: row.load_kg,
+                    mass_kg: row.load_kg(),
                     com_m: payload_com,
                 };
                 robot.predict_marker_deflection(m, &row.q, &payload)

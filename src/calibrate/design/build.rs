@@ -65,6 +65,9 @@ pub(super) struct Columns<'a> {
     pub(super) lin: &'a Linearisation,
     /// Whether the rows mix both kinds ([`super::super::rows::noise_scale`]).
     pub(super) mixed: bool,
+    /// The markers' positions on their links \[m\] (a row's predicted
+    /// point is its frames' at its marker: [`Rows::point_m`]).
+    pub(super) markers: &'a [Vector3<f64>],
 }
 
 impl<'a> Columns<'a> {
@@ -73,6 +76,7 @@ impl<'a> Columns<'a> {
         lin: &'a Linearisation,
         names: &super::super::names::Names,
         all: &Rows,
+        markers: &'a [Vector3<f64>],
     ) -> Self {
         Self {
             params,
@@ -80,6 +84,7 @@ impl<'a> Columns<'a> {
             linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
             lin,
             mixed: all.mixed(),
+            markers,
         }
     }
 
@@ -115,7 +120,8 @@ impl<'a> Columns<'a> {
         } else {
             Vec::new()
         };
-        let sample = row.sample(frames, &compliance, gravity_unit);
+        let point = frames.point_m(&super::super::rows::marker_m(self.markers, row));
+        let sample = row.sample(frames, point, &compliance, gravity_unit);
         let scale = super::super::rows::noise_scale(self.mixed, row.kind);
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
             let mut col = p.column_si(&sample)? * si;
@@ -231,7 +237,7 @@ impl Design {
     ) -> Result<Self, Error> {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
-        let columns = Columns::new(params, lin, names, all);
+        let columns = Columns::new(params, lin, names, all, &all.markers);
         let per = super::super::rows::run_length(m, threads);
         let Storage {
             b: mut data,
@@ -322,7 +328,7 @@ impl Design {
             y,
             group,
         } = old.unwrap_or_default();
-        let columns = Columns::new(params, lin, names, all);
+        let columns = Columns::new(params, lin, names, all, &geometry.markers);
         // With runs that start at the view's blocks, each block's
         // unit-weight sums from its columns as they are written.
         let fuse = unit_sums::aligned(m, per);

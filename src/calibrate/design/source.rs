@@ -187,6 +187,7 @@ impl Design {
             linearised: r.linearised,
             lin: &r.lin,
             mixed: r.mixed,
+            markers: &all.markers,
         };
         let mut frames = crate::robot::Frames::empty();
         for (k, i) in rows.enumerate() {

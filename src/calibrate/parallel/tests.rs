@@ -119,7 +119,10 @@ fn rows_and_design_do_not_depend_on_the_threads() {
         let state = |rows: &Rows| -> Vec<_> {
             rows.rows
                 .iter()
-                .map(|r| (r.y, r.p, r.tau().to_vec(), r.twists().to_vec()))
+                .map(|r| {
+                    let p = rows.point_m(r, &rows.frames(r).expect("frames"));
+                    (r.y, p, r.tau().to_vec(), r.twists().to_vec())
+                })
                 .collect()
         };
         let r = state(&rows);
@@ -228,7 +231,10 @@ fn rows_and_design_do_not_depend_on_the_threads() {
             let state: Vec<_> = r
                 .rows
                 .iter()
-                .map(|r| (r.y, r.p, r.tau().to_vec(), r.frames.theta().to_vec()))
+                .map(|row| {
+                    let p = r.point_m(row, &r.frames(row).expect("frames"));
+                    (row.y, p, row.tau().to_vec(), row.theta().to_vec())
+                })
                 .collect();
             (e, state)
         };
@@ -282,7 +288,7 @@ fn rows_built_on_threads_are_the_serial_ones() {
                 (
                     r.kind,
                     r.group,
-                    r.config,
+                    rows.configs[r.group],
                     r.marker,
                     r.q.clone(),
                     r.measured,

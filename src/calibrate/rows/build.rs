@@ -6,7 +6,7 @@ use std::borrow::Cow;
 
 use nalgebra::Vector3;
 
-use super::{DataKinds, Row, RowExtra, RowFrames, RowKind, Rows, Values};
+use super::{DataKinds, Row, RowExtra, RowKind, Rows};
 use crate::calibrate::names::Names;
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::io::{Job, Measurements};
@@ -143,7 +143,7 @@ impl Rows {
         let row = |kind,
                    config,
                    marker,
-                   load_kg,
+                   load_kg: f64,
                    q: &[f64],
                    dt: Option<f64>,
                    measured: [f64; 3],
@@ -151,18 +151,15 @@ impl Rows {
                    sigma: Option<[f64; 3]>,
                    hint: &mut usize| Row {
             kind,
-            group: group_of(&configs, config, hint),
-            config,
             marker: index_of(marker),
-            load_kg,
+            chain: 0,
+            group: group_of(&configs, config, hint),
             q: q.into(),
             measured: Vector3::from(measured),
             line,
-            frames: RowFrames::default(),
-            p: Vector3::zeros(),
-            tau: Values::default(),
-            extra: (dt.is_some() || sigma.is_some()).then(|| {
+            extra: (load_kg != 0.0 || dt.is_some() || sigma.is_some()).then(|| {
                 Box::new(RowExtra {
+                    load_kg,
                     dt,
                     sigma: sigma.map(Vector3::from),
                     ..RowExtra::default()
@@ -274,6 +271,7 @@ impl Rows {
             com,
             file: data.file.display().to_string(),
             chains: Vec::new(),
+            markers: Vec::new(),
             gravity_unit: Vector3::zeros(),
             at: None,
         })

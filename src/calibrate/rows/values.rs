@@ -1,10 +1,9 @@
 //! [`Values`]: `f64` values a row holds only sometimes.
 
 /// Values a row holds only sometimes (its joint torques, its
-/// equilibrium's `θ`): none, or a slice of their own, written over in place
-/// when the number is the same. 16 B where the `Vec` they were in was 24 B
-/// even when empty: with [`super::RowFrames`]'s chain index a `u32`, a row
-/// is 224 B, not 240 (16 MB fewer at 10⁶ rows).
+/// equilibrium's `θ`, both in [`super::RowExtra`]): none, or a slice of
+/// their own, written over in place when the number is the same. 16 B where
+/// the `Vec` they were in was 24 B even when empty.
 #[derive(Debug, Clone, Default)]
 pub(super) struct Values(Option<Box<[f64]>>);
 
@@ -48,5 +47,14 @@ mod tests {
         v.set(&[6.0]);
         v.clear();
         assert!(v.0.is_none() && v.as_slice().is_empty());
+    }
+}
+
+#[cfg(test)]
+mod size {
+    /// What a row costs at 10⁶ rows (the doc of [`super::super::Row`]).
+    #[test]
+    fn a_row_is_144_bytes() {
+        assert_eq!(core::mem::size_of::<super::super::Row>(), 144);
     }
 }
