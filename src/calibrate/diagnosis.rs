@@ -6,7 +6,7 @@ use super::effects::{candidates, Candidate};
 use super::engine::{Engine, Fitted};
 use super::fit::{self, Method};
 use super::report::{
-    ConfigNoise, EffectStep, LeftOut, NearDependent, PlotSeries, Report, RowError, Tested,
+    ConfigNoises, EffectStep, LeftOut, NearDependent, PlotSeries, Report, RowErrors, Tested,
     Unexplained,
 };
 use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
@@ -17,7 +17,7 @@ use super::trial::{self, Outcome};
 use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
-use nalgebra::{Dyn, Vector3};
+use nalgebra::Dyn;
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -509,41 +509,20 @@ pub fn run(
     let covariance = current
         .geometry
         .reported_covariance(&current.params, &current.fit.covariance);
-    // The report's vectors per configuration and per row, each from the
-    // fit's vectors it replaces, those freed as soon as read (at 10⁶ rows
-    // they are 120 MB of the report's against 96 MB of the fit's).
-    let (sigma, weights) = (
+    // The report's vectors per configuration and per row: the fit's own,
+    // taken over (`report/per_row.rs`).
+    drop(std::mem::take(&mut current.fit.dof));
+    let noise = ConfigNoises::new(
+        e.rows.configs.clone(),
         std::mem::take(&mut current.fit.sigma),
         std::mem::take(&mut current.fit.weights),
     );
-    drop(std::mem::take(&mut current.fit.dof));
-    let noise: Vec<ConfigNoise> = e
-        .rows
-        .configs
-        .iter()
-        .zip(sigma.iter().zip(&weights))
-        .map(|(&config, (s, w))| ConfigNoise {
-            config,
-            sigma_um: [s.x * 1e6, s.y * 1e6, s.z * 1e6],
-            weight: [w.x, w.y, w.z],
-        })
-        .collect();
-    drop((sigma, weights));
-    let residuals = std::mem::take(&mut current.residuals);
-    let row_errors: Vec<RowError> = e
-        .rows
-        .rows
-        .iter()
-        .zip(&residuals)
-        .map(|(r, res)| RowError {
-            config: e.rows.configs.get(r.group).copied().unwrap_or_default(),
-            marker: e.names.marker_id(r.marker),
-            deflection: r.kind == RowKind::Deflection,
-            nominal_um: Vector3::zeros(),
-            final_um: res * 1e6,
-        })
-        .collect();
-    drop(residuals);
+    let row_errors = RowErrors::new(
+        e.rows.configs.clone(),
+        e.names.markers.iter().map(|m| m.0).collect(),
+        (e.rows.rows.iter()).map(|r| (r.group, r.marker, r.kind == RowKind::Deflection)),
+        std::mem::take(&mut current.residuals),
+    );
     Ok(Report {
         method: e.fit_settings.method.name(),
         weights: if e.fit_settings.method == Method::Ols {

@@ -95,8 +95,8 @@ pub use geometry::Geometry;
 pub use linearisation::{DeflectionModel, Linearisation};
 pub use names::Names;
 pub use report::{
-    weights_line, Absorbed, ConfigNoise, EffectStep, LeftOut, NearDependent, Nominal, Parameter,
-    PlotSeries, Report, RowError, Unexplained, Validation,
+    weights_line, Absorbed, ConfigNoise, ConfigNoises, EffectStep, LeftOut, NearDependent, Nominal,
+    Parameter, PlotSeries, Report, RowError, RowErrors, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
@@ -322,9 +322,7 @@ fn calibrate_rows(
     let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
     let mut report = diagnosis::run(e, declared, left_out, &model, &settings, notes)?;
     report.nominal = nominal;
-    for (r, n) in report.row_errors.iter_mut().zip(nominal_rows) {
-        r.nominal_um = n;
-    }
+    report.row_errors.set_nominal_um(nominal_rows);
     // The input's, the run's (`diagnosis::run`), then the result's.
     warnings.append(&mut report.warnings);
     warnings.extend(plausibility::check_result(&report, &policy)?);

@@ -379,10 +379,17 @@ const OUTLIERS_LISTED: usize = 5;
 /// above [`Policy::outlier_floor_um`], among at least
 /// [`Policy::outlier_min_rows`] rows of the kind. The largest
 /// [`OUTLIERS_LISTED`] are named by configuration and marker.
-fn outliers(rows: &[RowError], policy: &Policy) -> Option<String> {
+fn outliers<R: std::borrow::Borrow<RowError>>(
+    rows: impl IntoIterator<Item = R> + Copy,
+    policy: &Policy,
+) -> Option<String> {
     let mut parts = Vec::new();
     for deflection in [false, true] {
-        let of_kind = || rows.iter().filter(move |r| r.deflection == deflection);
+        let of_kind = || {
+            (rows.into_iter())
+                .map(|r| *r.borrow())
+                .filter(move |r| r.deflection == deflection)
+        };
         // The norms alone (8 MB at 10⁶ rows), for the median: the middle
         // one, the upper of the two middle ones for an even count.
         let mut v: Vec<f64> = of_kind().map(|r| r.final_um.norm()).collect();
@@ -393,7 +400,7 @@ fn outliers(rows: &[RowError], policy: &Policy) -> Option<String> {
         let median = *v.select_nth_unstable_by(count / 2, f64::total_cmp).1;
         drop(v);
         let bound = (policy.outlier_ratio * median).max(policy.outlier_floor_um);
-        let mut far: Vec<(f64, &RowError)> = of_kind()
+        let mut far: Vec<(f64, RowError)> = of_kind()
             .map(|r| (r.final_um.norm(), r))
             .filter(|(n, _)| *n > bound || n.is_nan())
             .collect();

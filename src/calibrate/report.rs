@@ -10,6 +10,8 @@ use nalgebra::Vector3;
 use super::calibrated::CalibratedModel;
 use super::effects::Effect;
 use super::residuals::LackOfFit;
+mod per_row;
+pub use per_row::{ConfigNoise, ConfigNoises, RowError, RowErrors};
 
 /// One candidate's test in a diagnosis round.
 #[derive(Debug, Clone, PartialEq)]
@@ -79,17 +81,6 @@ pub struct Unexplained {
     pub statistic: f64,
     /// Its p-value.
     pub p_value: f64,
-}
-
-/// The noise of one configuration as the final fit saw it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ConfigNoise {
-    /// `config` as in the CSV.
-    pub config: i64,
-    /// Residual σ per axis x, y, z \[µm\] (eq. 14's σ, a point's: [`super::rows::noise_scale`]).
-    pub sigma_um: [f64; 3],
-    /// The weight per axis the fit gave its rows (eq. 14; 1 for OLS).
-    pub weight: [f64; 3],
 }
 
 /// A kept parameter that absorbs a left-out one.
@@ -204,23 +195,6 @@ pub struct PlotSeries {
     pub after_um: Vec<Vector3<f64>>,
 }
 
-/// One row's error before and after calibration (the report's per-pose
-/// plots and statistics).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RowError {
-    /// `config` as in the CSV.
-    pub config: i64,
-    /// Marker id.
-    pub marker: u32,
-    /// Whether the row is a deflection (loaded minus unloaded) rather than
-    /// an absolute position.
-    pub deflection: bool,
-    /// The nominal robot's error \[µm\] (as [`Nominal`]).
-    pub nominal_um: Vector3<f64>,
-    /// The final model's residual \[µm\].
-    pub final_um: Vector3<f64>,
-}
-
 /// The outcome of [`super::calibrate`].
 #[derive(Debug, Clone)]
 pub struct Report {
@@ -251,7 +225,7 @@ pub struct Report {
     /// (geometric ones as steps from the final linearisation).
     pub history: Vec<super::fit::Step>,
     /// The residual σ and the weights of the final fit per configuration.
-    pub noise: Vec<ConfigNoise>,
+    pub noise: ConfigNoises,
     /// RMS of the final model's position residuals \[µm\].
     pub rms_um: f64,
     /// Leave-one-configuration-out RMS \[µm\].
@@ -288,7 +262,7 @@ pub struct Report {
     pub plots: Vec<PlotSeries>,
     /// Every row's error before and after, in the rows' order (deflections
     /// first, then absolute positions, in file order).
-    pub row_errors: Vec<RowError>,
+    pub row_errors: RowErrors,
     /// The calibrated model (for validation and prediction).
     pub model: CalibratedModel,
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
@@ -317,7 +291,12 @@ impl Report {
     /// [`Nominal`] is before calibration: RMS, mean and max of the norm of
     /// each row's 3-D residual \[µm\].
     pub fn final_error(&self) -> Nominal {
-        let res: Vec<Vector3<f64>> = self.row_errors.iter().map(|e| e.final_um * 1e-6).collect();
+        let res: Vec<_> = self
+            .row_errors
+            .final_um()
+            .iter()
+            .map(|e| e * 1e-6)
+            .collect();
         Nominal::of(&res)
     }
 }

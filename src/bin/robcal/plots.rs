@@ -372,7 +372,7 @@ pub fn per_pose(r: &Report) -> Result<String> {
 /// row's 3-D error) before and after calibration \[µm, log scale\].
 pub fn ecdf(r: &Report) -> Result<String> {
     let sorted = |f: &dyn Fn(&robcal::calibrate::RowError) -> f64| {
-        let mut v: Vec<f64> = r.row_errors.iter().map(f).collect();
+        let mut v: Vec<f64> = r.row_errors.iter().map(|e| f(&e)).collect();
         v.sort_by(f64::total_cmp);
         v
     };
