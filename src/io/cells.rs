@@ -12,7 +12,7 @@ use super::setup::{AngleUnit, LengthUnit};
 use super::ErrorKind;
 
 /// The unit of a cell.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Scale {
     One,
     Angle(AngleUnit),

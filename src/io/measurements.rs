@@ -42,6 +42,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::cells::{self, Scale};
 use super::setup::Setup;
 use super::urdf::Robot;
 use super::{ErrorKind, InputError, InputWarning};
@@ -268,9 +269,98 @@ pub struct Measurements {
     pub has_time: bool,
     /// Suspicious but accepted input.
     pub warnings: Vec<InputWarning>,
+    /// For a file read a block at a time, which keeps no joint cell as
+    /// written: where they are in it ([`Measurements::written_cells`]).
+    pub(crate) cells_in_file: Option<CellsInFile>,
+}
+
+/// Where the joint cells of a file's records are, to read them again
+/// ([`Measurements::written_cells`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CellsInFile {
+    /// Fields of a record.
+    fields: usize,
+    /// Each joint's field.
+    joint_field: Vec<Option<usize>>,
+    /// Each joint's unit.
+    scale: Vec<Scale>,
+}
+
+impl CellsInFile {
+    /// The cells of the file whose header is `head`.
+    fn of(head: &Header, robot: &Robot, setup: &Setup) -> Self {
+        Self {
+            fields: head.record.len(),
+            joint_field: head.joint_field.clone(),
+            scale: (robot.joint_kinds.iter())
+                .map(|k| {
+                    if k.is_angular() {
+                        Scale::Angle(setup.units.angle)
+                    } else {
+                        Scale::Length(setup.units.length)
+                    }
+                })
+                .collect(),
+        }
+    }
 }
 
 impl Measurements {
+    /// The joint cells as written (trimmed) of each of `wanted` (one of
+    /// these observations and a joint): its [`Observation::q_written`]'s;
+    /// for a file read a block at a time (at least 32 MiB), which keeps
+    /// none, read again from the file, each checked to be the value read.
+    /// `None` where there is no cell (measurements not read from a file).
+    ///
+    /// # Errors
+    /// [`ErrorKind::Io`] when the file cannot be read again, or its line
+    /// no longer holds the value read.
+    pub fn written_cells(
+        &self,
+        wanted: &[(&Observation, usize)],
+    ) -> Result<Vec<Option<String>>, InputError> {
+        let Some(cells) = &self.cells_in_file else {
+            return Ok(wanted
+                .iter()
+                .map(|(o, j)| o.q_written.get(*j).map(|w| w.trim().to_string()))
+                .collect());
+        };
+        let mut lines: Vec<usize> = wanted.iter().map(|(o, _)| o.line).collect();
+        lines.sort_unstable();
+        lines.dedup();
+        let texts = stream::lines_of(&self.file, &lines, stream::BLOCK_BYTES)?;
+        wanted
+            .iter()
+            .map(|&(o, j)| {
+                let at = lines.binary_search(&o.line).ok();
+                let text = at.and_then(|k| texts.get(k)).map_or("", String::as_str);
+                let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+                let cell = (fields.len() == cells.fields)
+                    .then(|| cells.joint_field.get(j).copied().flatten())
+                    .flatten()
+                    .and_then(|f| fields.get(f).copied());
+                let value = cell.zip(cells.scale.get(j)).and_then(|(c, &scale)| {
+                    cells::parse_real_written(c, scale).ok().map(|(_, v)| v)
+                });
+                match (cell, value, o.q.get(j)) {
+                    (Some(c), Some(v), Some(q)) if v.to_bits() == q.to_bits() => {
+                        Ok(Some(c.to_string()))
+                    }
+                    _ => Err(InputError::new(
+                        &self.file,
+                        ErrorKind::Io,
+                        format!(
+                            "the file changed while it was read: its joint {} no longer \
+                             holds the value read",
+                            j + 1
+                        ),
+                    )
+                    .at_line(o.line)),
+                }
+            })
+            .collect()
+    }
+
     /// The unloaded rows: absolute positions (geometric data).
     pub fn unloaded(&self) -> impl Iterator<Item = &Observation> {
         self.observations.iter().filter(|o| o.is_unloaded())
@@ -465,5 +555,6 @@ fn finish(
         deflections,
         has_time,
         warnings,
+        cells_in_file: None,
     })
 }

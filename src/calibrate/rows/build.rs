@@ -98,7 +98,9 @@ impl Rows {
             let values: Vec<f64> = entering.iter().map(|o| o.q[j]).collect();
             let mut jb = Vec::new();
             let mut counts = Vec::new();
-            let mut written_bins = Vec::new();
+            // Each bin's centre and the first row in it (whose cell as
+            // written names it).
+            let mut firsts = Vec::new();
             if let Some(mut centres) = clusters_at_most(&values, policy.max_bins) {
                 // (Only here: with many distinct values, e.g. random poses,
                 // the key's scan of every value made this sort quadratic
@@ -106,11 +108,6 @@ impl Rows {
                 by_first_appearance(&mut centres, &values);
                 for c in &centres {
                     let near = |v: f64| (v - c).abs() <= BIN_TOLERANCE_RAD;
-                    let written = entering
-                        .iter()
-                        .find(|o| near(o.q[j]))
-                        .and_then(|o| o.q_written.get(j))
-                        .map_or_else(|| format!("{c}"), |w| w.trim().to_string());
                     let mut cfgs: Vec<i64> = entering
                         .iter()
                         .filter(|o| near(o.q[j]))
@@ -119,18 +116,34 @@ impl Rows {
                     cfgs.sort_unstable();
                     cfgs.dedup();
                     counts.push(cfgs.len());
-                    let a = angle_urad(*c);
-                    written_bins.push(((j as u8, a), written));
-                    jb.push(a);
+                    jb.push(angle_urad(*c));
+                    firsts.push((*c, entering.iter().position(|o| near(o.q[j]))));
                 }
             }
-            (jb, policy.compensator_eligible(&counts), written_bins)
+            (jb, policy.compensator_eligible(&counts), firsts)
         });
-        drop(entering);
+        // The bins' names: the cells as written of their first rows.
+        let rows_in = &entering;
+        let wanted: Vec<(&crate::io::Observation, usize)> = (per_joint.iter().enumerate())
+            .flat_map(|(j, (_, _, firsts))| {
+                firsts
+                    .iter()
+                    .filter_map(move |&(_, first)| Some((*rows_in.get(first?)?, j)))
+            })
+            .collect();
+        let mut written = data
+            .written_cells(&wanted)
+            .map_err(|e| CalibrationError::Data(e.to_string()))?
+            .into_iter();
+        drop((wanted, entering));
         let mut bins = Vec::with_capacity(dof);
         let mut compensator_ok = Vec::with_capacity(dof);
-        for (jb, ok, written_bins) in per_joint {
-            names.bins.extend(written_bins);
+        for (j, (jb, ok, firsts)) in per_joint.into_iter().enumerate() {
+            for (&a, (c, first)) in jb.iter().zip(firsts) {
+                let cell = first.and_then(|_| written.next().flatten());
+                let name = cell.unwrap_or_else(|| format!("{c}"));
+                names.bins.insert((j as u8, a), name);
+            }
             compensator_ok.push(ok);
             bins.push(jb);
         }

@@ -35,7 +35,7 @@ pub(super) struct Layout<'a> {
 impl Layout<'_> {
     /// The record on `line` as an observation; `stats` takes its joint
     /// values and positions (limits, units); its joint cells as written go
-    /// to the batch text `written` ([`Batch`]).
+    /// to the batch text `written` ([`Batch`]), when there is one.
     ///
     /// # Errors
     /// The first of its cells that is rejected (module [`super`]), with the
@@ -45,7 +45,7 @@ impl Layout<'_> {
         record: &[&str],
         line: usize,
         stats: &mut Stats,
-        written: &mut String,
+        written: Option<&mut String>,
     ) -> Result<Observation, InputError> {
         let mut o = Observation {
             q: smallvec::smallvec![0.0; self.robot.dof()],
@@ -203,12 +203,14 @@ impl Layout<'_> {
             }
         }
         // Every joint has its column (checked with the header).
-        o.q_written = WrittenCells::pending(
-            written,
-            self.joint_field
-                .iter()
-                .map(|&f| f.and_then(|f| record.get(f).copied()).unwrap_or("")),
-        );
+        if let Some(written) = written {
+            o.q_written = WrittenCells::pending(
+                written,
+                self.joint_field
+                    .iter()
+                    .map(|&f| f.and_then(|f| record.get(f).copied()).unwrap_or("")),
+            );
+        }
         Ok(o)
     }
 }
@@ -228,6 +230,9 @@ pub(super) struct Batch {
     first: usize,
     /// Bytes of `text` past which it is attached.
     limit: usize,
+    /// Whether the cells are kept (else `text` stays empty:
+    /// [`Read::without_cells`]).
+    cells: bool,
 }
 
 impl Default for Batch {
@@ -237,6 +242,7 @@ impl Default for Batch {
             text: String::new(),
             first: 0,
             limit: BATCH_BYTES,
+            cells: true,
         }
     }
 }
@@ -246,12 +252,13 @@ impl Batch {
     /// observations, whose text is not attached (up to
     /// [`WrittenCells::JOINED_BYTES`]) but given to the caller with them
     /// ([`Batch::pending`]).
-    pub(super) fn into(mut out: Vec<Observation>, rows: usize) -> Self {
+    pub(super) fn into(mut out: Vec<Observation>, rows: usize, cells: bool) -> Self {
         out.clear();
         out.reserve(rows);
         Self {
             out,
             limit: WrittenCells::JOINED_BYTES,
+            cells,
             ..Self::default()
         }
     }
@@ -268,7 +275,7 @@ impl Batch {
         line: usize,
         stats: &mut Stats,
     ) -> Result<(), InputError> {
-        let o = layout.observation(record, line, stats, &mut self.text)?;
+        let o = layout.observation(record, line, stats, self.cells.then_some(&mut self.text))?;
         self.out.push(o);
         if self.text.len() >= self.limit {
             self.attach();
@@ -401,6 +408,8 @@ pub(super) struct Read {
     /// Bytes of `text` past which it is attached
     /// ([`WrittenCells::JOINED_BYTES`]; fewer in tests).
     joined: usize,
+    /// Whether the joint cells as written are kept ([`Read::without_cells`]).
+    cells: bool,
 }
 
 impl Read {
@@ -415,6 +424,17 @@ impl Read {
             text: String::new(),
             first: 0,
             joined: WrittenCells::JOINED_BYTES,
+            cells: true,
+        }
+    }
+
+    /// The same, keeping no joint cell as written (the observations'
+    /// [`Observation::q_written`] empty): a large file's are read again
+    /// where needed ([`super::Measurements::written_cells`]).
+    pub(super) fn without_cells(self) -> Self {
+        Self {
+            cells: false,
+            ..self
         }
     }
 
@@ -509,7 +529,7 @@ pub(super) fn in_chunks(
             // At most one record per line (no slack to copy at the join).
             let first_line = newlines.partition_point(|&n| n < lo);
             let lines = newlines.partition_point(|&n| n < hi) - first_line;
-            let mut out = Batch::into(part, lines + 1);
+            let mut out = Batch::into(part, lines + 1, read.cells);
             let mut cells = Vec::with_capacity(layout.header.len());
             // Line ends before the record: its line is one more.
             let mut before = first_line;

@@ -19,9 +19,10 @@ use std::path::{Path, PathBuf};
 
 use super::super::setup::Setup;
 use super::super::urdf::Robot;
+use super::super::ErrorKind;
 use super::super::InputError;
 use super::records::{in_chunks, line_ends, Read as Records};
-use super::{finish, Header, Measurements};
+use super::{finish, CellsInFile, Header, Measurements};
 
 /// Files at least this large are read a block at a time ([`read`]).
 pub(super) const STREAM_FROM_BYTES: u64 = 32 << 20;
@@ -101,7 +102,10 @@ impl Blocks {
         let no = |_: csv::Error| InputError::new(&self.file, super::ErrorKind::Syntax, "");
         let head = Header::read(&mut rdr, &self.file, robot, setup, &no).ok()?;
         let layout = head.layout(&self.file, robot, setup);
-        let mut read = Records::new(robot.dof(), true);
+        // The joint cells as written are not kept (~115 MB at 10⁶ rows,
+        // held with the observations: the peak of the parse), but read
+        // again where the bins need them (`Measurements::written_cells`).
+        let mut read = Records::new(robot.dof(), true).without_cells();
         let (mut start, mut line0) = (head.data_start, 0);
         loop {
             // Up to the last `\n` (a line end whatever follows it), or to
@@ -137,14 +141,18 @@ impl Blocks {
             eof = self.fill(&mut reader, &mut buf, &mut total)?;
         }
         let (observations, stats) = read.finish();
-        Some(finish(
+        let measurements = finish(
             self.file.clone(),
             robot,
             setup,
             observations,
             &stats,
             head.has_time,
-        ))
+        );
+        Some(measurements.map(|m| Measurements {
+            cells_in_file: Some(CellsInFile::of(&head, robot, setup)),
+            ..m
+        }))
     }
 
     /// The next block of `reader` appended to `buf`: whether the file
@@ -165,6 +173,73 @@ impl Blocks {
         }
         Some(n < self.block)
     }
+}
+
+/// The text of each of `lines` (ascending line numbers, the header's 1,
+/// line ends as [`line_ends`] counts them) of the file `path`, without its
+/// line end: read again `block` bytes at a time up to the last of them
+/// (empty for a line the file no longer has).
+///
+/// # Errors
+/// [`ErrorKind::Io`] when the file cannot be read.
+pub(super) fn lines_of(
+    path: &Path,
+    lines: &[usize],
+    block: usize,
+) -> Result<Vec<String>, InputError> {
+    let io = |e: std::io::Error| {
+        InputError::new(
+            path,
+            ErrorKind::Io,
+            format!("cannot read the measurements again for their joint cells as written: {e}"),
+        )
+    };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut out = Vec::with_capacity(lines.len());
+    let mut want = lines.iter().copied().peekable();
+    let block = block.max(1);
+    let mut buf: Vec<u8> = Vec::with_capacity(2 * block);
+    // Line ends before `buf`.
+    let mut line0 = 0;
+    while want.peek().is_some() {
+        let n = (&mut file)
+            .take(block as u64)
+            .read_to_end(&mut buf)
+            .map_err(io)?;
+        let eof = n < block;
+        // Up to the last `\n`, as the blocks are read.
+        let cut = match memchr::memrchr(b'\n', &buf) {
+            _ if eof => buf.len(),
+            Some(k) => k + 1,
+            None => continue,
+        };
+        let ends = line_ends(&buf, 0..cut);
+        // Line `line0 + k` starts after the piece's line end `k - 1`.
+        while let Some(k) = want.peek().map(|&l| l.saturating_sub(line0)) {
+            if k == 0 || (k > ends.len() && !eof) {
+                break;
+            }
+            let start = if k == 1 {
+                Some(0)
+            } else {
+                ends.get(k - 2).map(|e| e + 1)
+            };
+            let text = start.filter(|&s| s <= cut).map_or_else(String::new, |s| {
+                let rest = &buf[s..cut];
+                let end = memchr::memchr2(b'\r', b'\n', rest).unwrap_or(rest.len());
+                String::from_utf8_lossy(&rest[..end]).into_owned()
+            });
+            out.push(text);
+            want.next();
+        }
+        if eof || want.peek().is_some_and(|&l| l <= line0) {
+            break;
+        }
+        line0 += ends.len();
+        buf.drain(..cut);
+    }
+    out.resize(lines.len(), String::new());
+    Ok(out)
 }
 
 #[cfg(test)]
