@@ -17,7 +17,7 @@ mod kept;
 mod source;
 mod unit_sums;
 pub use build::Storage;
-pub use group_rows::GroupRows;
+pub use group_rows::{GroupOf, GroupRows};
 
 /// The columns of some parameters at every row (`3·rows × params`, row
 /// `3i + a` axis `a` of row `i`, each column in its parameter's reported

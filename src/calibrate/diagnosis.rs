@@ -511,7 +511,6 @@ pub fn run(
         .reported_covariance(&current.params, &current.fit.covariance);
     // The report's vectors per configuration and per row: the fit's own,
     // taken over (`report/per_row.rs`).
-    drop(std::mem::take(&mut current.fit.dof));
     let noise = ConfigNoises::new(
         e.rows.configs.clone(),
         std::mem::take(&mut current.fit.sigma),

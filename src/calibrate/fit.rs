@@ -45,11 +45,9 @@ pub struct FitOut {
     pub covariance: OMatrix<f64, Dyn, Dyn>,
     /// Weights per group and axis the fit used.
     pub weights: Vec<Vector3<f64>>,
-    /// Residual σ per group and axis \[m\].
+    /// Residual σ per group and axis \[m\] (its degrees of freedom, which
+    /// only the fit reads, are not kept: 24 MB at 10⁶ configurations).
     pub sigma: Vec<Vector3<f64>>,
-    /// Its degrees of freedom per group and axis (a pooled σ carries the
-    /// pool's, [`crate::estimate::pool_small_groups`]).
-    pub dof: Vec<Vector3<f64>>,
     /// Reweighting iterations.
     pub iterations: usize,
     /// Whether the fit settled: IRLS within its iterations (OLS and one WLS
@@ -278,7 +276,6 @@ fn fit_source<R: Reweightable<f64, Dyn>>(
         covariance: fit.covariance,
         weights,
         sigma,
-        dof,
         iterations: fit.iterations,
         converged: s.method != Method::Irls
             || fit.converged

@@ -212,7 +212,7 @@ impl OlsHeldOut<'_> {
             let mut res = Vec::with_capacity(by.offset(hi) - by.offset(lo));
             let mut ok = Vec::with_capacity(hi - lo);
             for g in lo..hi {
-                let rs = by.of(g);
+                let rs = &*by.of(g);
                 self.d.rows_into(rs, &self.cols, &mut b);
                 let done = match rs {
                     [] => true,
@@ -465,13 +465,23 @@ mod tests {
         let by = GroupRows::new(&[2, 0, 2, 1, 0], 4).expect("in range");
         assert_eq!(by.groups(), 4);
         assert_eq!(
-            (by.of(0), by.of(1), by.of(2), by.of(3)),
+            (&*by.of(0), &*by.of(1), &*by.of(2), &*by.of(3)),
             (&[1, 4][..], &[3][..], &[0, 2][..], &[][..])
         );
-        assert_eq!(by.all(), &[1, 4, 3, 0, 2]);
-        assert_eq!((by.range(2), by.offset(4), by.of(9)), (3..5, 5, &[][..]));
+        assert_eq!(by.all(), [1, 4, 3, 0, 2]);
+        assert_eq!((by.range(2), by.offset(4), &*by.of(9)), (3..5, 5, &[][..]));
         assert!(GroupRows::new(&[0, 3], 3).is_none());
         assert!(GroupRows::new(&[usize::MAX], 3).is_none());
+        // Row `g` group `g`'s one row: the same rows, none held.
+        let one = GroupRows::new(&[0, 1, 2], 3).expect("in range");
+        let held = GroupRows::new(&[0, 1, 2, 0], 3).expect("in range");
+        assert_eq!(
+            (one.groups(), one.all(), &*one.of(1), &*one.of(3)),
+            (3, vec![0, 1, 2], &[1][..], &[][..])
+        );
+        assert_eq!((one.range(2), one.offset(3), one.offset(7)), (2..3, 3, 3));
+        assert_eq!((&*held.of(0), held.groups()), (&[0, 3][..], 3));
+        assert!(GroupRows::new(&[0, 1, 1], 3).is_some_and(|g| g.of(2).is_empty()));
     }
 
     #[test]

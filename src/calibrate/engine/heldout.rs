@@ -109,7 +109,7 @@ impl Engine<'_> {
                 }
             };
             let Some(out) = out else { return Ok(None) };
-            for &i in by.of(g) {
+            for &i in by.of(g).iter() {
                 res.extend(&[self.rows.unscaled(i, d.residual(&use_cols, &out.x, i))]);
             }
         }
