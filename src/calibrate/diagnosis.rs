@@ -519,7 +519,7 @@ pub fn run(
     let row_errors = RowErrors::new(
         e.rows.configs.clone(),
         e.names.markers.iter().map(|m| m.0).collect(),
-        (e.rows.rows.iter()).map(|r| (r.group, r.marker, r.kind == RowKind::Deflection)),
+        (e.rows.rows.iter()).map(|r| (r.group(), r.marker, r.kind == RowKind::Deflection)),
         std::mem::take(&mut current.residuals),
     );
     Ok(Report {

@@ -147,7 +147,7 @@ pub(super) fn rigid_urdf(
     e.geometry = final_geometry(model);
     e.lin = Linearisation::nominal(e.lin.model);
     e.relinearise().ok()?;
-    let own: Vec<_> = e.rows.rows.iter().map(|r| r.y).collect();
+    let own = e.rows.lhs().ok()?;
     let own_rms_um = absolute_rms_um(e, &own);
     let geometric: Vec<Param> = f
         .params

@@ -234,7 +234,10 @@ fn calibrate_rows(
     // the declared fit's first, `diagnosis::run`.)
     let with_dropped: Vec<Param> = declared.iter().chain(&dropped).copied().collect();
     e.register_base(&with_dropped)?;
-    let nominal = Nominal::of(&e.rows.rows.iter().map(|r| r.y).collect::<Vec<_>>());
+    // (The rows keep no left-hand side: computed from their frames.)
+    let mut nominal_rows =
+        (e.rows.lhs()).map_err(|e| CalibrationError::Core("forward kinematics", e))?;
+    let nominal = Nominal::of(&nominal_rows);
     // A declared compliance the data cannot identify is too few
     // configurations (or markers, or a load that does not load the joint)
     // for the declared model: an error naming the parameters, not a fit that
@@ -319,7 +322,9 @@ fn calibrate_rows(
             }
         }
     }
-    let nominal_rows: Vec<Vector3<f64>> = e.rows.rows.iter().map(|r| r.y * 1e6).collect();
+    for y in &mut nominal_rows {
+        *y *= 1e6;
+    }
     let mut report = diagnosis::run(e, declared, left_out, &model, &settings, notes)?;
     report.nominal = nominal;
     report.row_errors.set_nominal_um(nominal_rows);

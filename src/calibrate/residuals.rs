@@ -64,7 +64,7 @@ fn cells(rows: &Rows) -> (Vec<usize>, usize) {
     const NONE: usize = usize::MAX;
     // `head[g]`: the first of group `g`'s cells in `chain`; each entry its
     // marker, kind, cell number and the next entry of its group.
-    let groups = rows.rows.iter().map(|r| r.group + 1).max().unwrap_or(0);
+    let groups = rows.rows.iter().map(|r| r.group() + 1).max().unwrap_or(0);
     let mut head = vec![NONE; groups];
     let mut chain: Vec<(u8, bool, usize, usize)> = Vec::new();
     let cell = rows
@@ -72,7 +72,7 @@ fn cells(rows: &Rows) -> (Vec<usize>, usize) {
         .iter()
         .map(|r| {
             let deflection = r.kind == RowKind::Deflection;
-            let first = &mut head[r.group];
+            let first = &mut head[r.group()];
             let mut at = *first;
             let mut last = NONE;
             while at != NONE {
@@ -115,7 +115,7 @@ pub fn lack_of_fit(
     // sums of one vector per cell, without one per cell: a million rows
     // may be a million cells).
     let weighted = |row: &super::rows::Row, r: &Vector3<f64>| {
-        r.component_mul(&fit.weights[row.group]) * rows.noise_scale(row)
+        r.component_mul(&fit.weights[row.group()]) * rows.noise_scale(row)
     };
     let mut sum = vec![Vector3::<f64>::zeros(); n_cells];
     let mut count = vec![0usize; n_cells];
@@ -275,7 +275,7 @@ pub fn most_followed(
     let mut count = vec![0.0; cells];
     let mut res = vec![Vector3::<f64>::zeros(); cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
-        res[c] += r.component_mul(&weights[row.group]) * rows.noise_scale(row);
+        res[c] += r.component_mul(&weights[row.group()]) * rows.noise_scale(row);
         count[c] += 1.0;
     }
     for (r, n) in res.iter_mut().zip(&count) {
@@ -344,6 +344,6 @@ pub fn variable_values(rows: &Rows, names: &Names, name: &str) -> Vec<f64> {
 fn configs_per_row(rows: &Rows) -> Vec<f64> {
     rows.rows
         .iter()
-        .map(|r| rows.configs.get(r.group).map_or(f64::NAN, |&c| c as f64))
+        .map(|r| rows.configs.get(r.group()).map_or(f64::NAN, |&c| c as f64))
         .collect()
 }

@@ -55,11 +55,11 @@ pub enum RowKind {
 
 /// One row (three equations) of the identification problem.
 ///
-/// 144 B (a 7-joint arm's joint values inline): what every row has. What
+/// 112 B (a 7-joint arm's joint values inline): what every row has. What
 /// only some have is boxed ([`RowExtra`]), and what follows from the rest
 /// is computed where read: the configuration id (`Rows::configs[group]`),
-/// the predicted point ([`Rows::point_m`], from the frames). At 10⁶ rows
-/// the row was 224 B.
+/// the predicted point ([`Rows::point_m`]) and the left-hand side
+/// ([`Rows::y`]), from the frames. At 10⁶ rows the row was 224 B.
 #[derive(Debug, Clone)]
 pub struct Row {
     /// Deflection or absolute position.
@@ -69,26 +69,19 @@ pub struct Row {
     /// Index into [`Rows::chains`] of the chain the row's frames are on
     /// (see [`Rows::frames`]; a `u32`: 8 B a row fewer).
     chain: u32,
-    /// Index of the configuration (the group of the noise estimate); its
-    /// `config` as in the CSV is `Rows::configs[group]`.
-    pub group: usize,
+    /// Index of the configuration ([`Row::group`]).
+    group: u32,
     /// Joint values \[rad or m\] (inline up to [`crate::io::INLINE_JOINTS`]).
     pub q: crate::io::JointValues,
     /// What was measured \[m\]: the position (absolute rows, measurement
     /// frame) or the deflection.
     pub measured: Vector3<f64>,
-    /// CSV line (of the loaded row for deflections).
-    pub line: usize,
+    /// CSV line ([`Row::line`]).
+    line: u32,
     /// What only some rows have ([`RowExtra`]), boxed: absent (8 B) for an
     /// absolute row without time, instrument σ, weight of its own or the
     /// exact model's equilibrium (at 10⁶ such rows, ~200 MB fewer).
     pub extra: Option<Box<RowExtra>>,
-    /// The row's left-hand side \[m\], linearised at the current model
-    /// ([`super::linearisation`]): measured minus predicted plus the
-    /// linearised joint-law part, `measured − f(x₀) + B(x₀) x₀`. With the
-    /// first-order model, the measured deflection, or the measured minus
-    /// the rigid forward kinematics.
-    pub y: Vector3<f64>,
 }
 
 /// The fields of a [`Row`] that only some rows have; each read through
@@ -125,6 +118,10 @@ pub struct RowExtra {
     /// row's, when the exact model's law has a gravity compliance (its
     /// frames are then at the equilibrium, not at `q`); else empty.
     pub gravity_q: Vec<[f64; 2]>,
+    /// With the exact model, the row's left-hand side \[m\] ([`Rows::y`]),
+    /// which its frames alone do not give; `None` for the first-order
+    /// model's.
+    pub y: Option<Vector3<f64>>,
 }
 
 /// A run of rows in [`Rows::relinearise_with`], with its state and its
@@ -132,6 +129,18 @@ pub struct RowExtra {
 type Run<'a, S> = (&'a mut [Row], Option<S>, Result<(), Error>);
 
 impl Row {
+    /// Index of the configuration (the group of the noise estimate); its
+    /// `config` as in the CSV is `Rows::configs[group]`. (Held as a `u32`,
+    /// as [`Row::line`]: 8 B a row fewer.)
+    pub fn group(&self) -> usize {
+        self.group as usize
+    }
+
+    /// CSV line (of the loaded row for deflections; `u32::MAX` past it).
+    pub fn line(&self) -> usize {
+        self.line as usize
+    }
+
     /// [`RowExtra::load_kg`] (0 without it).
     pub fn load_kg(&self) -> f64 {
         self.extra.as_ref().map_or(0.0, |e| e.load_kg)
@@ -414,7 +423,6 @@ impl Rows {
                     chain
                         .frames_into(&row.q, rigid)
                         .map_err(core("forward kinematics"))?;
-                    let p_rigid = rigid.point_m(&m);
                     let mut tau = [0.0; J];
                     let tau = &mut tau[..row.q.len().min(J)];
                     loading
@@ -426,11 +434,9 @@ impl Rows {
                     if let Some(e) = &mut row.extra {
                         e.twists.clear();
                     }
-                    row.y = if absolute {
-                        row.measured - p_rigid
-                    } else {
-                        row.measured
-                    };
+                    if let Some(e) = &mut row.extra {
+                        e.y = None;
+                    }
                     sink(row, rigid);
                 }
                 Some(law) => {
@@ -487,11 +493,11 @@ impl Rows {
                         .sum();
                     row.set_tau(&eq.tau[..dof]);
                     row.set_load(loading.load.map(|l| l.wrench(&eq.frames)));
-                    row.y = if absolute {
+                    row.extra_mut().y = Some(if absolute {
                         row.measured - p + linear
                     } else {
                         row.measured - (p - p_rigid) + linear
-                    };
+                    });
                     row.set_theta(eq.frames.q());
                     sink(row, &eq.frames);
                 }
@@ -569,6 +575,47 @@ impl Rows {
         frames.point_m(&marker_m(&self.markers, row))
     }
 
+    /// The left-hand side of `row` \[m\] at its `frames` ([`Rows::frames`]),
+    /// linearised at the current model ([`super::linearisation`]):
+    /// measured minus predicted plus the linearised joint-law part,
+    /// `measured − f(x₀) + B(x₀) x₀`. With the first-order model the
+    /// measured deflection, or the measured position minus the rigid
+    /// forward kinematics ([`Rows::point_m`]); with the exact model, as
+    /// [`Rows::relinearise`] kept it ([`RowExtra::y`]). Not kept per row
+    /// otherwise (24 MB at 10⁶ rows).
+    pub fn y(&self, row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
+        lhs(&self.markers, row, frames)
+    }
+
+    /// [`Rows::y`] of every row, in order (their frames recomputed: on
+    /// worker threads with many rows).
+    ///
+    /// # Errors
+    /// As [`Rows::frames`].
+    pub fn lhs(&self) -> Result<Vec<Vector3<f64>>, Error> {
+        let rows = &self.rows;
+        let threads = super::parallel::for_rows(rows.len());
+        let per = rows.len().div_ceil(threads).max(1);
+        let runs = super::parallel::map(rows.len().div_ceil(per), threads, |t| {
+            let mut frames = Frames::empty();
+            rows[t * per..((t + 1) * per).min(rows.len())]
+                .iter()
+                .map(|row| {
+                    if !needs_frames(row) {
+                        return Ok(lhs(&self.markers, row, &frames));
+                    }
+                    self.frames_into(row, &mut frames)?;
+                    Ok(self.y(row, &frames))
+                })
+                .collect::<Result<Vec<_>, Error>>()
+        });
+        let mut out = Vec::with_capacity(rows.len());
+        for run in runs {
+            out.extend(run?);
+        }
+        Ok(out)
+    }
+
     /// [`Rows::point_m`] of each of `rows` (some of these rows), at their
     /// frames (recomputed: on worker threads with many rows).
     ///
@@ -615,9 +662,27 @@ impl Rows {
     pub fn per_group(&self) -> Vec<usize> {
         let mut n = vec![0usize; self.configs.len()];
         for r in &self.rows {
-            n[r.group] += 1;
+            n[r.group()] += 1;
         }
         n
+    }
+}
+
+/// Whether [`lhs`] of `row` reads its frames (a first-order absolute
+/// row's).
+fn needs_frames(row: &Row) -> bool {
+    row.kind == RowKind::Absolute && row.extra.as_ref().is_none_or(|e| e.y.is_none())
+}
+
+/// [`Rows::y`] with the markers `markers` (frames not read where
+/// [`needs_frames`] is false).
+pub(crate) fn lhs(markers: &[Vector3<f64>], row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
+    match row.extra.as_ref().and_then(|e| e.y) {
+        Some(y) => y,
+        None if row.kind == RowKind::Absolute => {
+            row.measured - frames.point_m(&marker_m(markers, row))
+        }
+        None => row.measured,
     }
 }
 

@@ -64,7 +64,7 @@ pub fn validate(
             CalibrationError::NoEquilibrium(format!(
                 "{}:{}: the calibrated model cannot predict this point ({e})",
                 data.file.display(),
-                row.line
+                row.line()
             ))
         };
         let m = usize::from(row.marker);

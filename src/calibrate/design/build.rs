@@ -241,17 +241,25 @@ impl Design {
         let per = super::super::rows::run_length(m, threads);
         let Storage {
             b: mut data,
-            y,
+            mut y,
             group,
         } = storage;
+        // The left-hand sides from the frames the columns are computed at
+        // ([`Rows::y`]: the rows keep none).
+        zeroed(&mut y, 3 * m);
+        let y_runs = y.as_chunks_mut::<3>().0.chunks_mut(per);
+        let lhs = |row: &Row, frames: &crate::robot::Frames<f64, { super::super::geometry::J }>| {
+            super::super::rows::scaled_y(columns.mixed, row, all.y(row, frames)).into()
+        };
         if !hold {
             // Each column once, for its error.
-            let mut runs: Vec<&[Row]> = rows.chunks(per).collect();
-            super::super::parallel::for_each_mut(&mut runs, threads, |_, run| {
+            let mut runs: Vec<_> = rows.chunks(per).zip(y_runs).collect();
+            super::super::parallel::for_each_mut(&mut runs, threads, |_, (run, ys)| {
                 let mut frames = crate::robot::Frames::empty();
-                for row in run.iter() {
+                for (row, y) in run.iter().zip(ys.iter_mut()) {
                     all.frames_into(row, &mut frames)?;
                     columns.each(row, &frames, all.gravity_unit, |_, _| {})?;
+                    *y = lhs(row, &frames);
                 }
                 Ok::<_, Error>(())
             })?;
@@ -263,12 +271,13 @@ impl Design {
             return Ok(Self::finish(all, params, storage, Some(columns.recipe())));
         }
         let pieces = pieces(&mut data, m, n, per);
-        let runs: Vec<(&[Row], Vec<&mut [f64]>)> = rows.chunks(per).zip(pieces).collect();
-        super::super::parallel::for_each_mut(&mut { runs }, threads, |_, (run, piece)| {
+        let mut runs: Vec<_> = rows.chunks(per).zip(pieces).zip(y_runs).collect();
+        super::super::parallel::for_each_mut(&mut runs, threads, |_, ((run, piece), ys)| {
             let mut frames = crate::robot::Frames::empty();
-            for (k, row) in run.iter().enumerate() {
+            for (k, (row, y)) in run.iter().zip(ys.iter_mut()).enumerate() {
                 all.frames_into(row, &mut frames)?;
                 columns.write(row, &frames, all.gravity_unit, piece, k)?;
+                *y = lhs(row, &frames);
             }
             Ok::<_, Error>(())
         })?;
@@ -325,10 +334,14 @@ impl Design {
         let per = super::super::rows::run_length(m, threads);
         let Storage {
             b: mut data,
-            y,
+            mut y,
             group,
         } = old.unwrap_or_default();
         let columns = Columns::new(params, lin, names, all, &geometry.markers);
+        // Each run's left-hand sides, from the frames computed there
+        // ([`Rows::y`]: the rows keep none).
+        zeroed(&mut y, 3 * m);
+        let y_runs = y.as_chunks_mut::<3>().0.chunks_mut(per);
         // With runs that start at the view's blocks, each block's
         // unit-weight sums from its columns as they are written.
         let fuse = unit_sums::aligned(m, per);
@@ -338,23 +351,29 @@ impl Design {
         let mut states: Vec<_> = if hold {
             pieces(&mut data, m, n, per)
                 .into_iter()
+                .zip(y_runs)
                 .enumerate()
-                .map(|(r, piece)| (Some(piece), Vec::new(), sums(r)))
+                .map(|(r, (piece, ys))| (Some(piece), Vec::new(), sums(r), ys))
                 .collect()
         } else {
             data = Vec::new();
-            (0..m.div_ceil(per.max(1)))
-                .map(|r| (None, vec![0.0; 3 * n], sums(r)))
+            (y_runs.enumerate())
+                .map(|(r, ys)| (None, vec![0.0; 3 * n], sums(r), ys))
                 .collect()
         };
+        let markers = &geometry.markers;
         let columns = &columns;
         let done = all.relinearise_with(
             geometry,
             lin,
             threads,
             states.iter_mut().collect(),
-            |(piece, one, sums), k, row, frames, g| {
-                let y = super::super::rows::scaled_y(columns.mixed, row).into();
+            |(piece, one, sums, ys), k, row, frames, g| {
+                let y = super::super::rows::lhs(markers, row, frames);
+                let y: [f64; 3] = super::super::rows::scaled_y(columns.mixed, row, y).into();
+                if let Some(at) = ys.get_mut(k) {
+                    *at = y;
+                }
                 match piece {
                     Some(piece) => {
                         columns.write(row, frames, g, piece, k)?;
@@ -375,7 +394,7 @@ impl Design {
             },
         )?;
         let sums = fuse.then(|| {
-            let runs = states.into_iter().filter_map(|(_, _, s)| s).collect();
+            let runs = states.into_iter().filter_map(|(_, _, s, _)| s).collect();
             unit_sums::merge_runs(n, runs)
         });
         let recipe = (!hold).then(|| columns.recipe());
@@ -428,45 +447,32 @@ impl Design {
         recipe: Option<source::Recipe>,
     ) -> Self {
         let (rows, groups) = (&all.rows[..], all.configs.len());
-        let Storage {
-            b,
-            mut y,
-            mut group,
-        } = storage;
+        let Storage { b, y, mut group } = storage;
         let source = match recipe {
             Some(r) => source::Source::Rows(r),
             None => source::Source::Held(DMatrix::from_vec(3 * rows.len(), params.len(), b)),
         };
-        // The left-hand sides and the groups by runs of rows on worker
-        // threads (one thread's pass over 10⁶ rows of 240 B each was ~0.05 s
-        // per design, four designs a run).
-        zeroed(&mut y, 3 * rows.len());
+        // The groups by runs of rows on worker threads (the left-hand sides
+        // are the passes' that computed the columns).
         zeroed(&mut group, rows.len());
         let threads = super::super::parallel::for_rows(rows.len());
         let per = rows.len().div_ceil(threads).max(1);
-        let (y3, _) = y.as_chunks_mut::<3>();
-        let mut runs: Vec<_> = y3
-            .chunks_mut(per)
-            .zip(group.chunks_mut(per))
-            .zip(rows.chunks(per))
-            .collect();
-        let filled =
-            super::super::parallel::for_each_mut(&mut runs, threads, |_, ((ys, gs), rs)| {
-                for ((y, g), r) in ys.iter_mut().zip(gs.iter_mut()).zip(rs.iter()) {
-                    *y = super::super::rows::scaled_y(all.mixed(), r).into();
-                    *g = r.group;
-                }
-                Ok::<(), std::convert::Infallible>(())
-            });
+        let mut runs: Vec<_> = group.chunks_mut(per).zip(rows.chunks(per)).collect();
+        let filled = super::super::parallel::for_each_mut(&mut runs, threads, |_, (gs, rs)| {
+            for (g, r) in gs.iter_mut().zip(rs.iter()) {
+                *g = r.group();
+            }
+            Ok::<(), std::convert::Infallible>(())
+        });
         let Ok(()) = filled;
         let instrument_sigma = rows.iter().all(|r| r.sigma().is_some()).then(|| {
             let mut ss = vec![Vector3::<f64>::zeros(); groups];
             let mut n = vec![0.0_f64; groups];
             for r in rows {
                 let sigma = r.sigma().map(|s| s * all.noise_scale(r));
-                if let (Some(s), Some(g)) = (sigma, ss.get_mut(r.group)) {
+                if let (Some(s), Some(g)) = (sigma, ss.get_mut(r.group())) {
                     *g += s.component_mul(&s);
-                    n[r.group] += 1.0;
+                    n[r.group()] += 1.0;
                 }
             }
             ss.iter()

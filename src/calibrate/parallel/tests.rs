@@ -120,8 +120,9 @@ fn rows_and_design_do_not_depend_on_the_threads() {
             rows.rows
                 .iter()
                 .map(|r| {
-                    let p = rows.point_m(r, &rows.frames(r).expect("frames"));
-                    (r.y, p, r.tau().to_vec(), r.twists().to_vec())
+                    let f = rows.frames(r).expect("frames");
+                    let (y, p) = (rows.y(r, &f), rows.point_m(r, &f));
+                    (y, p, r.tau().to_vec(), r.twists().to_vec())
                 })
                 .collect()
         };
@@ -210,7 +211,7 @@ fn rows_and_design_do_not_depend_on_the_threads() {
     // the heavier loads have no equilibrium near the measured pose),
     // then another from the starting points it left: the same rows and
     // the same error on 1 and 3 threads.
-    let first_line = rows.rows[0].line;
+    let first_line = rows.rows[0].line();
     let mut part_way = 0;
     for scale in [100.0, 300.0, 1e3, 3e3, 1e4, 3e4] {
         let bad = Linearisation::of(
@@ -232,8 +233,9 @@ fn rows_and_design_do_not_depend_on_the_threads() {
                 .rows
                 .iter()
                 .map(|row| {
-                    let p = r.point_m(row, &r.frames(row).expect("frames"));
-                    (row.y, p, row.tau().to_vec(), row.theta().to_vec())
+                    let f = r.frames(row).expect("frames");
+                    let (y, p) = (r.y(row, &f), r.point_m(row, &f));
+                    (y, p, row.tau().to_vec(), row.theta().to_vec())
                 })
                 .collect();
             (e, state)
@@ -287,13 +289,13 @@ fn rows_built_on_threads_are_the_serial_ones() {
             .map(|r| {
                 (
                     r.kind,
-                    r.group,
-                    rows.configs[r.group],
+                    r.group(),
+                    rows.configs[r.group()],
                     r.marker,
                     r.q.clone(),
                     r.measured,
-                    r.line,
-                    r.y,
+                    r.line(),
+                    r.extra.as_ref().map(|e| (e.dt, e.sigma, e.load_kg)),
                 )
             })
             .collect::<Vec<_>>()
@@ -408,7 +410,9 @@ fn rows_of_taken_measurements_are_those_of_borrowed_ones() {
         assert!(taken.rows[d..]
             .iter()
             .all(|r| r.kind == crate::calibrate::RowKind::Absolute));
-        assert!(taken.rows[d..].windows(2).all(|w| w[0].line < w[1].line));
+        assert!(taken.rows[d..]
+            .windows(2)
+            .all(|w| w[0].line() < w[1].line()));
         for (k, (a, b)) in borrowed.rows.iter().zip(&taken.rows).enumerate() {
             assert_eq!(format!("{a:?}"), format!("{b:?}"), "row {k}");
         }

@@ -160,16 +160,16 @@ impl Rows {
                    q: &[f64],
                    dt: Option<f64>,
                    measured: [f64; 3],
-                   line,
+                   line: usize,
                    sigma: Option<[f64; 3]>,
                    hint: &mut usize| Row {
             kind,
             marker: index_of(marker),
             chain: 0,
-            group: group_of(&configs, config, hint),
+            group: u32::try_from(group_of(&configs, config, hint)).unwrap_or(u32::MAX),
             q: q.into(),
             measured: Vector3::from(measured),
-            line,
+            line: u32::try_from(line).unwrap_or(u32::MAX),
             extra: (load_kg != 0.0 || dt.is_some() || sigma.is_some()).then(|| {
                 Box::new(RowExtra {
                     load_kg,
@@ -178,7 +178,6 @@ impl Rows {
                     ..RowExtra::default()
                 })
             }),
-            y: Vector3::from(measured),
         };
         let absolute_row = |o: &crate::io::Observation, hint: &mut usize| {
             row(

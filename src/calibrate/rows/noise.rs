@@ -20,15 +20,15 @@ pub fn noise_scale(mixed: bool, kind: RowKind) -> f64 {
     }
 }
 
-/// A row's left-hand side as the design holds it: `y` times
+/// A row's left-hand side `y` ([`Rows::y`]) as the design holds it: times
 /// [`noise_scale`] (not multiplied where the scale is 1): the same values
 /// wherever a pass needs them ([`super::super::design::Design`]).
-pub fn scaled_y(mixed: bool, row: &Row) -> Vector3<f64> {
+pub fn scaled_y(mixed: bool, row: &Row, y: Vector3<f64>) -> Vector3<f64> {
     let s = noise_scale(mixed, row.kind);
     if s == 1.0 {
-        row.y
+        y
     } else {
-        row.y * s
+        y * s
     }
 }
 

@@ -54,7 +54,7 @@ mod tests {
 mod size {
     /// What a row costs at 10⁶ rows (the doc of [`super::super::Row`]).
     #[test]
-    fn a_row_is_144_bytes() {
-        assert_eq!(core::mem::size_of::<super::super::Row>(), 144);
+    fn a_row_is_112_bytes() {
+        assert_eq!(core::mem::size_of::<super::super::Row>(), 112);
     }
 }
