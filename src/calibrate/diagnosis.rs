@@ -17,7 +17,7 @@ use super::trial::{self, Outcome};
 use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
-use nalgebra::Dyn;
+use nalgebra::{Dyn, Vector3};
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -237,6 +237,19 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
     Ok((cands, tested))
 }
 
+/// The nominal robot's error per row \[m\] ([`super::RowErrors`]' nominal
+/// column, the rows' left-hand sides at the nominal robot): held through
+/// the fit, or, when no row needed the exact model's equilibrium there,
+/// computed again at its end from the geometry it was at
+/// ([`super::Rows::rigid_lhs_at`]: 24 MB not held at 10⁶ rows).
+#[derive(Debug, Clone)]
+pub enum NominalRows {
+    /// Held, one per row.
+    Held(Vec<Vector3<f64>>),
+    /// At this geometry, without a joint law.
+    At(Box<super::geometry::Geometry>),
+}
+
 /// The calibration on a prepared engine: the declared model, then (unless
 /// `settings.diagnose` is off) the diagnosis loop.
 ///
@@ -254,6 +267,7 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
 ///
 /// # Errors
 /// [`CalibrationError`] from the fits.
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     mut e: Engine<'_>,
     declared: Vec<Param>,
@@ -261,6 +275,7 @@ pub fn run(
     model: &[Param],
     settings: &Settings,
     mut notes: Vec<String>,
+    nominal: NominalRows,
 ) -> Result<Report, CalibrationError> {
     let alpha = e.policy.alpha;
     (e.progress)("fitting the declared model");
@@ -487,6 +502,18 @@ pub fn run(
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
         .take();
+    // The nominal robot's error per row (in the room of the design's
+    // left-hand sides just freed, when it is computed again).
+    let mut nominal_um = match nominal {
+        NominalRows::Held(v) => v,
+        NominalRows::At(g) => e
+            .rows
+            .rigid_lhs_at(&g)
+            .map_err(|err| CalibrationError::Core("forward kinematics", err))?,
+    };
+    for y in &mut nominal_um {
+        *y *= 1e6;
+    }
     let model = e.calibrated(&current);
     let rigid = super::export::rigid_urdf(&mut e, &current, &model);
     if let Some(r) = rigid.as_ref().filter(|r| r.refit.is_some()) {
@@ -511,17 +538,19 @@ pub fn run(
         .reported_covariance(&current.params, &current.fit.covariance);
     // The report's vectors per configuration and per row: the fit's own,
     // taken over (`report/per_row.rs`).
+    let configs: std::sync::Arc<[i64]> = e.rows.configs.as_slice().into();
     let noise = ConfigNoises::new(
-        e.rows.configs.clone(),
+        configs.clone(),
         std::mem::take(&mut current.fit.sigma),
         std::mem::take(&mut current.fit.weights),
     );
-    let row_errors = RowErrors::new(
-        e.rows.configs.clone(),
+    let mut row_errors = RowErrors::new(
+        configs,
         e.names.markers.iter().map(|m| m.0).collect(),
         (e.rows.rows.iter()).map(|r| (r.group(), r.marker, r.kind == RowKind::Deflection)),
         std::mem::take(&mut current.residuals),
     );
+    row_errors.set_nominal_um(nominal_um);
     Ok(Report {
         method: e.fit_settings.method.name(),
         weights: if e.fit_settings.method == Method::Ols {

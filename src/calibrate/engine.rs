@@ -193,6 +193,26 @@ impl Engine<'_> {
         Ok(())
     }
 
+    /// Every row's left-hand side \[m\] at the rows' linearisation
+    /// ([`Rows::lhs`]): the last design's own when it was built there and
+    /// holds them unscaled (rows of one kind), else from the frames.
+    ///
+    /// # Errors
+    /// As [`Rows::frames`].
+    pub fn lhs(&self) -> Result<Vec<Vector3<f64>>, CalibrationError> {
+        let last = self
+            .last_design
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let (Some((_, at, d)), Some(now)) = (last.as_ref(), self.rows.at.as_ref()) {
+            if at == now && !self.rows.mixed() && d.y.len() == 3 * self.rows.rows.len() {
+                return Ok(d.y.as_chunks::<3>().0.iter().map(|&y| y.into()).collect());
+            }
+        }
+        drop(last);
+        (self.rows.lhs()).map_err(|e| CalibrationError::Core("forward kinematics", e))
+    }
+
     /// Places the base by a rigid registration of the predicted marker
     /// positions onto the measured ones ([`Geometry::register`]), when
     /// `model` identifies the base and there are absolute rows.

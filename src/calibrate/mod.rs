@@ -235,9 +235,21 @@ fn calibrate_rows(
     let with_dropped: Vec<Param> = declared.iter().chain(&dropped).copied().collect();
     e.register_base(&with_dropped)?;
     // (The rows keep no left-hand side: computed from their frames.)
-    let mut nominal_rows =
-        (e.rows.lhs()).map_err(|e| CalibrationError::Core("forward kinematics", e))?;
-    let nominal = Nominal::of(&nominal_rows);
+    let nominal_y = e.lhs()?;
+    let nominal = Nominal::of(&nominal_y);
+    // Each row's, for the report: computed again at the end where the
+    // nominal robot needed no equilibrium (`diagnosis::NominalRows`).
+    let exact = (e.rows.rows.iter()).any(|r| r.extra.as_ref().is_some_and(|x| x.y.is_some()));
+    let at = (e.rows.at.as_ref())
+        .filter(|_| !exact)
+        .map(|(g, _)| g.clone());
+    let nominal_rows = match at {
+        Some(at) => {
+            drop(nominal_y);
+            diagnosis::NominalRows::At(Box::new(at))
+        }
+        None => diagnosis::NominalRows::Held(nominal_y),
+    };
     // A declared compliance the data cannot identify is too few
     // configurations (or markers, or a load that does not load the joint)
     // for the declared model: an error naming the parameters, not a fit that
@@ -322,12 +334,16 @@ fn calibrate_rows(
             }
         }
     }
-    for y in &mut nominal_rows {
-        *y *= 1e6;
-    }
-    let mut report = diagnosis::run(e, declared, left_out, &model, &settings, notes)?;
+    let mut report = diagnosis::run(
+        e,
+        declared,
+        left_out,
+        &model,
+        &settings,
+        notes,
+        nominal_rows,
+    )?;
     report.nominal = nominal;
-    report.row_errors.set_nominal_um(nominal_rows);
     // The input's, the run's (`diagnosis::run`), then the result's.
     warnings.append(&mut report.warnings);
     warnings.extend(plausibility::check_result(&report, &policy)?);

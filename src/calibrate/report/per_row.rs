@@ -6,6 +6,8 @@
 //! while the fit's 96 MB were still there, at the end of a run that holds
 //! the rows: its peak memory.
 
+use std::sync::Arc;
+
 use nalgebra::Vector3;
 
 /// The noise of one configuration as the final fit saw it.
@@ -39,8 +41,9 @@ pub struct RowError {
 /// Every row's error before and after ([`RowError`]), by column.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RowErrors {
-    /// `config` as in the CSV, per configuration ([`RowErrors::group`]'s).
-    configs: Vec<i64>,
+    /// `config` as in the CSV, per configuration ([`RowErrors::group`]'s;
+    /// shared with the report's [`ConfigNoises`]).
+    configs: Arc<[i64]>,
     /// Marker ids, per marker index ([`RowErrors::marker`]'s).
     marker_ids: Vec<u32>,
     /// Each row's configuration (index into `configs`).
@@ -60,7 +63,7 @@ impl RowErrors {
     /// residuals `residuals` \[m\] (one per row; made µm in place), the
     /// nominal errors zero, with `configs` and `marker_ids` to name them.
     pub(crate) fn new(
-        configs: Vec<i64>,
+        configs: Arc<[i64]>,
         marker_ids: Vec<u32>,
         rows: impl Iterator<Item = (usize, u8, bool)>,
         mut residuals: Vec<Vector3<f64>>,
@@ -159,7 +162,7 @@ impl<'a> IntoIterator for &'a RowErrors {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ConfigNoises {
     /// `config` as in the CSV.
-    config: Vec<i64>,
+    config: Arc<[i64]>,
     /// Residual σ per axis \[µm\].
     sigma_um: Vec<Vector3<f64>>,
     /// The weight per axis.
@@ -170,12 +173,11 @@ impl ConfigNoises {
     /// The configurations `config` with the fit's σ per axis `sigma` \[m\]
     /// (made µm in place) and weights `weight`, as many as the shortest.
     pub(crate) fn new(
-        mut config: Vec<i64>,
+        config: Arc<[i64]>,
         mut sigma: Vec<Vector3<f64>>,
         mut weight: Vec<Vector3<f64>>,
     ) -> Self {
         let n = config.len().min(sigma.len()).min(weight.len());
-        config.truncate(n);
         sigma.truncate(n);
         weight.truncate(n);
         for s in &mut sigma {
@@ -190,12 +192,12 @@ impl ConfigNoises {
 
     /// Configurations.
     pub fn len(&self) -> usize {
-        self.config.len()
+        self.sigma_um.len()
     }
 
     /// Whether there is none.
     pub fn is_empty(&self) -> bool {
-        self.config.is_empty()
+        self.sigma_um.is_empty()
     }
 
     /// Configuration `i`'s noise.
@@ -245,7 +247,7 @@ mod tests {
             Vector3::new(0.1, 0.2, 0.3),
         ];
         let rows = [(1_usize, 0_u8, true), (0, 7, false)];
-        let mut e = RowErrors::new(vec![10, 20], vec![4], rows.into_iter(), res.clone());
+        let mut e = RowErrors::new(vec![10, 20].into(), vec![4], rows.into_iter(), res.clone());
         e.set_nominal_um(vec![Vector3::new(1.0, 2.0, 3.0)]);
         let want = [
             RowError {
@@ -266,7 +268,11 @@ mod tests {
         assert_eq!(e.iter().collect::<Vec<_>>(), want);
         assert_eq!((e.len(), e.get(2)), (2, None));
         let s = vec![Vector3::new(1e-6, 2e-6, 3e-6)];
-        let n = ConfigNoises::new(vec![5, 6], s.clone(), vec![Vector3::new(0.5, 1.0, 2.0)]);
+        let n = ConfigNoises::new(
+            vec![5, 6].into(),
+            s.clone(),
+            vec![Vector3::new(0.5, 1.0, 2.0)],
+        );
         let want = ConfigNoise {
             config: 5,
             sigma_um: [s[0].x * 1e6, s[0].y * 1e6, s[0].z * 1e6],
