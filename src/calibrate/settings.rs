@@ -116,9 +116,11 @@ pub struct Policy {
     /// A design of more rows than this does not hold its columns: each
     /// pass that reads them computes them again from the rows, a block at
     /// a time, bit for bit the same (384 B a row fewer at 16 parameters,
-    /// for a pass of forward kinematics per read). `usize::MAX` (always
-    /// held): the reads after a fit are not yet merged into few passes,
-    /// and one at 10⁶ rows is ~0.3 s.
+    /// for a pass of forward kinematics per read). 100 000 (a held design
+    /// of 16 parameters is then 38 MB at most): at 10⁶ rows a run without
+    /// the held design takes 273 MiB where one with it took 630 MiB, in
+    /// ~1.2× the time (`BENCHMARKS.md`); below, the time of the passes is
+    /// worth more than the memory. `usize::MAX`: always held.
     pub max_held_design_rows: usize,
     /// A kept parameter whose variance inflation `1/(1 − R²)` (its
     /// unweighted column regressed on the other parameters' columns,
@@ -236,7 +238,7 @@ impl Default for Policy {
             max_variance_inflation: 1000.0,
             max_absorption: 10.0,
             max_steps: 50,
-            max_held_design_rows: usize::MAX,
+            max_held_design_rows: 100_000,
             max_halvings: 10,
             max_bins: 32,
             compensator_bins: crate::model::bins::COMPENSATOR_BINS,

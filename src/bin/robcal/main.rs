@@ -514,10 +514,12 @@ fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String>
 /// `ROBCAL_MAX_HELD_DESIGN_ROWS`: a design of more rows does not hold its
 /// columns but computes them again where a pass reads them
 /// (`Policy::max_held_design_rows`: the same report, less memory, more
-/// time); unset, every design is held.
+/// time); unset, the policy's default.
 fn max_held_design_rows() -> Result<usize, String> {
     match std::env::var("ROBCAL_MAX_HELD_DESIGN_ROWS") {
-        Err(std::env::VarError::NotPresent) => Ok(usize::MAX),
+        Err(std::env::VarError::NotPresent) => {
+            Ok(robcal::calibrate::Policy::default().max_held_design_rows)
+        }
         Ok(v) => v
             .trim()
             .parse()
