@@ -427,3 +427,47 @@ fn rows_of_taken_measurements_are_those_of_borrowed_ones() {
         assert!(!names.bins.is_empty(), "the KR-270's joints have bins");
     }
 }
+
+/// The rows' left-hand sides at the nominal robot (no joint law: first
+/// order) computed again from its geometry once the rows are elsewhere
+/// ([`Rows::rigid_lhs_at`]: the report's nominal error per row) are the
+/// ones the relinearisation there gave, bit for bit.
+#[test]
+fn the_nominal_left_hand_sides_come_back_from_the_geometry() {
+    let (job, data) = kr270();
+    let mut names = names_of(&job);
+    let policy = crate::calibrate::Policy::default();
+    let mut rows = Rows::new(&job, &data, true, &mut names, &policy).expect("rows");
+    assert!(rows.kinds.absolute && rows.kinds.deflections);
+    let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
+    let nominal = Geometry::nominal_tree(
+        &job.robot.chain,
+        &job.robot.ends,
+        &markers,
+        &crate::calibrate::marker_ends(&job),
+    );
+    let lin = Linearisation::nominal(DeflectionModel::Exact);
+    rows.relinearise_on(&nominal, &lin, 2).expect("relinearise");
+    assert!(rows
+        .rows
+        .iter()
+        .all(|r| r.extra.as_ref().is_none_or(|e| e.y.is_none())));
+    let bits = |v: &[Vector3<f64>]| -> Vec<[u64; 3]> {
+        v.iter()
+            .map(|y| [y.x, y.y, y.z].map(f64::to_bits))
+            .collect()
+    };
+    let there = rows.lhs().expect("frames");
+    assert_eq!(
+        bits(&rows.rigid_lhs_at(&nominal).expect("frames")),
+        bits(&there)
+    );
+    let mut moved = nominal.clone();
+    moved.base.translation.vector.x += 1e-3;
+    rows.relinearise_on(&moved, &lin, 2).expect("relinearise");
+    assert_ne!(bits(&rows.lhs().expect("frames")), bits(&there));
+    assert_eq!(
+        bits(&rows.rigid_lhs_at(&nominal).expect("frames")),
+        bits(&there)
+    );
+}
