@@ -248,6 +248,9 @@ fn a_file_is_read_in_blocks_only_within_its_sizes() {
     assert_eq!(e.line, Some(o.line), "{e}");
     assert!(e.to_string().contains("changed"), "{e}");
     std::fs::remove_dir_all(&dir).expect("removed");
+    // Nothing wanted, nothing read: the file may be gone.
+    assert_eq!(read.written_cells(&[]).expect("nothing to read"), []);
+    assert!(read.written_cells(&[(o, 1)]).is_err());
 }
 
 /// The lines of `text` (the header's first), their line ends `\n`,
