@@ -65,27 +65,12 @@ impl Rows {
     /// # Errors
     /// As [`Rows::frames`].
     pub fn lhs(&self) -> Result<Vec<Vector3<f64>>, Error> {
-        let rows = &self.rows;
-        let threads = super::super::parallel::for_rows(rows.len());
-        let per = rows.len().div_ceil(threads).max(1);
-        let runs = super::super::parallel::map(rows.len().div_ceil(per), threads, |t| {
-            let mut frames = Frames::empty();
-            rows[t * per..((t + 1) * per).min(rows.len())]
-                .iter()
-                .map(|row| {
-                    if !needs_frames(row) {
-                        return Ok(lhs(&self.markers, row, &frames));
-                    }
-                    self.frames_into(row, &mut frames)?;
-                    Ok(self.y(row, &frames))
-                })
-                .collect::<Result<Vec<_>, Error>>()
-        });
-        let mut out = Vec::with_capacity(rows.len());
-        for run in runs {
-            out.extend(run?);
-        }
-        Ok(out)
+        per_row(&self.rows, |row, frames| {
+            if needs_frames(row) {
+                self.frames_into(row, frames)?;
+            }
+            Ok(self.y(row, frames))
+        })
     }
 
     /// [`Rows::lhs`] of every row as [`Rows::relinearise`] at `geometry`
@@ -97,33 +82,20 @@ impl Rows {
     /// As [`Rows::frames`].
     pub fn rigid_lhs_at(&self, geometry: &Geometry) -> Result<Vec<Vector3<f64>>, Error> {
         let chains = geometry.placed_chains();
-        let rows = &self.rows;
-        let threads = super::super::parallel::for_rows(rows.len());
-        let per = rows.len().div_ceil(threads).max(1);
-        let runs = super::super::parallel::map(rows.len().div_ceil(per), threads, |t| {
-            let mut frames = Frames::empty();
-            rows[t * per..((t + 1) * per).min(rows.len())]
-                .iter()
-                .map(|row| {
-                    if row.kind == RowKind::Deflection {
-                        return Ok(row.measured);
-                    }
-                    let end = geometry.end_of(row.marker);
-                    let chain = chains.get(end.min(chains.len().saturating_sub(1))).ok_or(
-                        Error::Mismatch {
-                            what: "a geometry without a chain",
-                        },
-                    )?;
-                    chain.frames_into(&row.q, &mut frames)?;
-                    Ok(row.measured - frames.point_m(&marker_m(&geometry.markers, row)))
-                })
-                .collect::<Result<Vec<_>, Error>>()
-        });
-        let mut out = Vec::with_capacity(rows.len());
-        for run in runs {
-            out.extend(run?);
-        }
-        Ok(out)
+        per_row(&self.rows, |row, frames| {
+            if row.kind == RowKind::Deflection {
+                return Ok(row.measured);
+            }
+            let end = geometry.end_of(row.marker);
+            let chain =
+                chains
+                    .get(end.min(chains.len().saturating_sub(1)))
+                    .ok_or(Error::Mismatch {
+                        what: "a geometry without a chain",
+                    })?;
+            chain.frames_into(&row.q, frames)?;
+            Ok(row.measured - frames.point_m(&marker_m(&geometry.markers, row)))
+        })
     }
 
     /// [`Rows::point_m`] of each of `rows` (some of these rows), at their
@@ -132,24 +104,34 @@ impl Rows {
     /// # Errors
     /// As [`Rows::frames`].
     pub fn points_m(&self, rows: &[&Row]) -> Result<Vec<Vector3<f64>>, Error> {
-        let threads = super::super::parallel::for_rows(rows.len());
-        let per = rows.len().div_ceil(threads).max(1);
-        let runs = super::super::parallel::map(rows.len().div_ceil(per), threads, |t| {
-            let mut frames = Frames::empty();
-            rows[t * per..((t + 1) * per).min(rows.len())]
-                .iter()
-                .map(|row| {
-                    self.frames_into(row, &mut frames)?;
-                    Ok(self.point_m(row, &frames))
-                })
-                .collect::<Result<Vec<_>, Error>>()
-        });
-        let mut points = Vec::with_capacity(rows.len());
-        for run in runs {
-            points.extend(run?);
-        }
-        Ok(points)
+        per_row(rows, |row, frames| {
+            self.frames_into(row, frames)?;
+            Ok(self.point_m(row, frames))
+        })
     }
+}
+
+/// `f(row, frames)` of each of `rows`, in order, with one [`Frames`] to
+/// fill per run of rows: runs on worker threads with many rows; the first
+/// error in row order.
+fn per_row<R: std::borrow::Borrow<Row> + Sync>(
+    rows: &[R],
+    f: impl Fn(&Row, &mut Frames<f64, J>) -> Result<Vector3<f64>, Error> + Sync,
+) -> Result<Vec<Vector3<f64>>, Error> {
+    let threads = super::super::parallel::for_rows(rows.len());
+    let per = rows.len().div_ceil(threads).max(1);
+    let runs = super::super::parallel::map(rows.len().div_ceil(per), threads, |t| {
+        let mut frames = Frames::empty();
+        rows[t * per..((t + 1) * per).min(rows.len())]
+            .iter()
+            .map(|row| f(row.borrow(), &mut frames))
+            .collect::<Result<Vec<_>, Error>>()
+    });
+    let mut out = Vec::with_capacity(rows.len());
+    for run in runs {
+        out.extend(run?);
+    }
+    Ok(out)
 }
 
 /// Whether [`lhs`] of `row` reads its frames (a first-order absolute
