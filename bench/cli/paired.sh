@@ -8,12 +8,14 @@
 # One warm-up run of each command (not counted), then RUNS runs of A (default
 # 5); with --vs, A and B in turn — A B A B … — and the ratio A / B taken pair
 # by pair, so that a machine whose speed drifts during the call (a shared
-# host) moves both sides of a ratio alike. COMMAND_B is one string split as a
-# shell splits words; put a variable before it with `env`:
+# host) moves both sides of a ratio alike. COMMAND_B is one string split at
+# white space (no quoting, no shell); put a variable before it with `env`:
 #   --vs "env ROBCAL_MAX_HELD_DESIGN_ROWS=0 target/release/robcal calibrate …"
 # What the commands print is thrown away.
 #
-# Printed per command: wall seconds (a monotonic clock around the child),
+# Printed per command: wall seconds (the clock read by `date +%s%N` just
+# before and after the child; GNU time's own start-up, about a millisecond,
+# is in it),
 # CPU seconds (user + system) and peak resident memory in MiB (the largest
 # resident set of the process, as GNU time's %M reports it), each as the
 # median [min, max]; with --vs, the paired A / B wall ratio the same way.
