@@ -59,8 +59,7 @@ impl WideAccumulator {
     /// once per buffer of rows, in the vector code. On AVX-512 a block's
     /// three rows take about 40 % less time than [`Self::update`] of the
     /// block at N = 9, 15 to 20 % less at N = 30 and a few percent less at
-    /// N = 60 (BENCHMARKS.md). At `N < 8` a row is one chunk of the buffer
-    /// (AVX-512: one masked vector a row); on other instruction sets the
+    /// N = 60 (BENCHMARKS.md). On instruction sets other than AVX-512 the
     /// copy goes one value at a time.
     ///
     /// # Errors
@@ -295,11 +294,12 @@ impl WithSimd for CopyRows<'_, '_> {
     }
 }
 
-/// [`CopyRows`] with AVX-512 (`N ≥ 8`; else the code for any instruction
-/// set): the rows' weight checks first, then the rows four at a time
-/// ([`Chunks::group`]), eight columns a vector, the last chunk (the row's
-/// `N mod 8` last values, then `Δp`, then zeros) from the row's last eight
-/// values by one permute.
+/// [`CopyRows`] with AVX-512: the rows' weight checks first, then the rows
+/// four at a time ([`Chunks::group`]), eight columns a vector, the last
+/// chunk (the row's `N mod 8` last values, then `Δp`, then zeros) from the
+/// row's last eight values by one permute, or at `N < 8` from its first
+/// eight ([`Chunks::short_row`]; one value at a time, the copy was three
+/// quarters of `update_rows` at N = 1).
 #[cfg(target_arch = "x86_64")]
 struct CopyRowsV4<'a, 'b> {
     op: CopyRows<'a, 'b>,
@@ -315,9 +315,6 @@ impl pulp::NullaryFnOnce for CopyRowsV4<'_, '_> {
         use pulp::x86::V4;
         let CopyRowsV4 { op, v4 } = self;
         let (n, cap, row0) = (op.n, op.cap, op.row0);
-        if n < 8 {
-            return one_chunk(v4, op);
-        }
         let rows = op.rows;
         let (bad, equations) = checks(v4, &rows);
         let mut out = Copied {
@@ -351,81 +348,6 @@ impl pulp::NullaryFnOnce for CopyRowsV4<'_, '_> {
         }
         out
     }
-}
-
-/// [`CopyRowsV4`] at `N < 8`: each row is one chunk of the buffer, `[bᵢᵀ |
-/// Δpᵢ | 0 …]` ([`row_chunk`]); the checks eight rows a vector
-/// ([`checks`]), the squares on four running sums (a bound: their order
-/// does not matter). One value at a time, the copy was three quarters of
-/// `update_rows` at N = 1.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn one_chunk(v4: pulp::x86::V4, op: CopyRows<'_, '_>) -> Copied {
-    use pulp::x86::V4;
-    let (rows, n, row0) = (op.rows, op.n, op.row0);
-    let count = rows.len();
-    let (bad, equations) = checks(v4, &rows);
-    let (low, dp_lane) = (((1u16 << n) - 1) as u8, 1u8 << n);
-    let (du, _) = V4::as_mut_simd_f64s(op.du);
-    let du = &mut du[row0..row0 + count];
-    let mut dv = op
-        .dv
-        .map(|dv| &mut V4::as_mut_simd_f64s(dv).0[row0..row0 + count]);
-    // Two running sums each, for two rows at a time (one sum's latency a row
-    // was a third of the copy).
-    let mut q = [v4.splat_f64s(0.0); 4];
-    for i0 in (0..count).step_by(2) {
-        for g in 0..2 {
-            let i = i0 + g;
-            if i == count {
-                break;
-            }
-            let x = row_chunk(v4, &rows, n, i, low, dp_lane);
-            let w = rows.w[i];
-            let y = v4.mul_f64s(v4.splat_f64s(w), x);
-            du[i] = y;
-            q[g] = v4.mul_add_f64s(y, y, q[g]);
-            if let Some(dv) = dv.as_deref_mut() {
-                let ws = rows.sigma.map_or(0.0, |s| w * w * s[i]);
-                let z = v4.mul_f64s(v4.splat_f64s(ws), x);
-                dv[i] = z;
-                q[2 + g] = v4.mul_add_f64s(z, z, q[2 + g]);
-            }
-        }
-    }
-    let (qu, qv) = (v4.add_f64s(q[0], q[1]), v4.add_f64s(q[2], q[3]));
-    let s = v4.add_f64s(qu, qv);
-    Copied {
-        q: v4.reduce_sum_f64s(s),
-        bad,
-        equations,
-    }
-}
-
-/// Row `i` of `rows` (`N < 8`) as one chunk: `[bᵢᵀ | Δpᵢ | 0 …]`. Its
-/// eight values from its first are read at once where they are all in `b`
-/// (the lanes from `N` on then cleared), the last rows' by a partial load.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn row_chunk(
-    v4: pulp::x86::V4,
-    rows: &Rows<'_>,
-    n: usize,
-    i: usize,
-    low: u8,
-    dp_lane: u8,
-) -> pulp::f64x8 {
-    let avx = v4.avx512f;
-    let b: pulp::f64x8 = match rows.b.get(i * n..i * n + 8) {
-        Some(v) => {
-            let v: [f64; 8] = v.try_into().unwrap_or([0.0; 8]);
-            pulp::cast(v)
-        }
-        None => v4.partial_load_f64s(&rows.b[i * n..(i + 1) * n]),
-    };
-    let b = avx._mm512_maskz_mov_pd(low, pulp::cast(b));
-    let dp = avx._mm512_set1_pd(rows.dp[i]);
-    pulp::cast(avx._mm512_mask_mov_pd(b, dp_lane, dp))
 }
 
 /// [`weights`] of every row, eight rows a vector (the scalar checks, one
@@ -499,6 +421,18 @@ impl Chunks<'_> {
         v4.reduce_sum_f64s(s)
     }
 
+    /// Row `i`'s values at `N < 8` (its only chunk): the eight values from
+    /// its first where they are all in `b` (lanes `N ..` are the next row's,
+    /// cleared by the caller), else a partial load.
+    #[inline(always)]
+    fn short_row(&self, v4: pulp::x86::V4, i: usize) -> pulp::f64x8 {
+        let (b, n) = (self.rows.b, self.n);
+        match b.get(i * n..i * n + 8) {
+            Some(v) => pulp::cast::<[f64; 8], _>(v.try_into().unwrap_or([0.0; 8])),
+            None => v4.partial_load_f64s(&b[i * n..(i + 1) * n]),
+        }
+    }
+
     /// Rows `i0 .. i0 + G`, every chunk: each chunk's `G` loads before its
     /// `G` stores (a load after a store to an address equal modulo 4 KiB
     /// waits for it), the squares into `G` running sums.
@@ -543,8 +477,12 @@ impl Chunks<'_> {
             }
         }
         for g in 0..G {
-            let v: [f64; 8] = rs[g * n + n - 8..][..8].try_into().unwrap_or([0.0; 8]);
-            let v = avx._mm512_maskz_permutexvar_pd(self.low, self.idx, pulp::cast(v));
+            let v = if n >= 8 {
+                let v: [f64; 8] = rs[g * n + n - 8..][..8].try_into().unwrap_or([0.0; 8]);
+                avx._mm512_maskz_permutexvar_pd(self.low, self.idx, pulp::cast(v))
+            } else {
+                avx._mm512_maskz_mov_pd(self.low, pulp::cast(self.short_row(v4, i0 + g)))
+            };
             let dp = avx._mm512_set1_pd(self.rows.dp[i0 + g]);
             x[g] = pulp::cast(avx._mm512_mask_mov_pd(v, self.dp_lane, dp));
         }
