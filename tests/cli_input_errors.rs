@@ -398,15 +398,27 @@ fn validation_reports_points_mean_and_max() {
     }
 }
 
+/// A fit that did not converge is not a calibration (issue 58): its report
+/// is written, marked (`failure`), and the run exits 1, unless the user
+/// accepts it (`--accept-unconverged`: exit 0, the same report).
 #[test]
 fn a_fit_stopped_at_max_iter_says_so() {
     let (dir, setup) = job("max-iter", None, None);
     let data = shipped(&dir);
-    let v = json(&run(
-        &setup,
-        &data,
-        &["--no-diagnose", "--json", "--max-iter", "1"],
-    ));
+    let args = ["--no-diagnose", "--json", "--max-iter", "1"];
+    let refused = run(&setup, &data, &args);
+    assert_eq!(refused.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("not a calibration"), "{err}");
+    let marked: serde_json::Value = serde_json::from_slice(&refused.stdout).unwrap();
+    assert!(
+        (marked["failure"].as_str()).is_some_and(|f| f.contains("did not converge")),
+        "{marked}"
+    );
+    let mut accepting = args.to_vec();
+    accepting.push("--accept-unconverged");
+    let v = json(&run(&setup, &data, &accepting));
+    assert_eq!(v, marked);
     assert_eq!(v["converged"], false);
     let w = v["warnings"].as_array().unwrap();
     assert!(
@@ -417,6 +429,7 @@ fn a_fit_stopped_at_max_iter_says_so() {
     let v = json(&run(&setup, &data, &["--no-diagnose", "--json"]));
     assert_eq!(v["converged"], true);
     assert_eq!(v["warnings"], serde_json::json!([]));
+    assert!(v.get("failure").is_none(), "{v}");
 }
 
 #[test]

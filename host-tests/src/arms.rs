@@ -170,6 +170,34 @@ impl Chain {
         format!("l{}", self.joints.len())
     }
 
+    /// The job of this chain's URDF (base `l0`, tip [`Chain::tip`]) with the
+    /// setup text `setup` (files named `arm.toml`, `arm.urdf`), and the
+    /// measurements `csv` read for it.
+    ///
+    /// # Errors
+    /// The readers' errors, as text.
+    pub fn job(
+        &self,
+        setup: &str,
+        csv: &str,
+    ) -> Result<(robcal::io::Job, robcal::io::Measurements), String> {
+        use robcal::io::{parse_measurements, Job, Robot, Setup};
+        let setup = Setup::parse(setup, "arm.toml").map_err(|e| e.to_string())?;
+        let robot = Robot::parse(&self.urdf(), "arm.urdf", Some("l0"), Some(&self.tip()))
+            .map_err(|e| e.to_string())?;
+        setup
+            .check_robot(&robot, std::path::Path::new("arm.toml"))
+            .map_err(|e| e.to_string())?;
+        let m = parse_measurements(csv.as_bytes(), "arm.csv", &robot, &setup)
+            .map_err(|e| e.to_string())?;
+        let job = Job {
+            setup_path: "arm.toml".into(),
+            setup,
+            robot,
+        };
+        Ok((job, m))
+    }
+
     /// Random joint values of a movable joint of this kind: revolute
     /// [-π, π] rad, prismatic [-0.3, 0.3] m.
     pub fn random_q(&self, rng: &mut SplitMix64) -> Vec<f64> {

@@ -24,7 +24,7 @@ use host_tests::exact::Fk;
 use nalgebra::{Isometry3, Vector3};
 use proptest::prelude::*;
 use robcal::calibrate::{self, Method, Report, Settings};
-use robcal::io::{parse_measurements, GeometryModel, Job, MarkerModel, Robot, Setup};
+use robcal::io::{parse_measurements, GeometryModel, Job, MarkerModel};
 use robcal_paper::rng::SplitMix64;
 
 fn root() -> PathBuf {
@@ -314,24 +314,7 @@ fn calibrate_case(c: &Case) -> Result<Report, String> {
 }
 
 fn calibrate_with(c: &Case, settings: &Settings) -> Result<Report, String> {
-    let setup = Setup::parse(&c.setup, "arm.toml").map_err(|e| e.to_string())?;
-    let robot = Robot::parse(
-        &c.chain.urdf(),
-        "arm.urdf",
-        Some("l0"),
-        Some(&c.chain.tip()),
-    )
-    .map_err(|e| e.to_string())?;
-    setup
-        .check_robot(&robot, Path::new("arm.toml"))
-        .map_err(|e| e.to_string())?;
-    let m = parse_measurements(c.csv.as_bytes(), "arm.csv", &robot, &setup)
-        .map_err(|e| e.to_string())?;
-    let job = Job {
-        setup_path: "arm.toml".into(),
-        setup,
-        robot,
-    };
+    let (job, m) = c.chain.job(&c.setup, &c.csv)?;
     calibrate::calibrate(&job, &m, settings, &mut |_| {}).map_err(|e| e.to_string())
 }
 

@@ -92,6 +92,13 @@ impl Design {
         self.residuals_on(cols, x, threads, |i, r| all.unscaled(i, r))
     }
 
+    /// [`Design::residual`] of every row, scaled as the fit sees them, by
+    /// runs of rows on worker threads.
+    pub fn scaled_residuals(&self, cols: &[usize], x: &[f64]) -> Vec<Vector3<f64>> {
+        let threads = super::parallel::for_rows(self.rows());
+        self.residuals_on(cols, x, threads, |_, r| r)
+    }
+
     /// `unscaled(i, `[`Design::residual`]`(cols, x, i))` of every row `i`,
     /// on `threads` threads.
     fn residuals_on(

@@ -587,5 +587,6 @@ pub fn run(
         notes,
         rigid,
         warnings,
+        failure: None,
     })
 }

@@ -89,6 +89,45 @@ pub struct Engine<'a> {
 /// A design and what it was built from: [`Engine::last_design`].
 pub type LastDesign = (Vec<Param>, (Geometry, Linearisation), Arc<Design>);
 
+/// A linearisation a fit went through, and the cost of its model
+/// ([`Engine::fit_carrying`]): where a fit that does not settle ends.
+struct Good {
+    geometry: Geometry,
+    lin: Linearisation,
+    /// The cost of its model, with the fit's first weights.
+    cost: f64,
+}
+
+/// Whether the cost `c` is above `bound`, or not a number.
+fn above(c: f64, bound: f64) -> bool {
+    c.is_nan() || c > bound
+}
+
+/// The cost of the model `v` (values of the columns `cols` of `d`): the
+/// sum of its squared residuals (scaled, as the fit sees them) weighted by
+/// `weights` per group and axis (unit weights when `None`). With unit
+/// weights and the unit-weight sums `ols` of those columns, from the sums,
+/// `yᵀy − 2vᵀη + vᵀΛv`, without a pass over the rows.
+fn cost(
+    d: &Design,
+    cols: &[usize],
+    v: &[f64],
+    ols: Option<&Accumulator<f64, nalgebra::Dyn>>,
+    weights: Option<&[Vector3<f64>]>,
+) -> f64 {
+    if let (Some(acc), None) = (ols, weights) {
+        let v = nalgebra::DVector::from_column_slice(v);
+        return acc.weighted_yy() - 2.0 * v.dot(acc.eta()) + v.dot(&(acc.information() * &v));
+    }
+    let one = Vector3::repeat(1.0);
+    (d.scaled_residuals(cols, v).iter().enumerate())
+        .map(|(i, r)| {
+            let w = weights.and_then(|w| w.get(d.group[i])).unwrap_or(&one);
+            w.component_mul(r).norm_squared()
+        })
+        .sum()
+}
+
 /// [`Engine::rows_mut`] of the engine's `rows` and `last` design.
 fn rows_mut<'r>(rows: &'r mut Arc<Rows>, last: &mut Mutex<Option<LastDesign>>) -> &'r mut Rows {
     let last = last
@@ -277,6 +316,15 @@ impl Engine<'_> {
         let cols: Vec<usize> = (0..params.len()).collect();
         let all: Vec<Param> = params.iter().chain(carried).copied().collect();
         let every: Vec<usize> = (0..all.len()).collect();
+        // The linearisation whose model fitted the rows best so far (by
+        // the cost with the first fit's weights), the first one's cost, and
+        // those weights: a fit that does not settle, or settles worse than
+        // where it started, ends at the best one, not converged.
+        let mut best: Option<Good> = None;
+        let mut start_cost: Option<f64> = None;
+        let mut reference: Option<Option<Vec<Vector3<f64>>>> = None;
+        // The fit is back at the best linearisation and ends there.
+        let mut stuck = false;
         loop {
             if self.cancel.is_some_and(|c| c()) {
                 return Err(CalibrationError::Cancelled);
@@ -333,6 +381,25 @@ impl Engine<'_> {
                     x
                 }
             };
+            // The model at this linearisation (no geometric step, the joint
+            // law the rows were evaluated at, every other parameter at this
+            // estimate) and its cost with the first fit's weights.
+            let cost_here = (geometric || iterates).then(|| {
+                let w = reference
+                    .get_or_insert_with(|| out.as_ref().map(|o| o.0.weights.clone()))
+                    .as_deref();
+                cost(&d, &cols, &self.model_here(params, &x), ols.as_ref(), w)
+            });
+            if let Some(c) = cost_here {
+                start_cost.get_or_insert(c);
+                if best.as_ref().is_none_or(|b| above(b.cost, c)) {
+                    best = Some(Good {
+                        geometry: self.geometry.clone(),
+                        lin: self.lin.clone(),
+                        cost: c,
+                    });
+                }
+            }
             let step = params
                 .iter()
                 .zip(&x)
@@ -349,22 +416,45 @@ impl Engine<'_> {
                     .fold(0.0_f64, f64::max),
                 _ => 0.0,
             };
-            if (geometric && step > self.policy.step_tolerance)
-                || moved > self.policy.gauss_newton_sigma
-            {
-                if relinearisations < self.policy.max_steps {
-                    // This design's storage is the next one's: nobody else
-                    // may hold it (a second 300 MB at 10⁶ rows).
+            let more = (geometric && step > self.policy.step_tolerance)
+                || moved > self.policy.gauss_newton_sigma;
+            // Settled, or out of steps: a fit whose model is not its best
+            // one (it ran out of steps away from it, or settled worse than
+            // where it started: a wrong stationary point) goes back there
+            // and ends, not converged.
+            let worse = match (cost_here, start_cost, &best) {
+                (Some(c), Some(s0), Some(b)) => {
+                    let tol = 1.0 + self.policy.max_cost_increase;
+                    (!more && above(c, s0 * tol)) || (more && above(c, b.cost * tol))
+                }
+                _ => false,
+            };
+            if !stuck && more && relinearisations < self.policy.max_steps {
+                // This design's storage is the next one's: nobody else
+                // may hold it (a second 300 MB at 10⁶ rows).
+                drop(d);
+                self.geometry.apply(params, &x);
+                let to = Linearisation::of(self.lin.model, params, &x, &self.names);
+                self.step_towards(&to, &all)?;
+                relinearisations += 1;
+                continue;
+            }
+            if more {
+                settled = false;
+            }
+            if !stuck && worse {
+                if let Some(b) = best.take() {
                     drop(d);
-                    self.geometry.apply(params, &x);
-                    let to = Linearisation::of(self.lin.model, params, &x, &self.names);
-                    self.step_towards(&to, &all)?;
+                    settled = false;
+                    stuck = true;
+                    self.geometry = b.geometry;
+                    self.lin = b.lin;
+                    self.relinearise_for(&all)?;
                     relinearisations += 1;
                     continue;
                 }
-                settled = false;
             }
-            let (out, kept) = match (out, &ols) {
+            let (mut out, kept) = match (out, &ols) {
                 (Some(out), _) => out,
                 // OLS: the fit's sums are the ones just made.
                 (None, Some(acc)) => {
@@ -373,15 +463,24 @@ impl Engine<'_> {
                 }
                 (None, None) => full_fit()?,
             };
-            // The residuals of the fit's last σ pass when it made them at
-            // its estimate (the same bits as a pass of their own).
-            let residuals = match kept {
-                Some(r) => r
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, r)| self.rows.unscaled(i, r))
-                    .collect(),
-                None => d.residuals(&self.rows, &cols, &out.x),
+            // A fit that did not settle is the model at its last good
+            // linearisation, as it is written (no step it did not take):
+            // its estimate and residuals there, not the linearised ones of
+            // a step that was not applied.
+            let residuals = if settled {
+                // The residuals of the fit's last σ pass when it made them
+                // at its estimate (the same bits as a pass of their own).
+                match kept {
+                    Some(r) => r
+                        .into_iter()
+                        .enumerate()
+                        .map(|(i, r)| self.rows.unscaled(i, r))
+                        .collect(),
+                    None => d.residuals(&self.rows, &cols, &out.x),
+                }
+            } else {
+                out.x = self.model_here(params, &out.x);
+                d.residuals(&self.rows, &cols, &out.x)
             };
             let fitted = Fitted {
                 params: params.to_vec(),
@@ -397,6 +496,27 @@ impl Engine<'_> {
             };
             return Ok((fitted, info));
         }
+    }
+
+    /// The estimate `x` of `params` as the model at the current
+    /// linearisation: no geometric step (the geometry as it is), every
+    /// parameter of the joint law at the value the rows were evaluated at
+    /// (exact deflection model), every other one at `x`.
+    fn model_here(&self, params: &[Param], x: &[f64]) -> Vec<f64> {
+        let exact = self.lin.model == super::linearisation::DeflectionModel::Exact;
+        params
+            .iter()
+            .zip(x)
+            .map(|(p, &v)| {
+                if p.is_geometric() {
+                    0.0
+                } else if exact && Linearisation::tracks(p) {
+                    self.lin.value(p, &self.names)
+                } else {
+                    v
+                }
+            })
+            .collect()
     }
 
     /// After [`Engine::fit_carrying`]: the last design without the carried

@@ -294,7 +294,32 @@ impl Geometry {
                 let (m, a) = (usize::from(marker), usize::from(axis));
                 (self.markers[m][a] - self.nominal_markers[m][a]) * 1e3 + dx
             }
+            // A revolute joint's offset as the angle it is, in (−π, π]:
+            // steps that went round (a fit along a direction the data
+            // barely see) do not report 50 rad.
+            Param::JointOffset { joint }
+                if self.chain.joints().get(usize::from(joint)).map(|j| j.kind)
+                    == Some(crate::robot::JointKind::Revolute) =>
+            {
+                wrap_mrad(self.applied.get(p).copied().unwrap_or(0.0) + dx)
+            }
             _ => self.applied.get(p).copied().unwrap_or(0.0) + dx,
         }
+    }
+}
+
+/// An angle \[mrad\] in (−π, π] (itself when it is already there, bit for
+/// bit).
+fn wrap_mrad(v: f64) -> f64 {
+    let half = core::f64::consts::PI * 1e3;
+    if v > -half && v <= half {
+        return v;
+    }
+    let turn = 2.0 * half;
+    let w = v - turn * (v / turn).round();
+    if w <= -half {
+        w + turn
+    } else {
+        w
     }
 }

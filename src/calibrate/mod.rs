@@ -348,6 +348,7 @@ fn calibrate_rows(
     warnings.append(&mut report.warnings);
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
+    report.failure = plausibility::failure(&report, &policy);
     Ok(report)
 }
 

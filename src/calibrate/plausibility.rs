@@ -22,8 +22,8 @@
 //! | an effect the loop added that the later ones took over | every parameter it added within [`Policy::determined_sigmas`] σ of 0 in the final model | warning |
 //! | a declared parameter left out, absorbed far from one-to-one | a kept parameter of the same unit absorbs it with a coefficient beyond [`Policy::max_absorption`] in magnitude | warning (the reduced model is exact only to first order) |
 //! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`super::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
-//! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] | warning, and `converged: false` |
-//! | the calibrated model fits worse than the nominal robot | the final residuals' root sum of squares, weighted by the fit's weights (eq. 14; unit for OLS), above the nominal robot's (base registered) with the same weights by more than [`Policy::worse_than_nominal`]: the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point. (The unweighted RMS of a weighted fit may legitimately end above the nominal robot's: the fit minimises the weighted sum) | warning |
+//! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] or back at its best model ([`Policy::max_cost_increase`]) | warning, `converged: false`, and not a calibration ([`failure`]: the report written, exit 1 unless `--accept-unconverged`) |
+//! | the calibrated model fits worse than the nominal robot | the final residuals' root sum of squares, weighted by the fit's weights (eq. 14; unit for OLS), above the nominal robot's (base registered) with the same weights by more than [`Policy::worse_than_nominal`]: the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point. (The unweighted RMS of a weighted fit may legitimately end above the nominal robot's: the fit minimises the weighted sum) | warning, and not a calibration ([`failure`]) |
 //! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker |
 //! | `robot.urdf` predicts the measured points worse than the nominal robot | the RMS over the absolute rows of what it holds (the geometric parameters refitted as a rigid robot when the model has parameters a URDF cannot hold, `export::rigid_urdf`; the model's own geometry when that refit fails) above the nominal robot's by more than [`Policy::worse_than_nominal`] | warning |
 //! | validation with no point | `--validate` | error ([`super::validate`](mod@super::validate)) |
@@ -329,6 +329,25 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
     warnings.extend(outliers(&report.row_errors, policy));
     warnings.extend(urdf_worse(report, policy.worse_than_nominal));
     Ok(warnings)
+}
+
+/// Why the result of a run is not a calibration, if it is not one: the
+/// fit did not converge (IRLS at `--max-iter`, Gauss–Newton at
+/// [`Policy::max_steps`] or with no step that lowers the cost,
+/// [`Policy::max_cost_increase`]), or the final model fits its own rows
+/// worse than the nominal robot by [`Policy::worse_than_nominal`]. Both are
+/// also warnings; `robcal calibrate` exits non-zero on either unless the
+/// user accepts the result (`--accept-unconverged`).
+pub fn failure(report: &Report, policy: &Policy) -> Option<String> {
+    if !report.converged {
+        return Some(format!(
+            "the fit did not converge ({} reweighting iterations, {} Gauss-Newton \
+             relinearisations); the model is the last one whose fit did not get worse, and its \
+             errors are its own",
+            report.iterations, report.relinearisations
+        ));
+    }
+    worse_than_nominal(report, policy.worse_than_nominal)
 }
 
 /// RMS \[µm\] of the nominal robot and of the final model over the

@@ -275,6 +275,12 @@ pub struct Report {
     /// Plausibility findings that did not stop the run
     /// ([`super::plausibility`]), the input readers' warnings included.
     pub warnings: Vec<String>,
+    /// Why this result is not a calibration, when it is not one
+    /// ([`super::plausibility::failure`]): the fit did not converge, or
+    /// its model fits its own data worse than the nominal robot. The
+    /// report is still complete, for inspection; `robcal calibrate` exits
+    /// non-zero unless asked to accept it (`--accept-unconverged`).
+    pub failure: Option<String>,
 }
 
 impl Report {
@@ -372,6 +378,9 @@ impl fmt::Display for Report {
             writeln!(f, "weights: {}", weights_line(self.weights))?;
         }
         writeln!(f, "nominal (before calibration): {}", self.nominal)?;
+        if let Some(why) = &self.failure {
+            writeln!(f, "error: NOT A CALIBRATION: {why}")?;
+        }
         for n in &self.notes {
             writeln!(f, "note: {n}")?;
         }

@@ -113,6 +113,16 @@ pub struct Policy {
     pub gauss_newton_sigma: f64,
     /// Gauss–Newton relinearisations at most. 50.
     pub max_steps: usize,
+    /// Gauss–Newton takes its steps whole, and keeps the linearisation
+    /// whose model fitted the rows best (its cost: the sum of squared
+    /// residuals with the weights of the fit's first linearisation). A fit
+    /// that runs out of steps ([`Policy::max_steps`]) at a model whose cost
+    /// exceeds the best one's by more than this share, or that settles at
+    /// one whose cost exceeds its start's by more than it (a wrong
+    /// stationary point), goes back to the best model and ends there, not
+    /// converged. 0.01 (a weighted fit's weights move between
+    /// linearisations).
+    pub max_cost_increase: f64,
     /// A design of more rows than this does not hold its columns: each
     /// pass that reads them computes them again from the rows, a block at
     /// a time, bit for bit the same (384 B a row fewer at 16 parameters,
@@ -238,6 +248,7 @@ impl Default for Policy {
             max_variance_inflation: 1000.0,
             max_absorption: 10.0,
             max_steps: 50,
+            max_cost_increase: 0.01,
             max_held_design_rows: 100_000,
             max_halvings: 10,
             max_bins: 32,

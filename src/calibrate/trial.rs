@@ -199,6 +199,15 @@ fn one(e: &mut Engine<'_>, params: &[Param], c: &Candidate) -> Result<Outcome, C
         }
         Err(err) => return Err(err),
     };
+    // A model that Gauss–Newton could not settle (no step lowered its cost,
+    // or it ran out of steps) is no better known than the current one.
+    if !next.converged {
+        return Ok(Outcome::Rejected(format!(
+            "rejected: its fit did not converge ({} Gauss-Newton relinearisations, {} \
+             reweighting iterations)",
+            next.relinearisations, next.fit.iterations
+        )));
+    }
     Ok(
         match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add) {
             Some(why) => {

@@ -440,6 +440,13 @@ fn validation(h: &mut String, r: &Report, info: &JobInfo<'_>) {
 
 fn warnings(h: &mut String, r: &Report) {
     h.push_str("<section id=\"warnings\"><h2>Warnings</h2>");
+    if let Some(why) = &r.failure {
+        let _ = write!(
+            h,
+            "<p class=\"warn\"><strong>Not a calibration:</strong> {}</p>",
+            esc(why)
+        );
+    }
     if r.warnings.is_empty() {
         h.push_str("<p class=\"ok\">None.</p>");
     } else {

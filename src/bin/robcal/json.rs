@@ -33,6 +33,11 @@ pub struct ReportJson<'a> {
     unexplained: Option<UnexplainedJson<'a>>,
     validation: Option<ValidationJson<'a>>,
     warnings: &'a [String],
+    /// Why the result is not a calibration (an extension of §5: the fit did
+    /// not converge, or its model is worse than the nominal robot; the run
+    /// exits non-zero unless `--accept-unconverged`); absent when it is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    failure: Option<&'a str>,
     identifiability: Vec<LeftOutJson<'a>>,
     near_dependent: Vec<NearDependentJson<'a>>,
     /// What the run changed on its own (an extension of §5), e.g. IRLS →
@@ -149,6 +154,7 @@ impl<'a> ReportJson<'a> {
             unexplained: r.unexplained.as_ref().map(UnexplainedJson::of),
             validation: r.validation.as_ref().map(ValidationJson::of),
             warnings: &r.warnings,
+            failure: r.failure.as_deref(),
             identifiability: r.left_out.iter().map(LeftOutJson::of).collect(),
             near_dependent: r.near_dependent.iter().map(NearDependentJson::of).collect(),
             notes: &r.notes,

@@ -130,6 +130,11 @@ struct CalibrateArgs {
     /// Fit the declared model only.
     #[arg(long = "no-diagnose")]
     no_diagnose: bool,
+    /// Accept a result that is not a calibration (a fit that did not
+    /// converge, or a model worse than the nominal robot on its own data):
+    /// exit 0. Without it such a run writes its report and exits 1.
+    #[arg(long = "accept-unconverged")]
+    accept_unconverged: bool,
     /// The paper's first-order deflection model (eq. 3: torques and
     /// columns at the commanded pose) instead of the exact equilibrium of
     /// the deflected robot.
@@ -456,7 +461,14 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     };
     std::io::stdout()
         .write_all(out.as_bytes())
-        .map_err(|e| format!("cannot write the report: {e}"))
+        .map_err(|e| format!("cannot write the report: {e}"))?;
+    match &report.failure {
+        Some(why) if !a.accept_unconverged => Err(format!(
+            "not a calibration: {why}; the report is written for inspection \
+             (--accept-unconverged accepts it)"
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// The files of every `(dir, files)` by one [`robcal::io::write_all_atomic`]
