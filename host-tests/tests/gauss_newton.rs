@@ -101,11 +101,7 @@ fn check(report: &Report, job: &Job, data: &Measurements) -> Result<(), String> 
             report.rms_um
         ));
     }
-    // The unweighted RMS of a weighted fit may end a little above the
-    // nominal robot's (`Report::failure` compares the weighted sums); an
-    // OLS fit's may not.
-    let margin = if report.method == "ols" { 1.01 } else { 1.1 };
-    if own_um > margin * report.nominal.rms_um {
+    if own_um > 1.01 * report.nominal.rms_um {
         return Err(format!(
             "exit 0, but the model ({own_um} um) is worse than the nominal robot ({} um)",
             report.nominal.rms_um

@@ -335,9 +335,11 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
 /// fit did not converge (IRLS at `--max-iter`, Gauss–Newton at
 /// [`Policy::max_steps`] or with no step that lowers the cost,
 /// [`Policy::max_cost_increase`]), or the final model fits its own rows
-/// worse than the nominal robot by [`Policy::worse_than_nominal`]. Both are
-/// also warnings; `robcal calibrate` exits non-zero on either unless the
-/// user accepts the result (`--accept-unconverged`).
+/// worse than the nominal robot by [`Policy::worse_than_nominal`] (weighted
+/// by the fit's weights, or, for the RMS the report gives, unweighted).
+/// The first two are
+/// also warnings; `robcal calibrate` exits non-zero on any unless the user
+/// accepts the result (`--accept-unconverged`).
 pub fn failure(report: &Report, policy: &Policy) -> Option<String> {
     if !report.converged {
         return Some(format!(
@@ -347,7 +349,20 @@ pub fn failure(report: &Report, policy: &Policy) -> Option<String> {
             report.iterations, report.relinearisations
         ));
     }
-    worse_than_nominal(report, policy.worse_than_nominal)
+    // The weighted sums first (the fit's own criterion), then the error a
+    // user reads: a weighted fit's may end above the nominal robot's, and
+    // a model that predicts its own data worse than the robot did before
+    // is not a calibration either.
+    worse_than_nominal(report, policy.worse_than_nominal).or_else(|| {
+        (report.rms_um > report.nominal.rms_um * (1.0 + policy.worse_than_nominal)).then(|| {
+            format!(
+                "the model predicts its own data worse than the nominal robot (RMS {:.1} um \
+                 against {:.1} um): the declared model lacks what the data hold, and the \
+                 weights of the fit traded the errors of some configurations for others'",
+                report.rms_um, report.nominal.rms_um
+            )
+        })
+    })
 }
 
 /// RMS \[µm\] of the nominal robot and of the final model over the
