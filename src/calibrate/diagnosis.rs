@@ -181,6 +181,11 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
     // serial loop.
     let threads = super::parallel::threads().min(cands.len());
     let names = &e.names;
+    // (Every column's unit-weight sums, for the candidates' screening.)
+    let every: Vec<usize> = (0..params.len()).collect();
+    let sums =
+        fit::information(&d, &every).map_err(|err| CalibrationError::Core("columns", err))?;
+    let bound = e.policy.max_candidate_inflation;
     let outcomes = super::parallel::map_until(
         cands.len(),
         threads,
@@ -188,6 +193,7 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
             let c = &cands[ci];
             let cols: Vec<usize> = c.test.iter().filter_map(|p| d.index(p)).collect();
             let cols = d.independent(&model, &cols);
+            let cols = trial::screened(&d, &sums, &model, &cols, bound);
             if cols.is_empty() {
                 return Ok(None);
             }

@@ -143,6 +143,15 @@ pub struct Policy {
     /// column is more than `1 − 1e-6` explained by the ones kept before it
     /// is left out instead ([`crate::estimate::rank`]).
     pub max_variance_inflation: f64,
+    /// A candidate of the closed loop is rejected when its fitted model has
+    /// a parameter whose variance inflation reaches this, the candidate's
+    /// own or one that a candidate's parameter explains mostly
+    /// (`trial::wandering`): 1e5, the column 99.999 % explained by the
+    /// others (a declared parameter is left out at 1e6, and flagged from
+    /// [`Policy::max_variance_inflation`]). The loop adds what the data
+    /// determine, not a direction along which the estimate follows
+    /// whatever the model lacks.
+    pub max_candidate_inflation: f64,
     /// A declared parameter left out and absorbed by a kept one of the same
     /// unit with a coefficient beyond this (in magnitude) is reported in a
     /// warning: the kept parameters reproduce its effect only to first
@@ -246,6 +255,7 @@ impl Default for Policy {
             step_tolerance: 1e-6,
             gauss_newton_sigma: 0.01,
             max_variance_inflation: 1000.0,
+            max_candidate_inflation: 1e5,
             max_absorption: 10.0,
             max_steps: 50,
             max_cost_increase: 0.01,

@@ -19,15 +19,19 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
+use nalgebra::Dyn;
+
+use super::design::Design;
 use super::effects::{inadmissible, Candidate};
 use super::engine::{Engine, Fitted, LastDesign};
-use super::fit::FitSettings;
+use super::fit::{columns_of, information, FitSettings};
 use super::geometry::Geometry;
 use super::linearisation::Linearisation;
 use super::names::Names;
 use super::parallel;
 use super::rows::Rows;
 use super::settings::{CalibrationError, Policy};
+use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
 
@@ -208,6 +212,9 @@ fn one(e: &mut Engine<'_>, params: &[Param], c: &Candidate) -> Result<Outcome, C
             next.relinearisations, next.fit.iterations
         )));
     }
+    if let Some(why) = wandering(e, &next, c)? {
+        return Ok(Outcome::Rejected(why));
+    }
     Ok(
         match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add) {
             Some(why) => {
@@ -216,6 +223,60 @@ fn one(e: &mut Engine<'_>, params: &[Param], c: &Candidate) -> Result<Outcome, C
             None => Outcome::Admissible(Box::new(next)),
         },
     )
+}
+
+/// Why the trial `f` of candidate `c` is rejected when the data barely
+/// tell its parameters from the model's: a parameter of `f` whose variance
+/// inflation (its unweighted column regressed on the others',
+/// [`crate::estimate::Identifiability::inflation`]) reaches
+/// [`Policy::max_candidate_inflation`], and that is one of the candidate's
+/// or explained mostly by one of them. Along such a direction the data
+/// hardly change the fit, and Gauss–Newton settles wherever the unmodelled
+/// rest of the data pulls it: a UR5's shoulder and elbow offsets at ∓1.29
+/// rad with `elbow_joint.tx` at −1.05 m, predicting as well as the truth
+/// (`shared/repro/ur5-joint-offsets`).
+///
+/// # Errors
+/// As [`Engine::design`].
+fn wandering(
+    e: &Engine<'_>,
+    f: &Fitted,
+    c: &Candidate,
+) -> Result<Option<String>, CalibrationError> {
+    let all: Vec<usize> = (0..f.params.len()).collect();
+    let rank = match &f.information {
+        Some(acc) => acc.identifiable().ok(),
+        None => e.design(&f.params)?.identifiability(&[], &all),
+    };
+    let Some(rank) = rank else {
+        return Ok(None);
+    };
+    let added = |k: usize| c.add.contains(&f.params[k]);
+    for i in all {
+        let Some(inflation) = rank.inflation(i) else {
+            continue;
+        };
+        if inflation < e.policy.max_candidate_inflation {
+            continue;
+        }
+        let with: Vec<usize> = rank
+            .explained_by(i)
+            .iter()
+            .take(3)
+            .map(|a| a.param)
+            .collect();
+        if added(i) || with.iter().any(|&k| added(k)) {
+            let names: Vec<String> = with.iter().map(|&k| e.names.name(&f.params[k])).collect();
+            return Ok(Some(format!(
+                "rejected: the data barely tell its parameters from the model's ({} has a \
+                 variance inflation of {inflation:.1e} with it, with {}): its estimate would \
+                 follow whatever else the data hold along that direction",
+                e.names.name(&f.params[i]),
+                names.join(", ")
+            )));
+        }
+    }
+    Ok(None)
 }
 
 /// The model `params` with candidate `c` added: its parameters go where the
@@ -239,5 +300,52 @@ fn extended(
     new.extend(params[at..].iter().filter(|p| !c.remove.contains(p)));
     let d = e.design(&new)?;
     let all: Vec<usize> = (0..new.len()).collect();
-    Ok(d.independent(&[], &all).iter().map(|&i| new[i]).collect())
+    let kept = d.independent(&[], &all);
+    // The candidate's own columns (not the model's) within the loop's
+    // bound on variance inflation ([`screened`]).
+    let (added, model): (Vec<usize>, Vec<usize>) = kept
+        .iter()
+        .partition(|&&i| c.add.contains(&new[i]) && !params.contains(&new[i]));
+    if added.is_empty() {
+        return Ok(kept.iter().map(|&i| new[i]).collect());
+    }
+    let sums = information(&d, &all).map_err(|err| CalibrationError::Core("columns", err))?;
+    let added = screened(&d, &sums, &model, &added, e.policy.max_candidate_inflation);
+    Ok((0..new.len())
+        .filter(|i| model.contains(i) || added.contains(i))
+        .map(|i| new[i])
+        .collect())
+}
+
+/// Of a candidate's columns `extra` of `d` (independent of the model's
+/// columns `base` by the one test), those the data determine well enough
+/// for the closed loop to add: while one has a variance inflation (its
+/// column regressed on all the others of `base` and `extra`) at or above
+/// `bound` ([`Policy::max_candidate_inflation`]), the largest such is
+/// dropped. `sums` are the unit-weight sums of every column of `d`
+/// ([`information`]): no pass over the rows.
+pub(super) fn screened(
+    d: &Design,
+    sums: &Accumulator<f64, Dyn>,
+    base: &[usize],
+    extra: &[usize],
+    bound: f64,
+) -> Vec<usize> {
+    let mut keep = extra.to_vec();
+    loop {
+        let cols: Vec<usize> = base.iter().chain(&keep).copied().collect();
+        let Some(rank) = d.identifiability_of(&cols, &columns_of(sums, &cols)) else {
+            return keep;
+        };
+        let worst = (0..keep.len())
+            .filter_map(|k| rank.inflation(base.len() + k).map(|v| (k, v)))
+            .filter(|(_, v)| *v >= bound)
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        match worst {
+            Some((k, _)) => {
+                keep.remove(k);
+            }
+            None => return keep,
+        }
+    }
 }
