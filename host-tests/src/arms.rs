@@ -170,6 +170,37 @@ impl Chain {
         format!("l{}", self.joints.len())
     }
 
+    /// The setup text (data contract §2, m and rad, σ0 20 µm) of this
+    /// chain's URDF as `arm.urdf` (base `l0`, tip [`Chain::tip`]), its
+    /// `[model]` with `geometry`, `base_frame` and `markers` (`identify` or
+    /// `nominal`), and one `[[marker]]` per point of `at` \[m, tip frame\],
+    /// ids from 1.
+    pub fn setup(
+        &self,
+        geometry: &str,
+        base_frame: bool,
+        markers: &str,
+        at: &[Vector3<f64>],
+    ) -> String {
+        let mut setup = format!(
+            "robot = \"arm.urdf\"\nbase_link = \"l0\"\ntip_link = \"{}\"\n[units]\nangle = \"rad\"\n\
+             length = \"m\"\n[noise]\nsigma0_um = 20.0\n[model]\ngeometry = \"{geometry}\"\n\
+             base_frame = {base_frame}\nmarkers = \"{markers}\"\n",
+            self.tip(),
+        );
+        for (i, m) in at.iter().enumerate() {
+            let _ = write!(
+                setup,
+                "[[marker]]\nid = {}\nxyz = [{:?}, {:?}, {:?}]\n",
+                i + 1,
+                m.x,
+                m.y,
+                m.z
+            );
+        }
+        setup
+    }
+
     /// The job of this chain's URDF (base `l0`, tip [`Chain::tip`]) with the
     /// setup text `setup` (files named `arm.toml`, `arm.urdf`), and the
     /// measurements `csv` read for it.

@@ -492,3 +492,21 @@ where
     }
     acc
 }
+
+/// `shared/<sub>` beside the repository (as in CI, and as the bundled
+/// setups name it), when `shared/<sub>/<probe>` is there; `None` on a plain
+/// clone, after saying on stderr that `test` is skipped; a failure with
+/// `ROBCAL_REQUIRE_SHARED=1` (CI).
+pub fn shared_or_skip(sub: &str, probe: &str, test: &str) -> Option<std::path::PathBuf> {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared")
+        .join(sub);
+    if p.join(probe).exists() {
+        return Some(p);
+    }
+    if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
+        panic!("shared/{sub} not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
+    }
+    eprintln!("skipped {test}: shared/{sub} not found beside the repository (CI has it)");
+    None
+}

@@ -18,8 +18,6 @@
 //! And the reproduction of `shared/repro/ur5-joint-offsets`: no absurd
 //! model with exit 0.
 
-use std::path::PathBuf;
-
 use host_tests::arms::{self, Chain, Truth};
 use host_tests::exact::Fk;
 use nalgebra::{Isometry3, Vector3};
@@ -30,11 +28,18 @@ use robcal_paper::rng::SplitMix64;
 
 const GEOMETRIES: [&str; 4] = ["none", "joint_offsets", "select", "full"];
 
-/// One random robot and its data, the setup without its `geometry`.
+/// One random robot, its nominal markers and its data.
 struct Case {
     chain: Chain,
-    setup: String,
+    markers: Vec<Vector3<f64>>,
     csv: String,
+}
+
+impl Case {
+    /// The setup declaring `geometry`, the base frame and the markers.
+    fn setup(&self, geometry: &str) -> String {
+        self.chain.setup(geometry, true, "identify", &self.markers)
+    }
 }
 
 fn case(seed: u64) -> Case {
@@ -63,26 +68,15 @@ fn case(seed: u64) -> Case {
     let configs = 15 + (rng.uniform() * 26.0) as usize;
     let poses: Vec<Vec<f64>> = (0..configs).map(|_| chain.random_q(&mut rng)).collect();
     let csv = truth.csv(&joints, &poses, &mut rng);
-    let mut setup = format!(
-        "robot = \"arm.urdf\"\nbase_link = \"l0\"\ntip_link = \"{}\"\n[units]\nangle = \"rad\"\n\
-         length = \"m\"\n[noise]\nsigma0_um = 20.0\n[model]\ngeometry = \"GEOMETRY\"\n\
-         base_frame = true\nmarkers = \"identify\"\n",
-        chain.tip(),
-    );
-    for (i, m) in markers.iter().enumerate() {
-        setup.push_str(&format!(
-            "[[marker]]\nid = {}\nxyz = [{:?}, {:?}, {:?}]\n",
-            i + 1,
-            m.x,
-            m.y,
-            m.z
-        ));
+    Case {
+        chain,
+        markers,
+        csv,
     }
-    Case { chain, setup, csv }
 }
 
 fn job_and_data(c: &Case, geometry: &str) -> Result<(Job, Measurements), String> {
-    c.chain.job(&c.setup.replace("GEOMETRY", geometry), &c.csv)
+    c.chain.job(&c.setup(geometry), &c.csv)
 }
 
 /// The rule of the issue on one run: `Ok` when the run is refused, or
@@ -133,24 +127,12 @@ proptest! {
             check(&report, &job, &data).map_err(|e| {
                 TestCaseError::fail(format!(
                     "seed {seed}, geometry {geometry}: {e}\n{}\n{}",
-                    c.setup,
+                    c.setup(geometry),
                     c.chain.urdf()
                 ))
             })?;
         }
     }
-}
-
-fn shared() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared");
-    if p.join("repro/ur5-joint-offsets").exists() {
-        return Some(p);
-    }
-    if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
-        panic!("shared/repro/ur5-joint-offsets not found, and ROBCAL_REQUIRE_SHARED=1 requires it");
-    }
-    eprintln!("skipped: shared/repro/ur5-joint-offsets not found");
-    None
 }
 
 /// The reproduction of the issue: the closed loop on a UR5 whose data hold
@@ -168,10 +150,13 @@ fn shared() -> Option<PathBuf> {
 /// point). The loop leaves structure it cannot explain and says so.
 #[test]
 fn ur5_joint_offsets_does_not_wander() {
-    let Some(shared) = shared() else {
+    let Some(dir) = host_tests::shared_or_skip(
+        "repro/ur5-joint-offsets",
+        "train.csv",
+        "ur5_joint_offsets_does_not_wander",
+    ) else {
         return;
     };
-    let dir = shared.join("repro/ur5-joint-offsets");
     let job = Job::load(dir.join("setup.toml")).unwrap();
     let train = job.read_measurements(dir.join("train.csv")).unwrap();
     let validate = job.read_measurements(dir.join("validate.csv")).unwrap();

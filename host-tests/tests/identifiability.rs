@@ -274,22 +274,12 @@ fn case(seed: u64) -> Case {
     let configs = 20 + (rng.uniform() * 21.0) as usize;
     let poses: Vec<Vec<f64>> = (0..configs).map(|_| chain.random_q(&mut rng)).collect();
     let csv = truth.csv(&joints, &poses, &mut rng);
-    let mut setup = format!(
-        "robot = \"arm.urdf\"\nbase_link = \"l0\"\ntip_link = \"{}\"\n[units]\nangle = \"rad\"\n\
-         length = \"m\"\n[noise]\nsigma0_um = 20.0\n[model]\ngeometry = \"{geometry}\"\n\
-         base_frame = {base_frame}\nmarkers = \"{}\"\n",
-        chain.tip(),
-        if identify { "identify" } else { "nominal" }
+    let setup = chain.setup(
+        geometry,
+        base_frame,
+        if identify { "identify" } else { "nominal" },
+        &markers,
     );
-    for (i, m) in markers.iter().enumerate() {
-        setup.push_str(&format!(
-            "[[marker]]\nid = {}\nxyz = [{:?}, {:?}, {:?}]\n",
-            i + 1,
-            m.x,
-            m.y,
-            m.z
-        ));
-    }
     Case {
         chain,
         setup,

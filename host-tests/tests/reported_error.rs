@@ -16,21 +16,6 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// `shared/datasets` beside the repository (as the bundled setups name it);
-/// `None` on a plain clone (the test says it is skipped), a failure with
-/// `ROBCAL_REQUIRE_SHARED=1` (CI).
-fn datasets(test: &str) -> Option<PathBuf> {
-    let p = root().join("../shared/datasets");
-    if p.join("abb_irb120/abb_irb120.csv").exists() {
-        return Some(p);
-    }
-    if std::env::var_os("ROBCAL_REQUIRE_SHARED").is_some_and(|v| v == "1") {
-        panic!("shared/datasets not found, and ROBCAL_REQUIRE_SHARED=1 (CI) requires it");
-    }
-    eprintln!("skipped {test}: shared/datasets not found beside the repository");
-    None
-}
-
 /// The report's RMS against the model's own error on its training rows.
 fn assert_own(job: &Job, data: &Measurements, what: &str) {
     assert_own_with(job, data, what, &Settings::default());
@@ -92,7 +77,8 @@ fn real(data: &Path, set: &str, split: &str, setup: &str) -> (Job, Measurements)
 }
 
 fn real_set(test: &str, set: &str, split: &str, setup: &str) {
-    let Some(data) = datasets(test) else {
+    let Some(data) = host_tests::shared_or_skip("datasets", "abb_irb120/abb_irb120.csv", test)
+    else {
         return;
     };
     let (job, m) = real(&data, set, split, setup);

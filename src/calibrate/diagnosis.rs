@@ -14,10 +14,9 @@ use super::retest;
 use super::rows::RowKind;
 use super::settings::{CalibrationError, Settings};
 use super::trial::{self, Outcome};
-use crate::estimate::Accumulator;
 use crate::model::Param;
 use crate::Error;
-use nalgebra::{Dyn, Vector3};
+use nalgebra::Vector3;
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
 /// configuration with fewer than [`super::Policy::min_rows_per_group`]
@@ -40,80 +39,6 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
     })
 }
 
-/// The declared model fitted. A parameter that a Gauss–Newton step makes
-/// dependent on the others (at the geometry the step reached) is left out
-/// with the parameters that absorb it there, and the fit goes on from there
-/// without it; a declared compliance that becomes dependent is an error, as
-/// at the nominal robot. `carried` and what is returned beside the fit as
-/// in [`Engine::fit_carrying`]; a parameter left out on the way is carried
-/// from there on (added to `carried`), to be tested again at the fitted
-/// geometry ([`super::retest`]).
-///
-/// # Errors
-/// [`CalibrationError::Data`] when a compliance or every parameter is
-/// left out; as [`Engine::fit`].
-pub(super) fn first_fit(
-    e: &mut Engine<'_>,
-    mut params: Vec<Param>,
-    left_out: &mut Vec<LeftOut>,
-    carried: &mut Vec<Param>,
-) -> Result<(Fitted, Option<Accumulator<f64, Dyn>>), CalibrationError> {
-    loop {
-        match e.fit_carrying(&params, carried) {
-            Err(CalibrationError::Dependent(_)) => {}
-            // The solver's refusal, by name (a candidate's is its rejection,
-            // `super::trial`); of a weighted fit, with the unweighted one
-            // offered (the independence test passed the unweighted columns).
-            Err(CalibrationError::Core("fit", err)) => {
-                return Err(match CalibrationError::of_fit(err, &params, &e.names) {
-                    CalibrationError::Data(why) if e.fit_settings.method != Method::Ols => {
-                        CalibrationError::Data(format!(
-                            "{why}, or fit without weights (--method ols)"
-                        ))
-                    }
-                    other => other,
-                })
-            }
-            other => return other,
-        }
-        let now = e.left_out(&params)?;
-        let out: Vec<Param> = params
-            .iter()
-            .filter(|p| now.iter().any(|l| l.name == e.names.name(p)))
-            .copied()
-            .collect();
-        if let Some(p) = out.iter().find(|p| p.is_compliance()) {
-            return Err(CalibrationError::Data(format!(
-                "{} cannot be identified: at the fitted geometry its column is a \
-                 combination of the other parameters'; measure more configurations, or \
-                 remove it from [model]",
-                e.names.name(p)
-            )));
-        }
-        if out.is_empty() {
-            return Err(CalibrationError::Data(
-                "the declared model could not be fitted: a parameter became dependent on \
-                 the others during the fit"
-                    .into(),
-            ));
-        }
-        for l in now {
-            (e.progress)(&format!(
-                "{} left out: dependent on the others at the fitted geometry",
-                l.name
-            ));
-            left_out.push(l);
-        }
-        params.retain(|p| !out.contains(p));
-        carried.extend_from_slice(&out);
-        if params.is_empty() {
-            return Err(CalibrationError::Data(
-                "the declared model has no parameter these data can identify".into(),
-            ));
-        }
-    }
-}
-
 /// The kept parameters of `f` that the data determine poorly: variance
 /// inflation of their unweighted columns above
 /// [`super::Policy::max_variance_inflation`], largest first.
@@ -121,18 +46,11 @@ pub(super) fn first_fit(
 /// # Errors
 /// As [`Engine::design`].
 fn near_dependent(e: &Engine<'_>, f: &Fitted) -> Result<Vec<NearDependent>, CalibrationError> {
-    let all: Vec<usize> = (0..f.params.len()).collect();
-    // (The fit's own unit-weight sums when it made them: the same test.)
-    let rank = match &f.information {
-        Some(acc) => acc.identifiable().ok(),
-        None => e.design(&f.params)?.identifiability(&[], &all),
-    };
-    let Some(rank) = rank else {
+    let Some(rank) = e.identifiability(f)? else {
         return Ok(Vec::new());
     };
-    let mut out: Vec<NearDependent> = all
-        .iter()
-        .filter_map(|&i| {
+    let mut out: Vec<NearDependent> = (0..f.params.len())
+        .filter_map(|i| {
             let inflation = rank.inflation(i)?;
             (inflation >= e.policy.max_variance_inflation).then(|| NearDependent {
                 name: e.names.name(&f.params[i]),
@@ -292,7 +210,7 @@ pub fn run(
         .filter(|p| !declared.contains(p))
         .copied()
         .collect();
-    let (first, info) = first_fit(&mut e, declared, &mut left_out, &mut carried)?;
+    let (first, info) = retest::first_fit(&mut e, declared, &mut left_out, &mut carried)?;
     let mut warnings = Vec::new();
     let first = retest::revive(
         &mut e,

@@ -606,6 +606,25 @@ impl Engine<'_> {
         self.rows.at.as_ref().is_some_and(at)
     }
 
+    /// The one independence test of `f`'s parameters at the current
+    /// linearisation (`f`'s, [`Design::identifiability`]): from the fit's
+    /// own unit-weight sums when it made them (OLS: the same test, no
+    /// pass), else from its design. `None` without a column.
+    ///
+    /// # Errors
+    /// As [`Engine::design`].
+    pub fn identifiability(
+        &self,
+        f: &Fitted,
+    ) -> Result<Option<crate::estimate::Identifiability<f64, nalgebra::Dyn>>, CalibrationError>
+    {
+        let all: Vec<usize> = (0..f.params.len()).collect();
+        Ok(match &f.information {
+            Some(acc) => acc.identifiable().ok(),
+            None => self.design(&f.params)?.identifiability(&[], &all),
+        })
+    }
+
     /// The identifiability report of `params` at the current linearisation
     /// ([`Design::identifiability`]): each parameter the one independence
     /// test leaves out, with the kept parameters that absorb it.

@@ -39,6 +39,7 @@ use super::calibrated::CalibratedModel;
 use super::engine::{Engine, Fitted};
 use super::geometry::Geometry;
 use super::linearisation::Linearisation;
+pub use super::report::RigidUrdf;
 use super::residuals::SquareSum;
 use super::rows::RowKind;
 use super::settings::CalibrationError;
@@ -100,20 +101,6 @@ pub fn final_geometry(model: &CalibratedModel) -> Geometry {
     let mut g = model.geometry.clone();
     g.apply(&model.params, &model.x);
     g
-}
-
-/// What `robot.urdf` holds for a model with parameters a URDF cannot hold
-/// (compliances, backlash, gear cyclic errors, drift, …; `rigid_urdf`).
-#[derive(Debug, Clone)]
-pub struct RigidUrdf {
-    /// The model's geometric parameters refitted as a rigid robot (none of
-    /// the others), when that fit succeeded; else the URDF holds the
-    /// model's own geometry.
-    pub refit: Option<CalibratedModel>,
-    /// RMS \[µm\] over the absolute rows of what the URDF holds.
-    pub rms_um: f64,
-    /// RMS \[µm\] over the absolute rows of the model's own geometry alone.
-    pub own_rms_um: f64,
 }
 
 /// RMS \[µm\] of `residuals` over the absolute rows of `e`.

@@ -34,7 +34,7 @@
 //! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
 //! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
 //! | [`engine`] | one model fitted to convergence (optionally carrying unfitted columns), and its held-out error |
-//! | [`retest`] | the parameters left out at the nominal robot, tested again at the fitted one |
+//! | [`retest`] | the declared model fitted, leaving out what a step makes dependent (`first_fit`); the parameters left out at the nominal robot or on the way, tested again at the fitted one |
 //! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
 //! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
 //! | `widest` | the host's passes over many rows compiled for the widest instruction set found at run time (same bits as the baseline) |
@@ -42,7 +42,7 @@
 //! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
 //! | [`effects`] | the effect library and its physical limits |
 //! | [`diagnosis`] | the closed loop |
-//! | [`trial`] | a candidate's trial from the current model's state (several side by side when the rows are few) |
+//! | [`trial`] | a candidate's trial from the current model's state (several side by side when the rows are few); the columns of a candidate the data determine (`screened`) |
 //! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
 //! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
 //! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |

@@ -271,7 +271,7 @@ pub struct Report {
     /// What `robot.urdf` holds when the final model has parameters a URDF
     /// cannot hold (`export::rigid_urdf`); `None` when the URDF
     /// predicts what the model does, or without absolute rows.
-    pub rigid: Option<super::export::RigidUrdf>,
+    pub rigid: Option<RigidUrdf>,
     /// Plausibility findings that did not stop the run
     /// ([`super::plausibility`]), the input readers' warnings included.
     pub warnings: Vec<String>,
@@ -281,6 +281,21 @@ pub struct Report {
     /// report is still complete, for inspection; `robcal calibrate` exits
     /// non-zero unless asked to accept it (`--accept-unconverged`).
     pub failure: Option<String>,
+}
+
+/// What `robot.urdf` holds for a model with parameters a URDF cannot hold
+/// (compliances, backlash, gear cyclic errors, drift, …;
+/// `export::rigid_urdf`).
+#[derive(Debug, Clone)]
+pub struct RigidUrdf {
+    /// The model's geometric parameters refitted as a rigid robot (none of
+    /// the others), when that fit succeeded; else the URDF holds the
+    /// model's own geometry.
+    pub refit: Option<CalibratedModel>,
+    /// RMS \[µm\] over the absolute rows of what the URDF holds.
+    pub rms_um: f64,
+    /// RMS \[µm\] over the absolute rows of the model's own geometry alone.
+    pub own_rms_um: f64,
 }
 
 impl Report {

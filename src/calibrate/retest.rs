@@ -10,7 +10,7 @@
 //! apart. Left out, such a parameter leaves its whole effect in the
 //! residuals (a property test found 365 µm of RMS against 33 µm of noise,
 //! with no warning). The same holds for a parameter that a Gauss–Newton
-//! step made dependent on the way (`diagnosis::first_fit`: 60 µm against
+//! step made dependent on the way (`first_fit`: 60 µm against
 //! 33 µm on another random chain, seed 14554966693631364839). So each
 //! parameter left out at the nominal robot or on the way is carried,
 //! unfitted, in the declared fit's designs ([`Engine::fit_carrying`]), and
@@ -44,15 +44,89 @@
 //! One round: a parameter that becomes independent only after the chosen
 //! ones moved the geometry again stays left out.
 
-use super::diagnosis::first_fit;
 use super::engine::{Engine, Fitted};
-use super::fit;
+use super::fit::{self, Method};
 use super::names::Names;
 use super::report::LeftOut;
 use super::settings::CalibrationError;
 use crate::estimate::{Accumulator, NestedTest};
 use crate::model::Param;
 use crate::Error;
+use nalgebra::Dyn;
+
+/// The declared model fitted. A parameter that a Gauss–Newton step makes
+/// dependent on the others (at the geometry the step reached) is left out
+/// with the parameters that absorb it there, and the fit goes on from there
+/// without it; a declared compliance that becomes dependent is an error, as
+/// at the nominal robot. `carried` and what is returned beside the fit as
+/// in [`Engine::fit_carrying`]; a parameter left out on the way is carried
+/// from there on (added to `carried`), to be tested again at the fitted
+/// geometry (the rest of this module).
+///
+/// # Errors
+/// [`CalibrationError::Data`] when a compliance or every parameter is
+/// left out; as [`Engine::fit`].
+pub(super) fn first_fit(
+    e: &mut Engine<'_>,
+    mut params: Vec<Param>,
+    left_out: &mut Vec<LeftOut>,
+    carried: &mut Vec<Param>,
+) -> Result<(Fitted, Option<Accumulator<f64, Dyn>>), CalibrationError> {
+    loop {
+        match e.fit_carrying(&params, carried) {
+            Err(CalibrationError::Dependent(_)) => {}
+            // The solver's refusal, by name (a candidate's is its rejection,
+            // `super::trial`); of a weighted fit, with the unweighted one
+            // offered (the independence test passed the unweighted columns).
+            Err(CalibrationError::Core("fit", err)) => {
+                return Err(match CalibrationError::of_fit(err, &params, &e.names) {
+                    CalibrationError::Data(why) if e.fit_settings.method != Method::Ols => {
+                        CalibrationError::Data(format!(
+                            "{why}, or fit without weights (--method ols)"
+                        ))
+                    }
+                    other => other,
+                })
+            }
+            other => return other,
+        }
+        let now = e.left_out(&params)?;
+        let out: Vec<Param> = params
+            .iter()
+            .filter(|p| now.iter().any(|l| l.name == e.names.name(p)))
+            .copied()
+            .collect();
+        if let Some(p) = out.iter().find(|p| p.is_compliance()) {
+            return Err(CalibrationError::Data(format!(
+                "{} cannot be identified: at the fitted geometry its column is a \
+                 combination of the other parameters'; measure more configurations, or \
+                 remove it from [model]",
+                e.names.name(p)
+            )));
+        }
+        if out.is_empty() {
+            return Err(CalibrationError::Data(
+                "the declared model could not be fitted: a parameter became dependent on \
+                 the others during the fit"
+                    .into(),
+            ));
+        }
+        for l in now {
+            (e.progress)(&format!(
+                "{} left out: dependent on the others at the fitted geometry",
+                l.name
+            ));
+            left_out.push(l);
+        }
+        params.retain(|p| !out.contains(p));
+        carried.extend_from_slice(&out);
+        if params.is_empty() {
+            return Err(CalibrationError::Data(
+                "the declared model has no parameter these data can identify".into(),
+            ));
+        }
+    }
+}
 
 /// `first`, the declared fit that carried `carried`
 /// ([`Engine::fit_carrying`]; `info` its unit-weight sums with OLS), or the

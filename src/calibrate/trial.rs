@@ -243,16 +243,11 @@ fn wandering(
     f: &Fitted,
     c: &Candidate,
 ) -> Result<Option<String>, CalibrationError> {
-    let all: Vec<usize> = (0..f.params.len()).collect();
-    let rank = match &f.information {
-        Some(acc) => acc.identifiable().ok(),
-        None => e.design(&f.params)?.identifiability(&[], &all),
-    };
-    let Some(rank) = rank else {
+    let Some(rank) = e.identifiability(f)? else {
         return Ok(None);
     };
     let added = |k: usize| c.add.contains(&f.params[k]);
-    for i in all {
+    for i in 0..f.params.len() {
         let Some(inflation) = rank.inflation(i) else {
             continue;
         };
