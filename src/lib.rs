@@ -35,8 +35,9 @@
 //! | [`model`] | [`model::Param`] (every parameter and effect, with units), [`model::Sample`], the columns, the device's [`model::Layout`] | — |
 //! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests | — |
 //! | [`Error`] | the core's one error type | — |
+//! | `parallel` | independent work on worker threads, the serial loop's answers bit for bit (`ROBCAL_THREADS`) | `std` |
 //! | `io` | the data contract's files: URDF, setup TOML, measurement CSV, importers | `std` |
-//! | `calibrate` | the one calibration engine: `calibrate::calibrate` | `std` |
+//! | `calibrate` | the one calibration engine, `calibrate::calibrate`: eleven modules in the order a calibration flows through them (its own map) | `std` |
 //!
 //! The `tree` feature (no_std too; `std` turns it on) lets a chain branch:
 //! a controller of a serial arm leaves it off and saves ~600 bytes of flash.
@@ -61,6 +62,8 @@ pub mod estimate;
 #[cfg(feature = "std")]
 pub mod io;
 pub mod model;
+#[cfg(feature = "std")]
+pub mod parallel;
 pub mod robot;
 
 pub use error::Error;

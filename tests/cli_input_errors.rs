@@ -241,7 +241,7 @@ fn two_configurations_are_enough_for_the_paper_model() {
     );
 }
 
-// Plausibility (issue 13, `robcal::calibrate::plausibility`): each wrong
+// Plausibility (issue 13, `robcal::calibrate::report::plausibility`): each wrong
 // answer that once left with exit 0 is an error or a reported warning.
 
 /// A run that failed after the calibration began: progress lines, then

@@ -1,10 +1,18 @@
 //! The design: the columns of a list of parameters at every row (`B` of
 //! eq. 4, stacked), and which of them the data can tell apart.
+//!
+//! Its parts: how the columns are computed at a row (`columns`), built
+//! (`build`) into storage held or computed again where read (`source`,
+//! `Policy::max_held_design_rows`), their unit-weight sums made in the same
+//! pass (`unit_sums`), the rows of each configuration (`group_rows`), the
+//! independence test on the columns themselves (`kept`), and the rows as
+//! the core's source of sums, bit for bit, in a faster layout (`view`,
+//! with the widest instruction set found at run time, `widest`).
 
 use nalgebra::{Dyn, OMatrix, Vector3, U3};
 
-use super::rows::Rows;
-use super::view::View;
+use crate::calibrate::design::view::View;
+use crate::calibrate::rows::Rows;
 use crate::estimate::{
     identifiability_excluding, independence_tolerance, Accumulator, Block, Identifiability,
     IdentifiabilitySettings,
@@ -12,10 +20,13 @@ use crate::estimate::{
 use crate::model::Param;
 
 mod build;
+mod columns;
 mod group_rows;
 mod kept;
 mod source;
 mod unit_sums;
+pub(crate) mod view;
+pub(crate) mod widest;
 pub use build::Storage;
 pub use group_rows::{GroupOf, GroupRows};
 
@@ -88,14 +99,14 @@ impl Design {
     /// [`Design::residual`] of every row, in metres again
     /// ([`Rows::unscaled`]), by runs of rows on worker threads.
     pub fn residuals(&self, all: &Rows, cols: &[usize], x: &[f64]) -> Vec<Vector3<f64>> {
-        let threads = super::parallel::for_rows(self.rows());
+        let threads = crate::parallel::for_rows(self.rows());
         self.residuals_on(cols, x, threads, |i, r| all.unscaled(i, r))
     }
 
     /// [`Design::residual`] of every row, scaled as the fit sees them, by
     /// runs of rows on worker threads.
     pub fn scaled_residuals(&self, cols: &[usize], x: &[f64]) -> Vec<Vector3<f64>> {
-        let threads = super::parallel::for_rows(self.rows());
+        let threads = crate::parallel::for_rows(self.rows());
         self.residuals_on(cols, x, threads, |_, r| r)
     }
 
@@ -109,7 +120,7 @@ impl Design {
         unscaled: impl Fn(usize, Vector3<f64>) -> Vector3<f64> + Sync,
     ) -> Vec<Vector3<f64>> {
         let mut out = vec![Vector3::zeros(); self.rows()];
-        let done = super::parallel::for_runs_mut(&mut out, threads, |first, run| {
+        let done = crate::parallel::for_runs_mut(&mut out, threads, |first, run| {
             let mut row = Vec::new();
             for (i, r) in (first..).zip(run) {
                 self.rows_into(&[i], cols, &mut row);
@@ -218,10 +229,12 @@ pub const CHECK_RCOND: f64 = 1e-3;
 /// Pseudo-random designs for the unit tests of what reads a design.
 #[cfg(test)]
 pub(crate) mod testing;
+#[cfg(test)]
+mod threads;
 
 #[cfg(test)]
 mod tests {
-    use super::testing::design;
+    use crate::calibrate::design::testing::design;
 
     #[test]
     fn residuals_on_threads_are_the_rows_residuals() {

@@ -1,25 +1,33 @@
 //! The closed loop: fit the declared model, test every effect it lacks
 //! against the residuals, add the first that passes, refit, repeat; report
 //! the errors before and after each step.
+//!
+//! Its parts: the declared model's first fit and the parameters left out
+//! tested again at the fitted robot ([`retest`]), and a candidate's trial
+//! from the current model with the columns the data determine ([`trial`]).
 
-use super::effects::{candidates, Candidate};
-use super::engine::{Engine, Fitted};
-use super::fit::{self, Method};
-use super::report::{
+pub mod retest;
+pub mod trial;
+
+use crate::calibrate::diagnosis::trial::Outcome;
+use crate::calibrate::effects::{candidates, Candidate};
+use crate::calibrate::engine::{Engine, Fitted};
+use crate::calibrate::fit::residuals::{
+    lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit,
+};
+use crate::calibrate::fit::{self, Method};
+use crate::calibrate::report::{
     ConfigNoises, EffectStep, LeftOut, NearDependent, PlotSeries, Report, RowErrors, Tested,
     Unexplained,
 };
-use super::residuals::{lack_of_fit, most_followed, traced_variable, variable_values, LackOfFit};
-use super::retest;
-use super::rows::RowKind;
-use super::settings::{CalibrationError, Settings};
-use super::trial::{self, Outcome};
+use crate::calibrate::rows::RowKind;
+use crate::calibrate::settings::{CalibrationError, Settings};
+use crate::error::Error;
 use crate::model::Param;
-use crate::Error;
 use nalgebra::Vector3;
 
 /// When IRLS/WLS cannot estimate a σ per configuration and axis (a
-/// configuration with fewer than [`super::Policy::min_rows_per_group`]
+/// configuration with fewer than [`crate::calibrate::settings::Policy::min_rows_per_group`]
 /// rows), the fit falls back (to the instrument's σ alone for `both`, to
 /// OLS for `estimated`); the reason, for the report.
 pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
@@ -41,7 +49,7 @@ pub fn weighting_fallback(e: &Engine<'_>, method: Method) -> Option<String> {
 
 /// The kept parameters of `f` that the data determine poorly: variance
 /// inflation of their unweighted columns above
-/// [`super::Policy::max_variance_inflation`], largest first.
+/// [`crate::calibrate::settings::Policy::max_variance_inflation`], largest first.
 ///
 /// # Errors
 /// As [`Engine::design`].
@@ -97,14 +105,14 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
     // Each candidate's test on its own (on worker threads: they share only
     // the design); up to the first error in the candidates' order, as the
     // serial loop.
-    let threads = super::parallel::threads().min(cands.len());
+    let threads = crate::parallel::threads().min(cands.len());
     let names = &e.names;
     // (Every column's unit-weight sums, for the candidates' screening.)
     let every: Vec<usize> = (0..params.len()).collect();
     let sums =
         fit::information(&d, &every).map_err(|err| CalibrationError::Core("columns", err))?;
     let bound = e.policy.max_candidate_inflation;
-    let outcomes = super::parallel::map_until(
+    let outcomes = crate::parallel::map_until(
         cands.len(),
         threads,
         |ci| {
@@ -161,29 +169,29 @@ fn test_round(e: &mut Engine<'_>, current: &Fitted) -> Result<Round, Calibration
     Ok((cands, tested))
 }
 
-/// The nominal robot's error per row \[m\] ([`super::RowErrors`]' nominal
+/// The nominal robot's error per row \[m\] ([`crate::calibrate::report::RowErrors`]' nominal
 /// column, the rows' left-hand sides at the nominal robot): held through
 /// the fit, or, when no row needed the exact model's equilibrium there,
 /// computed again at its end from the geometry it was at
-/// ([`super::Rows::rigid_lhs_at`]: 24 MB not held at 10⁶ rows).
+/// ([`crate::calibrate::rows::Rows::rigid_lhs_at`]: 24 MB not held at 10⁶ rows).
 #[derive(Debug, Clone)]
 pub enum NominalRows {
     /// Held, one per row.
     Held(Vec<Vector3<f64>>),
     /// At this geometry, without a joint law.
-    At(Box<super::geometry::Geometry>),
+    At(Box<crate::calibrate::params::geometry::Geometry>),
 }
 
 /// The calibration on a prepared engine: the declared model, then (unless
 /// `settings.diagnose` is off) the diagnosis loop.
 ///
-/// Decisions (constants in [`super::Policy`]):
+/// Decisions (constants in [`crate::calibrate::settings::Policy`]):
 /// - an effect is added only if it passes the Bonferroni-corrected test
 ///   (`p · tried < α`) and, when the lack of fit is significant, explains
 ///   at least `min_share` of the lack-of-fit sum of squares above its noise
 ///   expectation: an effect that only nibbles at a structure it does not
 ///   describe is not named;
-/// - and only if its estimate is physical ([`super::effects::inadmissible`]) and the
+/// - and only if its estimate is physical ([`crate::calibrate::effects::inadmissible`]) and the
 ///   leave-one-configuration-out RMS drops with it (when it is computed):
 ///   a significant effect that predicts unseen configurations worse is
 ///   fitting this data set, not the robot. The candidates are tried in
@@ -439,7 +447,7 @@ pub fn run(
         *y *= 1e6;
     }
     let model = e.calibrated(&current);
-    let rigid = super::export::rigid_urdf(&mut e, &current, &model);
+    let rigid = crate::calibrate::outputs::export::rigid_urdf(&mut e, &current, &model);
     if let Some(r) = rigid.as_ref().filter(|r| r.refit.is_some()) {
         let others: Vec<String> = (current.params.iter())
             .filter(|p| !p.is_geometric())

@@ -2,7 +2,8 @@
 //! effect it lacks, as the [`Param`]s to test and how the model changes
 //! when the effect is added — the core's rule
 //! ([`crate::model::effect::candidates`], shared with the device), owned
-//! and named; and which estimates of an added effect are physical.
+//! and named; and which estimates of an added effect are physical. The
+//! declared model, the setup's `[model]` as parameters, is [`declared`].
 //!
 //! To add an effect: a [`Param`] with its column (`crate::model::columns`)
 //! and unit (`crate::model::param`), a variant of [`Effect`] with its
@@ -11,11 +12,13 @@
 //! any) in [`inadmissible`], and a test in `host-tests/tests/loop_effects.rs`
 //! that simulates data with the effect and checks that the loop names it.
 
+pub mod declared;
+
 use core::convert::Infallible;
 
-use super::names::Names;
-use super::rows::{revolute, DataKinds};
-use super::settings::Policy;
+use crate::calibrate::params::names::Names;
+use crate::calibrate::rows::{revolute, DataKinds};
+use crate::calibrate::settings::Policy;
 use crate::model::effect::{self, Unphysical};
 use crate::model::Param;
 
@@ -152,4 +155,65 @@ pub fn inadmissible(
         }
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::settings::Policy;
+    use crate::robot::JointKind;
+    use nalgebra::Vector3;
+
+    fn names() -> Names {
+        Names {
+            joints: vec!["a1".into(), "a2".into()],
+            kinds: vec![JointKind::Revolute; 2],
+            markers: vec![(1, Vector3::zeros())],
+            bins: Default::default(),
+        }
+    }
+
+    #[test]
+    fn physical_limits_reject_impossible_estimates() {
+        let (n, p) = (names(), Policy::default());
+        let k = [Param::Compliance { joint: 1 }];
+        assert!(inadmissible(&n, &p, &k, &[0.5], &k).is_none());
+        assert!(inadmissible(&n, &p, &k, &[-0.5], &k)
+            .unwrap()
+            .contains("< 0"));
+        let b = [Param::Backlash { joint: 0 }];
+        assert!(inadmissible(&n, &p, &b, &[-1.0], &b).is_some());
+        assert!(inadmissible(&n, &p, &b, &[1.0], &b).is_none());
+        // A negative compliance already in the model is not the candidate's.
+        let params = [Param::Compliance { joint: 0 }, Param::Backlash { joint: 1 }];
+        assert!(inadmissible(
+            &n,
+            &p,
+            &params,
+            &[-1.0, 1.0],
+            &[Param::Backlash { joint: 1 }]
+        )
+        .is_none());
+        let cyc = [
+            Param::GearCyclic {
+                joint: 0,
+                cos: false,
+            },
+            Param::GearCyclic {
+                joint: 0,
+                cos: true,
+            },
+        ];
+        assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.0], &cyc).is_none()); // 10 mrad
+        assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.1], &cyc).is_some());
+        let grav = [false, true].map(|b| Param::GravityCompliance { joint: 1, b });
+        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.0], &grav).is_none()); // 50 mrad
+        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.1], &grav)
+            .unwrap()
+            .contains("gravity_compliance_a2"));
+        let drift: Vec<Param> = (0..3).map(|axis| Param::Drift { axis }).collect();
+        // 1 µm/s = 3.6 mm/h.
+        assert!(inadmissible(&n, &p, &drift, &[1.0, 0.0, 0.0], &drift).is_none());
+        assert!(inadmissible(&n, &p, &drift, &[1.0, 1.0, 0.0], &drift).is_some());
+    }
 }

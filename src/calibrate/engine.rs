@@ -8,16 +8,18 @@ use nalgebra::Vector3;
 
 mod heldout;
 
-use super::calibrated::CalibratedModel;
-use super::design::Design;
-use super::fit::{fit_with_residuals, information, leading, FitOut, FitSettings, Method};
-use super::geometry::Geometry;
-use super::linearisation::Linearisation;
-use super::names::Names;
-use super::report::{Absorbed, LeftOut, Parameter};
-use super::residuals::rms_um;
-use super::rows::{RowKind, Rows};
-use super::settings::{CalibrationError, Policy, Progress};
+use crate::calibrate::design::Design;
+use crate::calibrate::fit::residuals::rms_um;
+use crate::calibrate::fit::{
+    fit_with_residuals, information, leading, FitOut, FitSettings, Method,
+};
+use crate::calibrate::params::geometry::Geometry;
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::params::names::Names;
+use crate::calibrate::report::calibrated::CalibratedModel;
+use crate::calibrate::report::{Absorbed, LeftOut, Parameter};
+use crate::calibrate::rows::{RowKind, Rows};
+use crate::calibrate::settings::{CalibrationError, Policy, Progress};
 use crate::estimate::Accumulator;
 use crate::model::Param;
 
@@ -76,7 +78,7 @@ pub struct Engine<'a> {
     pub progress: Progress<'a>,
     /// Whether to abandon a fit ([`Engine::fit`] checks it before each
     /// Gauss–Newton step): a candidate's trial on a worker thread once an
-    /// earlier candidate was admissible ([`super::trial`]).
+    /// earlier candidate was admissible ([`crate::calibrate::diagnosis::trial`]).
     pub cancel: Option<&'a (dyn Fn() -> bool + Sync)>,
     /// The last design [`Engine::design`] built: its parameters, the rows'
     /// linearisation it was built at ([`Rows::at`]), the design. A fit's
@@ -277,7 +279,7 @@ impl Engine<'_> {
         self.relinearise_for(model)
     }
 
-    /// Fits `params` by Gauss–Newton ([`super::linearisation`]): the
+    /// Fits `params` by Gauss–Newton ([`crate::calibrate::params::linearisation`]): the
     /// rows at the current model, the fit, the geometric step applied and
     /// the joint law moved to the estimate, until no geometric step exceeds
     /// [`Policy::step_tolerance`] and no parameter acting through a joint
@@ -503,7 +505,8 @@ impl Engine<'_> {
     /// parameter of the joint law at the value the rows were evaluated at
     /// (exact deflection model), every other one at `x`.
     fn model_here(&self, params: &[Param], x: &[f64]) -> Vec<f64> {
-        let exact = self.lin.model == super::linearisation::DeflectionModel::Exact;
+        let exact =
+            self.lin.model == crate::calibrate::params::linearisation::DeflectionModel::Exact;
         params
             .iter()
             .zip(x)

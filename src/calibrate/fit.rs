@@ -1,20 +1,29 @@
 //! The estimator on the host: the fits and tests the engine asks for, on
 //! the rows of a [`Design`] (`view`, a [`Reweightable`] source of
 //! the core at the exact number of parameters, `Dyn`) or on its moments
-//! per configuration and axis ([`super::moments`]).
+//! per configuration and axis ([`crate::calibrate::fit::moments`]).
+//!
+//! Also here: the held-out predictions of an OLS fit in closed form
+//! ([`heldout`]) and of weighted fits from the moments ([`moments`]), and
+//! what the residuals say: RMS, lack of fit, the variable they follow
+//! ([`residuals`]).
+
+pub mod heldout;
+pub mod moments;
+pub mod residuals;
 
 use nalgebra::{DMatrix, Dyn, OMatrix, Vector3};
 
-use super::design::Design;
-use super::moments::DesignMoments;
-pub use super::settings::Method;
-use super::view::View;
+use crate::calibrate::design::view::View;
+use crate::calibrate::design::Design;
+use crate::calibrate::fit::moments::DesignMoments;
+pub use crate::calibrate::settings::Method;
+use crate::error::Error;
 use crate::estimate::{
     nested_test, robust_weights, Accumulator, Fit, IrlsSettings, NestedTest, Reweightable,
     RobustWeight,
 };
-pub use crate::io::Weighting;
-use crate::Error;
+pub use crate::io::setup::Weighting;
 
 /// How one fit is made.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -170,7 +179,7 @@ pub fn columns_of(acc: &Accumulator<f64, Dyn>, cols: &[usize]) -> Accumulator<f6
 /// [`fit`] of all the columns of `m` (the moments of the columns `cols` of
 /// `d`, [`DesignMoments::new`]) without the configuration `skip_group`: the
 /// same fit from the moments per configuration and axis, equal to the
-/// row-by-row one up to rounding ([`super::moments`]).
+/// row-by-row one up to rounding ([`crate::calibrate::fit::moments`]).
 ///
 /// # Errors
 /// As [`fit`].
@@ -315,8 +324,8 @@ pub fn test_sums(acc: &Accumulator<f64, Dyn>, model: usize) -> Result<NestedTest
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::calibrate::design::testing;
+    use crate::calibrate::fit::*;
     use crate::estimate::RobustWeight;
 
     /// `rows` rows, each its own configuration, on `n` pseudo-random columns.

@@ -1,52 +1,30 @@
 //! The one calibration engine of robcal (`std`): fit the declared model,
 //! find the structure left in the residuals, trace it to an effect the
 //! model lacks, add it, refit, and report the error before and after each
-//! step. `robcal calibrate` is this function; so are the examples and the
-//! real-data analyses.
+//! step. `robcal calibrate` is [`calibrate()`]; so are the examples, the
+//! Python package and the real-data analyses.
+//!
+//! The modules, in the order a calibration flows through them; each
+//! imports only from those above it in this table (and from the core,
+//! [`crate::io`] and [`crate::parallel`]):
 //!
 //! ```text
-//!   Job + Measurements
-//!     │ rows        Rows: deflections and absolute positions, configurations = groups
-//!     │ declared    the setup's [model] → parameters (crate::model::Param)
-//!     ▼
-//!   Engine ─ design   columns of the parameters at every row (B of eq. 4)
-//!          ─ fit      OLS | WLS | IRLS through the core's Reweightable   (eq. 6, 10, 14)
-//!          ─ geometry Gauss–Newton: apply the geometric step, relinearise
-//!                     (the next design built in the same pass over the rows)
-//!          ─ heldout  leave-one-configuration-out prediction RMS
-//!     │
-//!   diagnosis  lack of fit (residuals) → every candidate of the effect
-//!              library (effects) → nested F test (crate::estimate::nested)
-//!              → Bonferroni, physical, held-out RMS drops → add, refit, repeat
-//!     ▼
-//!   Report (report) + CalibratedModel (calibrated) ──validate──► another file
+//!   params ─► settings ─► rows ─► effects ─► design ─► fit ─► report ─► engine ─► outputs ─► diagnosis ─► run
 //! ```
 //!
-//! | module | what |
+//! | module | one concept |
 //! |---|---|
+//! | [`params`] | what a parameter is called, and the model's value the rows are evaluated at: [`Names`], [`Geometry`] (Gauss–Newton's current robot), [`Linearisation`] (the joint law; the exact or first-order deflection model) |
 //! | [`settings`] | [`Settings`] (what the user sets), [`Policy`] (every decision constant), [`CalibrationError`] |
-//! | [`names`] | contract names of parameters, joints, markers, angle bins |
-//! | [`rows`] | [`Row`]s from the measurements, recomputed at the current geometry |
-//! | [`declared`] | the setup's `[model]` as parameters |
-//! | [`design`] | the stacked columns of some parameters (or built in a relinearisation's pass, `Design::relinearised`), held or computed again from the rows where read (`Policy::max_held_design_rows`); the independence test |
-//! | [`fit`] | the core's fits and nested test on a design, at the exact size |
-//! | `view` | the rows of a design as the core's source of those fits: the core's sums, bit for bit, in a faster layout |
-//! | [`geometry`] | the current geometry (Gauss–Newton, registration) |
-//! | [`linearisation`] | the joint law the rows are evaluated at; the exact or first-order deflection model |
-//! | [`engine`] | one model fitted to convergence (optionally carrying unfitted columns), and its held-out error |
-//! | [`retest`] | the declared model fitted, leaving out what a step makes dependent (`first_fit`); the parameters left out at the nominal robot or on the way, tested again at the fitted one |
-//! | [`heldout`] | the OLS held-out prediction in closed form (no refit per configuration) |
-//! | [`moments`] | the design's moments per configuration and axis: the weighted held-out fits without re-streaming rows |
-//! | `widest` | the host's passes over many rows compiled for the widest instruction set found at run time (same bits as the baseline) |
-//! | [`parallel`] | independent work on worker threads (the held-out folds; the candidates' trials; building the rows; the rows of a relinearisation and of a design), the serial loop's answers bit for bit; `ROBCAL_THREADS` |
-//! | [`residuals`] | RMS, lack of fit, the variable the residuals follow |
-//! | [`effects`] | the effect library and its physical limits |
-//! | [`diagnosis`] | the closed loop |
-//! | [`trial`] | a candidate's trial from the current model's state (several side by side when the rows are few); the columns of a candidate the data determine (`screened`) |
-//! | [`report`], [`calibrated`], [`validate`](mod@validate) | what comes out |
-//! | [`export`] | the calibrated robot as a URDF (`--output DIR`) |
-//! | [`model_file`] | the `predictor` section of `model.json`: the calibrated robot in SI units, read back without the calibration's inputs |
-//! | [`predict`] | the calibrated model applied: [`predict::Predictor`] predicts a point for joint values and payload, and compensates (the joint command that reaches a desired point); [`predict::payload`] warns about a payload beyond the calibration's |
+//! | [`rows`] | the measurements as [`Row`]s (deflections, absolute positions; configurations as groups), recomputed at the current geometry |
+//! | [`effects`] | which parameters: the setup's declared model, and the effect library's candidates with their physical limits |
+//! | [`design`] | the columns of some parameters at every row (`B` of eq. 4), held or computed again from the rows, and their sums in the core's order (`view`) |
+//! | [`fit`] | the core's OLS, WLS and IRLS on a design (eq. 6, 10, 14), the nested test, the held-out predictions, the residuals' RMS and lack of fit |
+//! | [`report`] | what a calibration says: [`Report`] and its parts, the [`CalibratedModel`], and the rules that judge it a calibration (`plausibility`) |
+//! | [`engine`] | one model fitted to convergence by Gauss–Newton, keeping its best model, and its held-out error |
+//! | [`outputs`] | the calibrated robot handed on: URDF (`export`), `model.json` (`model_file`), prediction and compensation (`predict`), validation on another file |
+//! | [`diagnosis`] | the closed loop: the declared model's first fit and re-tests (`retest`), every candidate tested and tried (`trial`), added while the data ask |
+//! | [`run`] | a job calibrated: rows prepared, the loop run, the report judged |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
 //! user sets (method, λ, iterations, diagnose) is [`Settings`].
@@ -56,406 +34,35 @@
 //! contract says). RMS is the RMS of the norm of the 3-D position residual
 //! of each row, unweighted; held-out RMS is the same over the predictions of
 //! each configuration from a fit without it (same method; for OLS by the
-//! closed form of [`heldout`], linear in the number of configurations; for
-//! WLS and IRLS from the moments of [`moments`], built once).
+//! closed form of [`fit::heldout`], linear in the number of configurations;
+//! for WLS and IRLS from the moments of [`fit::moments`], built once).
 
-pub mod calibrated;
-pub mod declared;
 pub mod design;
 pub mod diagnosis;
 pub mod effects;
 pub mod engine;
-pub mod export;
 pub mod fit;
-pub mod geometry;
-pub mod heldout;
-pub mod linearisation;
-pub mod model_file;
-pub mod moments;
-pub mod names;
-pub mod parallel;
-pub mod plausibility;
-pub mod predict;
+pub mod outputs;
+pub mod params;
 pub mod report;
-pub mod residuals;
-pub mod retest;
 pub mod rows;
+pub mod run;
 pub mod settings;
-pub mod trial;
-pub mod validate;
-mod view;
-mod widest;
 
-use nalgebra::Vector3;
-
-pub use calibrated::CalibratedModel;
 pub use effects::{Candidate, Effect};
 pub use fit::Step;
-pub use geometry::Geometry;
-pub use linearisation::{DeflectionModel, Linearisation};
-pub use names::Names;
+pub use outputs::export;
+pub use outputs::model_file::ModelFile;
+pub use outputs::predict::{Payload, Predictor};
+pub use outputs::validate::validate;
+pub use params::geometry::Geometry;
+pub use params::linearisation::{DeflectionModel, Linearisation};
+pub use params::names::Names;
+pub use report::calibrated::CalibratedModel;
 pub use report::{
     weights_line, Absorbed, ConfigNoise, ConfigNoises, EffectStep, LeftOut, NearDependent, Nominal,
     Parameter, PlotSeries, Report, RowError, RowErrors, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
+pub use run::{calibrate, calibrate_owned};
 pub use settings::{CalibrationError, Method, Policy, Progress, Settings};
-pub use validate::validate;
-
-use crate::estimate::RobustWeight;
-use crate::model::Param;
-
-/// Runs the calibration of `job` on `data`: the declared model, then
-/// (unless `settings.diagnose` is off) the diagnosis loop
-/// ([`diagnosis::run`]). `progress` receives one line per long step.
-///
-/// # Errors
-/// [`CalibrationError`] when the data cannot support the model.
-pub fn calibrate(
-    job: &crate::io::Job,
-    data: &crate::io::Measurements,
-    settings: &Settings,
-    progress: Progress<'_>,
-) -> Result<Report, CalibrationError> {
-    let (rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), &settings.policy)?;
-    calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)
-}
-
-/// [`calibrate`], taking the measurements: they are freed as the rows are
-/// built from them ([`Rows::from_measurements`]; a million rows parsed
-/// are ~350 MB, which were held with the rows' ~224 MB).
-///
-/// # Errors
-/// As [`calibrate`].
-pub fn calibrate_owned(
-    job: &crate::io::Job,
-    data: crate::io::Measurements,
-    settings: &Settings,
-    progress: Progress<'_>,
-) -> Result<Report, CalibrationError> {
-    let file = data.file.clone();
-    let (rows, names, warnings) = prepare(job, std::borrow::Cow::Owned(data), &settings.policy)?;
-    calibrate_rows(job, &file, rows, names, warnings, settings, progress)
-}
-
-/// The rows of `data` (taken: [`Rows::from_measurements`]), the names they
-/// use, and the input's warnings. The units are checked first, on the
-/// data whole; an error of the rows comes before theirs.
-fn prepare(
-    job: &crate::io::Job,
-    data: std::borrow::Cow<'_, crate::io::Measurements>,
-    policy: &Policy,
-) -> Result<(Rows, Names, Vec<String>), CalibrationError> {
-    let setup = &job.setup;
-    let mut names = Names {
-        joints: job.robot.joint_names.clone(),
-        kinds: job.robot.chain.joints().iter().map(|j| j.kind).collect(),
-        markers: setup
-            .markers
-            .iter()
-            .map(|m| (m.id, Vector3::from(m.xyz)))
-            .collect(),
-        bins: Default::default(),
-    };
-    let mut warnings: Vec<String> = data.warnings.iter().map(ToString::to_string).collect();
-    let units = plausibility::check_units(job, &data, policy);
-    let absolute = declared::needs_absolute(job);
-    let rows = Rows::build(job, data, absolute, &mut names, policy)?;
-    warnings.extend(units?);
-    Ok((rows, names, warnings))
-}
-
-/// [`calibrate`] from the rows of the measurements in `file`.
-fn calibrate_rows(
-    job: &crate::io::Job,
-    file: &std::path::Path,
-    rows: Rows,
-    names: Names,
-    mut warnings: Vec<String>,
-    settings: &Settings,
-    progress: Progress<'_>,
-) -> Result<Report, CalibrationError> {
-    let policy = settings.policy;
-    let setup = &job.setup;
-    let model = declared::declared(job, file, &rows, &names)?;
-    let weight = RobustWeight::new(
-        setup.noise.sigma0_um * 1e-6,
-        settings.lambda.unwrap_or(setup.noise.lambda),
-    )
-    .map_err(|e| CalibrationError::Core("noise settings", e))?;
-    let weighting = weighting(setup, &rows, file)?;
-    let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
-    let mut e = engine::Engine {
-        cancel: None,
-        geometry: Geometry::nominal_tree(
-            &job.robot.chain,
-            &job.robot.ends,
-            &markers,
-            &marker_ends(job),
-        ),
-        rows: std::sync::Arc::new(rows),
-        names,
-        lin: Linearisation::nominal(settings.deflection_model),
-        fit_settings: fit::FitSettings {
-            method: settings.method,
-            weight,
-            max_iterations: settings.max_iterations,
-            tolerance: policy.irls_tolerance,
-            weighting,
-        },
-        policy,
-        heldout: settings.heldout,
-        progress,
-        last_design: Default::default(),
-    };
-    // (With the model's design in the same pass: the independence test
-    // below needs it.)
-    e.relinearise_for(&model)?;
-    plausibility::check_torques(&model, &e.rows, &e.names, &policy, file)?;
-
-    // The declared model reduced to what the data can identify, at the
-    // nominal robot (its dependences are structural, and read in the robot's
-    // own axes: a1's offset is the base's turn about z). A Gauss–Newton
-    // step that makes another one dependent leaves it out there
-    // (`diagnosis::run`).
-    let left_out = e.left_out(&model)?;
-    let dropped: Vec<Param> = model
-        .iter()
-        .filter(|p| left_out.iter().any(|l| l.name == e.names.name(p)))
-        .copied()
-        .collect();
-    let kept: Vec<usize> = (0..model.len())
-        .filter(|&i| !dropped.contains(&model[i]))
-        .collect();
-    let declared: Vec<Param> = kept.iter().map(|&i| model[i]).collect();
-    // Then the tracker frame (when declared), by a rigid registration; the
-    // rows there, every parameter zero, are the nominal error.
-    // (With the design of the declared parameters then the left-out ones:
-    // the declared fit's first, `diagnosis::run`.)
-    let with_dropped: Vec<Param> = declared.iter().chain(&dropped).copied().collect();
-    e.register_base(&with_dropped)?;
-    // (The rows keep no left-hand side: computed from their frames.)
-    let nominal_y = e.lhs()?;
-    let nominal = Nominal::of(&nominal_y);
-    // Each row's, for the report: computed again at the end where the
-    // nominal robot needed no equilibrium (`diagnosis::NominalRows`).
-    let exact = (e.rows.rows.iter()).any(|r| r.extra.as_ref().is_some_and(|x| x.y.is_some()));
-    let at = (e.rows.at.as_ref())
-        .filter(|_| !exact)
-        .map(|(g, _)| g.clone());
-    let nominal_rows = match at {
-        Some(at) => {
-            drop(nominal_y);
-            diagnosis::NominalRows::At(Box::new(at))
-        }
-        None => diagnosis::NominalRows::Held(nominal_y),
-    };
-    // A declared compliance the data cannot identify is too few
-    // configurations (or markers, or a load that does not load the joint)
-    // for the declared model: an error naming the parameters, not a fit that
-    // silently leaves them out. (Geometric parameters that another declared
-    // one absorbs, e.g. a1's offset and the base yaw, are a property of the
-    // model, not of the data: left out and reported.)
-    let missing: Vec<String> = dropped
-        .iter()
-        .filter(|p| p.is_compliance())
-        .map(|p| e.names.name(p))
-        .collect();
-    if !missing.is_empty() {
-        let deflections = e
-            .rows
-            .rows
-            .iter()
-            .filter(|r| r.kind == RowKind::Deflection)
-            .count();
-        return Err(CalibrationError::Data(format!(
-            "{}: too few configurations for the declared model: {} cannot be identified \
-             from {} configuration(s) and {} deflection(s) ({} equations for {} declared \
-             parameters); measure more configurations (or markers), or remove them from \
-             [model]",
-            file.display(),
-            missing.join(", "),
-            e.rows.configs.len(),
-            deflections,
-            3 * deflections,
-            model.len()
-        )));
-    }
-    if declared.is_empty() {
-        return Err(CalibrationError::Data(format!(
-            "the declared model has no parameter these data can identify (nominal error \
-             before calibration: {nominal}); declare one in [model]"
-        )));
-    }
-    // As many identifiable parameters as equations: the fit reproduces
-    // every measurement, and no residual is left to estimate the noise
-    // from (eq. 14; the estimator's error was "sigma must be positive").
-    let equations = 3 * e.rows.rows.len();
-    if equations <= declared.len() {
-        return Err(CalibrationError::Data(format!(
-            "{}: too few measurements for the declared model: {} row(s) give {equations} \
-             equations for {} identifiable parameters, which leaves no residual to estimate \
-             the noise from; measure more configurations (or markers), or remove parameters \
-             from [model]",
-            file.display(),
-            e.rows.rows.len(),
-            declared.len()
-        )));
-    }
-    let mut settings = *settings;
-    let mut notes = Vec::new();
-    if let Some(m) = setup.assumed_link_mass_kg {
-        // The compliances are per the assumed torques: the reader must know.
-        notes.push(format!(
-            "assumed mass model (setup assumed_link_mass_kg): every joint whose moving body \
-             has no mass in the URDF carries {m} kg at its frame's origin; compliances are \
-             per the torques of these masses"
-        ));
-    }
-    // Weights known in advance (the instrument's σ) need no scatter per
-    // configuration; estimated ones fall back: `both` to the instrument's σ
-    // alone (given σ enter the weights, data contract 7.2), `estimated`
-    // to OLS.
-    if e.fit_settings.weighting != fit::Weighting::Instrument {
-        if let Some(note) = diagnosis::weighting_fallback(&e, settings.method) {
-            if e.fit_settings.weighting == fit::Weighting::Both {
-                let note = format!(
-                    "{note}: weighted by the instrument's sigma alone (sx, sy, sz), one weighted fit"
-                );
-                (e.progress)(&note);
-                notes.push(note);
-                e.fit_settings.weighting = fit::Weighting::Instrument;
-            } else {
-                let note = format!("{note}: fitted by OLS instead");
-                (e.progress)(&note);
-                notes.push(note);
-                settings.method = Method::Ols;
-                e.fit_settings.method = Method::Ols;
-            }
-        }
-    }
-    let mut report = diagnosis::run(
-        e,
-        declared,
-        left_out,
-        &model,
-        &settings,
-        notes,
-        nominal_rows,
-    )?;
-    report.nominal = nominal;
-    // The input's, the run's (`diagnosis::run`), then the result's.
-    warnings.append(&mut report.warnings);
-    warnings.extend(plausibility::check_result(&report, &policy)?);
-    report.warnings = warnings;
-    report.failure = plausibility::failure(&report, &policy);
-    Ok(report)
-}
-
-/// Which σ enters the weights ([`crate::io::Weighting`]): the setup's
-/// `[noise] weights`, else `both` when every row carries the instrument's
-/// σ (`sx, sy, sz`, data contract 7.2) and `estimated` when none does.
-///
-/// # Errors
-/// [`CalibrationError::Data`] when some rows carry it and some do not
-/// (only deflections without both points' σ), or when the setup asks for
-/// the instrument's σ and the data do not have it.
-fn weighting(
-    setup: &crate::io::Setup,
-    rows: &Rows,
-    file: &std::path::Path,
-) -> Result<fit::Weighting, CalibrationError> {
-    use fit::Weighting;
-    let with = rows.rows.iter().filter(|r| r.sigma().is_some()).count();
-    let all = with == rows.rows.len();
-    if with > 0 && !all {
-        return Err(CalibrationError::Data(format!(
-            "{}: {with} of {} rows carry the instrument's σ (sx, sy, sz): all or none",
-            file.display(),
-            rows.rows.len()
-        )));
-    }
-    match setup.noise.weights {
-        None if all && with > 0 => Ok(Weighting::Both),
-        None => Ok(Weighting::Estimated),
-        Some(w @ (Weighting::Instrument | Weighting::Both)) if with == 0 => {
-            Err(CalibrationError::Data(format!(
-                "{}: [noise] weights = \"{}\" needs the instrument's σ, but the \
-                 measurements have no sx, sy, sz columns",
-                file.display(),
-                w.name()
-            )))
-        }
-        Some(w) => Ok(w),
-    }
-}
-
-/// Each setup marker's end in the robot ([`crate::io::Robot::ends`]), in
-/// setup order (the order of [`Names::markers`]).
-pub(crate) fn marker_ends(job: &crate::io::Job) -> Vec<usize> {
-    job.setup
-        .markers
-        .iter()
-        .map(|m| job.robot.end_index(m.link.as_deref()).unwrap_or(0))
-        .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::effects::inadmissible;
-    use super::*;
-    use crate::robot::JointKind;
-
-    fn names() -> Names {
-        Names {
-            joints: vec!["a1".into(), "a2".into()],
-            kinds: vec![JointKind::Revolute; 2],
-            markers: vec![(1, Vector3::zeros())],
-            bins: Default::default(),
-        }
-    }
-
-    #[test]
-    fn physical_limits_reject_impossible_estimates() {
-        let (n, p) = (names(), Policy::default());
-        let k = [Param::Compliance { joint: 1 }];
-        assert!(inadmissible(&n, &p, &k, &[0.5], &k).is_none());
-        assert!(inadmissible(&n, &p, &k, &[-0.5], &k)
-            .unwrap()
-            .contains("< 0"));
-        let b = [Param::Backlash { joint: 0 }];
-        assert!(inadmissible(&n, &p, &b, &[-1.0], &b).is_some());
-        assert!(inadmissible(&n, &p, &b, &[1.0], &b).is_none());
-        // A negative compliance already in the model is not the candidate's.
-        let params = [Param::Compliance { joint: 0 }, Param::Backlash { joint: 1 }];
-        assert!(inadmissible(
-            &n,
-            &p,
-            &params,
-            &[-1.0, 1.0],
-            &[Param::Backlash { joint: 1 }]
-        )
-        .is_none());
-        let cyc = [
-            Param::GearCyclic {
-                joint: 0,
-                cos: false,
-            },
-            Param::GearCyclic {
-                joint: 0,
-                cos: true,
-            },
-        ];
-        assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.0], &cyc).is_none()); // 10 mrad
-        assert!(inadmissible(&n, &p, &cyc, &[6.0, 8.1], &cyc).is_some());
-        let grav = [false, true].map(|b| Param::GravityCompliance { joint: 1, b });
-        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.0], &grav).is_none()); // 50 mrad
-        assert!(inadmissible(&n, &p, &grav, &[30.0, -40.1], &grav)
-            .unwrap()
-            .contains("gravity_compliance_a2"));
-        let drift: Vec<Param> = (0..3).map(|axis| Param::Drift { axis }).collect();
-        // 1 µm/s = 3.6 mm/h.
-        assert!(inadmissible(&n, &p, &drift, &[1.0, 0.0, 0.0], &drift).is_none());
-        assert!(inadmissible(&n, &p, &drift, &[1.0, 1.0, 0.0], &drift).is_some());
-    }
-}

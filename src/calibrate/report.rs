@@ -1,15 +1,22 @@
 //! What a calibration reports: the final model, the errors, the effects the
 //! diagnosis added with the errors before and after each, and what is left.
 //! The CLI prints it (`Display`) or writes the contract's JSON.
+//!
+//! Also here: the calibrated model the report carries ([`calibrated`]), and
+//! the rules that judge a result — errors, warnings and whether it is a
+//! calibration at all ([`plausibility`]).
+
+pub mod calibrated;
+pub mod plausibility;
 
 use std::collections::BTreeMap;
 use std::fmt;
 
 use nalgebra::Vector3;
 
-use super::calibrated::CalibratedModel;
-use super::effects::Effect;
-use super::residuals::LackOfFit;
+use crate::calibrate::effects::Effect;
+use crate::calibrate::fit::residuals::LackOfFit;
+use crate::calibrate::report::calibrated::CalibratedModel;
 mod per_row;
 pub use per_row::{ConfigNoise, ConfigNoises, RowError, RowErrors};
 
@@ -116,7 +123,7 @@ pub struct NearDependent {
     pub name: String,
     /// Variance inflation `1/(1 − R²)` of its (unweighted) column on the
     /// other parameters' ([`crate::estimate::Identifiability::inflation`]),
-    /// at least [`super::Policy::max_variance_inflation`].
+    /// at least [`crate::calibrate::settings::Policy::max_variance_inflation`].
     pub inflation: f64,
     /// The parameters its value trades against, largest share first.
     pub with: Vec<String>,
@@ -195,7 +202,7 @@ pub struct PlotSeries {
     pub after_um: Vec<Vector3<f64>>,
 }
 
-/// The outcome of [`super::calibrate`].
+/// The outcome of [`crate::calibrate::run::calibrate`].
 #[derive(Debug, Clone)]
 pub struct Report {
     /// `irls` | `wls` | `ols`.
@@ -223,7 +230,7 @@ pub struct Report {
     /// The final fit's steps: the OLS start and every reweighting after it
     /// (the paper's Figure 3), estimates in the order of `parameters`
     /// (geometric ones as steps from the final linearisation).
-    pub history: Vec<super::fit::Step>,
+    pub history: Vec<crate::calibrate::fit::Step>,
     /// The residual σ and the weights of the final fit per configuration.
     pub noise: ConfigNoises,
     /// RMS of the final model's position residuals \[µm\].
@@ -252,7 +259,7 @@ pub struct Report {
     pub left_out: Vec<LeftOut>,
     /// Parameters of the final model that are identifiable but poorly
     /// (variance inflation at least
-    /// [`super::Policy::max_variance_inflation`]), largest first.
+    /// [`crate::calibrate::settings::Policy::max_variance_inflation`]), largest first.
     pub near_dependent: Vec<NearDependent>,
     /// Rows (3 equations each).
     pub rows: usize,
@@ -273,10 +280,10 @@ pub struct Report {
     /// predicts what the model does, or without absolute rows.
     pub rigid: Option<RigidUrdf>,
     /// Plausibility findings that did not stop the run
-    /// ([`super::plausibility`]), the input readers' warnings included.
+    /// ([`crate::calibrate::report::plausibility`]), the input readers' warnings included.
     pub warnings: Vec<String>,
     /// Why this result is not a calibration, when it is not one
-    /// ([`super::plausibility::failure`]): the fit did not converge, or
+    /// ([`crate::calibrate::report::plausibility::failure`]): the fit did not converge, or
     /// its model fits its own data worse than the nominal robot. The
     /// report is still complete, for inspection; `robcal calibrate` exits
     /// non-zero unless asked to accept it (`--accept-unconverged`).

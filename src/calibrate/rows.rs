@@ -12,16 +12,16 @@
 
 use nalgebra::Vector3;
 
-use super::geometry::{Geometry, J};
-use super::linearisation::Linearisation;
-use super::names::Names;
-use super::settings::CalibrationError;
+use crate::calibrate::params::geometry::{Geometry, J};
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::params::names::Names;
+use crate::calibrate::settings::CalibrationError;
+use crate::error::Error;
 use crate::model::Sample;
 use crate::robot::{
     equilibrium, Chain, EquilibriumSettings, Frames, JointKind, JointLaw, Loading, PointLoad,
     Wrench,
 };
-use crate::Error;
 
 mod build;
 mod noise;
@@ -73,8 +73,8 @@ pub struct Row {
     chain: u32,
     /// Index of the configuration ([`Row::group`]).
     group: u32,
-    /// Joint values \[rad or m\] (inline up to [`crate::io::INLINE_JOINTS`]).
-    pub q: crate::io::JointValues,
+    /// Joint values \[rad or m\] (inline up to [`crate::io::measurements::INLINE_JOINTS`]).
+    pub q: crate::io::measurements::JointValues,
     /// What was measured \[m\]: the position (absolute rows, measurement
     /// frame) or the deflection.
     pub measured: Vector3<f64>,
@@ -273,7 +273,7 @@ pub struct Rows {
     /// What kinds of rows there are.
     pub kinds: DataKinds,
     /// Distinct angles \[µrad\] of each joint, in order of first appearance
-    /// (empty when the joint takes more than [`super::Policy::max_bins`]).
+    /// (empty when the joint takes more than [`crate::calibrate::settings::Policy::max_bins`]).
     pub bins: Vec<Vec<i32>>,
     /// Whether each joint's bins make a compensator candidate.
     pub compensator_ok: Vec<bool>,
@@ -301,7 +301,7 @@ pub struct Rows {
 
 impl Rows {
     /// Recomputes every row at `geometry` and `lin` (see
-    /// [`super::linearisation`]): frames, predicted position, torques, the
+    /// [`crate::calibrate::params::linearisation`]): frames, predicted position, torques, the
     /// columns' joint twists and the left-hand side `y`.
     ///
     /// # Errors
@@ -313,11 +313,11 @@ impl Rows {
         geometry: &Geometry,
         lin: &Linearisation,
     ) -> Result<(), CalibrationError> {
-        let threads = super::parallel::for_rows(self.rows.len());
+        let threads = crate::parallel::for_rows(self.rows.len());
         self.relinearise_on(geometry, lin, threads)
     }
 
-    /// [`Rows::relinearise`] on `threads` threads ([`super::parallel`]):
+    /// [`Rows::relinearise`] on `threads` threads ([`crate::parallel`]):
     /// the same rows whatever their number.
     ///
     /// # Errors
@@ -339,7 +339,7 @@ impl Rows {
     /// (those [`Rows::frames`] recomputes, bit for bit), `k` its index in
     /// its run: the rows are split in runs of [`run_length`] rows, and
     /// `states` holds one state per run (none: `then` is not called). A design built here needs no second forward
-    /// kinematics per row ([`super::design::Design::relinearised`]).
+    /// kinematics per row ([`crate::calibrate::design::Design::relinearised`]).
     /// `then`'s first error (in row order) does not stop the rows: it is
     /// returned when they are all computed.
     ///
@@ -371,7 +371,7 @@ impl Rows {
         // so that the retry is the same on any number of threads. (Only the
         // exact model starts from them.)
         let before: Option<Vec<Vec<f64>>> = (threads > 1
-            && lin.model == super::DeflectionModel::Exact)
+            && lin.model == crate::calibrate::params::linearisation::DeflectionModel::Exact)
             .then(|| self.rows.iter().map(|r| r.theta().to_vec()).collect());
         // `rigid`: the run's frames of a rigid row, filled in place; `sink`
         // gets the row and its frames.
@@ -412,7 +412,10 @@ impl Rows {
             if let Some(e) = &mut row.extra {
                 e.gravity_q.clear();
             }
-            if absolute && lin.model == super::DeflectionModel::Exact && lin.needs_gravity() {
+            if absolute
+                && lin.model == crate::calibrate::params::linearisation::DeflectionModel::Exact
+                && lin.needs_gravity()
+            {
                 // The gravity compliance's deflection at the commanded pose.
                 let at_q = chain.frames(&row.q).map_err(core("forward kinematics"))?;
                 let g = lin.gravity_at(&at_q, &g_unit);
@@ -515,7 +518,7 @@ impl Rows {
             .chunks_mut(per)
             .map(|run| (run, states.next(), Ok(())))
             .collect();
-        let done = super::parallel::for_each_mut(&mut runs, threads, |r, (run, state, failed)| {
+        let done = crate::parallel::for_each_mut(&mut runs, threads, |r, (run, state, failed)| {
             let mut rigid = Frames::empty();
             for (k, row) in run.iter_mut().enumerate() {
                 let mut sink = |row: &Row, frames: &Frames<f64, J>| {

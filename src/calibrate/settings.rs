@@ -1,9 +1,9 @@
 //! What a calibration is told: the user's [`Settings`], the engine's
 //! [`Policy`] (every decision constant, stated once), and how it fails.
 
-use super::names::Names;
+use crate::calibrate::params::names::Names;
+use crate::error::Error;
 use crate::model::Param;
-use crate::Error;
 
 /// Estimation method (data contract §4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -43,7 +43,7 @@ pub struct Settings {
     pub heldout: bool,
     /// The deflection model of the rows: the exact equilibrium (default)
     /// or the paper's first-order eq. 3.
-    pub deflection_model: super::DeflectionModel,
+    pub deflection_model: crate::calibrate::params::linearisation::DeflectionModel,
     /// The decision constants.
     pub policy: Policy,
 }
@@ -56,7 +56,7 @@ impl Default for Settings {
             max_iterations: 100,
             diagnose: true,
             heldout: true,
-            deflection_model: super::DeflectionModel::Exact,
+            deflection_model: crate::calibrate::params::linearisation::DeflectionModel::Exact,
             policy: Policy::default(),
         }
     }
@@ -75,12 +75,12 @@ pub struct Policy {
     pub min_share: f64,
     /// Share of the drop in the residual sum of squares that the nested
     /// tests of re-added parameters predict (at the first fit's
-    /// linearisation, [`super::retest`]) that the new fit must realise in
+    /// linearisation, [`crate::calibrate::diagnosis::retest`]) that the new fit must realise in
     /// its RMS (`1 − (RMS after / RMS before)²`); else the first fit
     /// stands. 0.5.
     pub min_realised: f64,
     /// A calibrated model is reported as fitting worse than the nominal
-    /// robot ([`super::plausibility`]) when its root weighted sum of squares
+    /// robot ([`crate::calibrate::report::plausibility`]) when its root weighted sum of squares
     /// (the fit's weights; unweighted for OLS) exceeds the nominal robot's
     /// by more than this share. 0.01: a fit that only rounds to the nominal
     /// robot (a base-only model, whose registration is already the least
@@ -219,14 +219,14 @@ pub struct Policy {
     /// error; within it, a warning (consistent with zero). 3.
     pub negative_sigmas: f64,
     /// A final estimate within this many σ of zero is not determined by
-    /// the data ([`super::plausibility`]): a warning for a declared term of
+    /// the data ([`crate::calibrate::report::plausibility`]): a warning for a declared term of
     /// the joint law that follows the torque (it would be applied, as
     /// estimated, under any load), and for an effect the loop added whose
     /// every parameter ended there. 2.
     pub determined_sigmas: f64,
     /// A row whose final residual (its norm) exceeds this many times the
     /// median row's of its kind (absolute positions, deflections) is
-    /// reported as a likely measurement error ([`super::plausibility`]).
+    /// reported as a likely measurement error ([`crate::calibrate::report::plausibility`]).
     /// 20: for Gaussian noise the median norm is 1.54 σ (3 axes), so the
     /// bound is 31 σ, and still 6 σ for a configuration five times
     /// noisier than the median one (the paper's premise: the noise varies
@@ -311,7 +311,7 @@ pub enum CalibrationError {
     /// The engine is left at that linearisation.
     Dependent(Vec<usize>),
     /// A candidate's trial abandoned because an earlier candidate of the
-    /// same step was admissible ([`super::trial`]): never the run's error.
+    /// same step was admissible ([`crate::calibrate::diagnosis::trial`]): never the run's error.
     Cancelled,
 }
 

@@ -39,7 +39,7 @@ use nalgebra::{DefaultAllocator, Dim, DimName, OMatrix, OVector, RealField};
 
 use super::block::{validate_rows, Block};
 use super::factor::Solution;
-use crate::Error;
+use crate::error::Error;
 
 mod kernel;
 use kernel::{

@@ -5,7 +5,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, RealField, Vector3, U3};
 
 use super::Alloc;
-use crate::Error;
+use crate::error::Error;
 
 /// One measurement: up to three rows of `Δp = B X` with their weights.
 ///

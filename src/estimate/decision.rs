@@ -8,7 +8,7 @@ use nalgebra::{RealField, Vector3};
 
 use super::distributions;
 use super::nested::NestedTest;
-use crate::Error;
+use crate::error::Error;
 
 /// The lack-of-fit test against the repetitions: rows of one cell
 /// (configuration, marker, kind) share their regressors, so the scatter

@@ -23,7 +23,7 @@ use super::linalg::{dot, mat_mul};
 use super::Alloc;
 use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 
-use crate::Error;
+use crate::error::Error;
 
 /// Pivot tolerance on the scaled matrix: `√ε` of the scalar type
 /// (1.5e-8 for f64, 3.5e-4 for f32). A parameter whose column is explained

@@ -31,7 +31,7 @@ use super::accumulator::Accumulator;
 use super::factor::Solution;
 use super::irls::Noise;
 use super::linalg::dot;
-use crate::Error;
+use crate::error::Error;
 
 mod kernel;
 mod sums;

@@ -24,7 +24,7 @@ use super::irls::{
 };
 use super::weights::RobustWeight;
 use super::Alloc;
-use crate::Error;
+use crate::error::Error;
 
 mod fused;
 

@@ -28,7 +28,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, RealField, Vector3};
 use super::accumulator::Accumulator;
 use super::factor::{std_devs, Solution};
 use super::weights::RobustWeight;
-use crate::Error;
+use crate::error::Error;
 
 /// Settings of the iteration.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -25,7 +25,7 @@ use super::accumulator::Accumulator;
 use super::distributions;
 use super::factor::{pivot_tolerance, Solution};
 use super::linalg::{dot, mat_mul, mat_vec};
-use crate::Error;
+use crate::error::Error;
 
 /// The outcome of one nested test.
 #[derive(Debug, Clone, Copy, PartialEq)]

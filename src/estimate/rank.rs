@@ -37,7 +37,7 @@ use nalgebra::{Const, DefaultAllocator, Dim, OMatrix, OVector, RealField};
 use super::accumulator::Accumulator;
 use super::factor::{solve_lower_in_place, solve_upper_t_in_place};
 use super::linalg::dot;
-use crate::Error;
+use crate::error::Error;
 
 mod kept;
 use kept::{kept_factor, verify_kept};

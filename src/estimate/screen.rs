@@ -42,7 +42,7 @@ use super::linalg::dot;
 use super::nested::{from_delta, nested_test, NestedTest};
 use super::rank::independent;
 use super::Alloc;
-use crate::Error;
+use crate::error::Error;
 
 pub use super::decision::{rank_tests, LackOfFit, PureError, Rule};
 

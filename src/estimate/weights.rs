@@ -12,7 +12,7 @@
 
 use nalgebra::RealField;
 
-use crate::Error;
+use crate::error::Error;
 
 /// Settings of the robust weight, eq. 14.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -58,7 +58,7 @@ use nalgebra::{DMatrix, DVector, Dyn};
 
 use super::block::{validate_rows, Block};
 use super::Accumulator;
-use crate::Error;
+use crate::error::Error;
 
 mod copy;
 mod kernel;

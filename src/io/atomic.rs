@@ -142,7 +142,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::io::atomic::*;
 
     fn dir(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("robcal-atomic-{name}-{}", std::process::id()));

@@ -8,8 +8,8 @@
 //! and mm, and for deg whenever some decimal degree value maps back exactly
 //! under `to_radians` (else within 1 ulp).
 
-use super::setup::{AngleUnit, LengthUnit};
-use super::ErrorKind;
+use crate::io::error::ErrorKind;
+use crate::io::units::{AngleUnit, LengthUnit};
 
 /// The unit of a cell.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,7 +114,7 @@ pub(crate) fn format_real(v: f64, scale: Scale) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::io::cells::*;
 
     #[test]
     fn times_1000_moves_the_point() {

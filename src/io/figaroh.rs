@@ -33,11 +33,11 @@
 
 use std::path::{Path, PathBuf};
 
-use super::measurements::Observation;
-use super::setup::Units;
-use super::urdf::Robot;
-use super::writer::write_measurements;
-use super::{ErrorKind, InputError};
+use crate::io::measurements::Observation;
+use crate::io::setup::Units;
+use crate::io::urdf::Robot;
+use crate::io::writer::write_measurements;
+use crate::io::{error::ErrorKind, error::InputError};
 
 /// Number of tracked points per posture (BL, BR, TR, TL).
 pub const POINTS: usize = 4;
@@ -152,7 +152,8 @@ impl MocapFile {
 /// See the module docs; the error names `path`, the line and the column.
 pub fn read_mocap(path: impl AsRef<Path>) -> Result<MocapFile, InputError> {
     let path = path.as_ref();
-    let text = super::input::read_text(path, "the mocap file", super::input::MAX_DATA_BYTES)?;
+    let text =
+        crate::io::input::read_text(path, "the mocap file", crate::io::input::MAX_DATA_BYTES)?;
     parse_mocap(&text, path)
 }
 
@@ -305,7 +306,7 @@ pub struct Imported {
 ///
 /// With a `robot`, the joint columns must be exactly the chain's movable
 /// joints and are written in chain order (through
-/// [`super::write_measurements`]); without one, in the file's order.
+/// [`crate::io::writer::write_measurements`]); without one, in the file's order.
 ///
 /// # Errors
 /// Any [`read_mocap`] error; a joint column set that does not match the
@@ -317,8 +318,8 @@ pub fn import_mocap(
     robot: Option<&Robot>,
 ) -> Result<Imported, InputError> {
     let out = out_csv.as_ref();
-    super::atomic::check_target(out, &[in_csv.as_ref()]).map_err(|e| {
-        let why = format!("cannot write: {}", super::atomic::reason(out, &e));
+    crate::io::atomic::check_target(out, &[in_csv.as_ref()]).map_err(|e| {
+        let why = format!("cannot write: {}", crate::io::atomic::reason(out, &e));
         InputError::new(out, ErrorKind::Io, why)
     })?;
     let mocap = read_mocap(in_csv)?;
@@ -355,7 +356,7 @@ fn write_plain(path: &Path, names: &[String], rows: &[Observation]) -> Result<()
         }
         text.push('\n');
     }
-    super::atomic::write_atomic(path, text.as_bytes()).map_err(|e| {
+    crate::io::atomic::write_atomic(path, text.as_bytes()).map_err(|e| {
         InputError::new(
             path,
             ErrorKind::Io,
@@ -366,7 +367,7 @@ fn write_plain(path: &Path, names: &[String], rows: &[Observation]) -> Result<()
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::io::figaroh::*;
 
     const HEAD: &str = "x1,y1,z1,x2,y2,z2,x3,y3,z3,x4,y4,z4,j1,j2,t_start_robot,t_end_robot";
 

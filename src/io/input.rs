@@ -4,7 +4,7 @@
 //! | input | limit |
 //! |---|---|
 //! | setup (TOML) | [`MAX_SETUP_BYTES`] = 1 MiB |
-//! | robot (URDF) | [`MAX_URDF_BYTES`] = 16 MiB; at most [`super::urdf::MAX_XML_ELEMENTS`] = 100,000 elements, nested at most [`super::urdf::MAX_XML_DEPTH`] = 64 deep (checked in one pass before the parser) |
+//! | robot (URDF) | [`MAX_URDF_BYTES`] = 16 MiB; at most [`crate::io::urdf::MAX_XML_ELEMENTS`] = 100,000 elements, nested at most [`crate::io::urdf::MAX_XML_DEPTH`] = 64 deep (checked in one pass before the parser) |
 //! | measurements (CSV), FIGAROH mocap export | [`MAX_DATA_BYTES`] = 1 GiB by default (`robcal calibrate --max-data-mib`) |
 //!
 //! A FIFO, a device (`/dev/zero`), a socket or a directory is refused from
@@ -15,7 +15,8 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::{ErrorKind, InputError};
+pub use crate::io::error::{quote, shorten, MAX_MESSAGE_CHARS, MAX_QUOTE_CHARS};
+use crate::io::error::{ErrorKind, InputError};
 
 /// Largest setup file \[bytes\].
 pub const MAX_SETUP_BYTES: u64 = 1 << 20;
@@ -23,8 +24,6 @@ pub const MAX_SETUP_BYTES: u64 = 1 << 20;
 pub const MAX_URDF_BYTES: u64 = 16 << 20;
 /// Largest measurement or mocap file by default \[bytes\].
 pub const MAX_DATA_BYTES: u64 = 1 << 30;
-/// Characters of offending text an error quotes at most.
-pub const MAX_QUOTE_CHARS: usize = 80;
 
 /// What a path is, for an error.
 fn kind_of(meta: &std::fs::Metadata) -> &'static str {
@@ -74,7 +73,7 @@ pub fn read_limited(path: &Path, what: &str, limit: u64) -> Result<Vec<u8>, Inpu
         return Err(too_large(meta.len()));
     }
     let file = std::fs::File::open(path).map_err(|e| io(format!("cannot read {what}: {e}")))?;
-    if let Some(bytes) = read_in_pieces(&file, meta.len(), crate::calibrate::parallel::threads()) {
+    if let Some(bytes) = read_in_pieces(&file, meta.len(), crate::parallel::threads()) {
         return Ok(bytes);
     }
     let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
@@ -94,7 +93,7 @@ const PIECES_FROM_BYTES: u64 = 32 << 20;
 
 /// The `len` bytes of `file` read in one piece per thread (`threads`: the
 /// engine's), each at its own offset, into one buffer
-/// ([`crate::calibrate::parallel::for_runs_mut`]: a piece whose thread the
+/// ([`crate::parallel::for_runs_mut`]: a piece whose thread the
 /// system refuses is read on this one). The kernel's copy into fresh pages
 /// (and their faults) was ~0.3 s of one thread for a file of 10⁶ rows
 /// (187 MB), before anything else could start. `None` (the caller reads
@@ -111,7 +110,7 @@ fn read_in_pieces(file: &std::fs::File, len: u64, threads: usize) -> Option<Vec<
     // Zeroed by the allocator (fresh pages for a buffer this large): each
     // page is first touched by the thread that reads into it.
     let mut bytes = vec![0_u8; len];
-    crate::calibrate::parallel::for_runs_mut(&mut bytes, threads, |first, piece| {
+    crate::parallel::for_runs_mut(&mut bytes, threads, |first, piece| {
         file.read_exact_at(piece, first as u64)
     })
     .ok()?;
@@ -144,50 +143,9 @@ pub fn read_text(path: &Path, what: &str, limit: u64) -> Result<String, InputErr
     })
 }
 
-/// `text` in single quotes, cut to [`MAX_QUOTE_CHARS`] characters (`…`
-/// and the full length when cut): what an error echoes of the input.
-pub fn quote(text: &str) -> String {
-    let mut chars = text.char_indices();
-    match chars.nth(MAX_QUOTE_CHARS) {
-        None => format!("'{text}'"),
-        Some((end, _)) => format!("'{}…' ({} bytes)", &text[..end], text.len()),
-    }
-}
-
-/// Most characters of one error message.
-pub const MAX_MESSAGE_CHARS: usize = 600;
-
-/// `message` with every quoted text (between two `'`) cut to
-/// [`MAX_QUOTE_CHARS`] characters, and the whole cut to
-/// [`MAX_MESSAGE_CHARS`]: what [`super::Located`] displays, so that no
-/// error echoes a megabyte cell, name or line.
-pub fn shorten(message: &str) -> String {
-    let mut out = String::with_capacity(message.len().min(MAX_MESSAGE_CHARS + 8));
-    for (i, part) in message.split('\'').enumerate() {
-        if i > 0 {
-            out.push('\'');
-        }
-        // Odd parts are inside quotes.
-        match part.char_indices().nth(MAX_QUOTE_CHARS) {
-            Some((end, _)) if i % 2 == 1 => {
-                out.push_str(&part[..end]);
-                out.push('…');
-            }
-            _ => out.push_str(part),
-        }
-        if out.len() > 4 * MAX_MESSAGE_CHARS {
-            break;
-        }
-    }
-    match out.char_indices().nth(MAX_MESSAGE_CHARS) {
-        Some((end, _)) => format!("{}…", &out[..end]),
-        None => out,
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::io::input::*;
 
     #[test]
     fn quotes_are_short() {

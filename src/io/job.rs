@@ -3,13 +3,13 @@
 
 use std::path::{Path, PathBuf};
 
-use super::measurements::{
+use crate::io::error::InputError;
+use crate::io::measurements::{
     read_measurements, read_measurements_limited, Measurements, Observation,
 };
-use super::setup::Setup;
-use super::urdf::Robot;
-use super::writer::write_measurements;
-use super::InputError;
+use crate::io::setup::Setup;
+use crate::io::urdf::Robot;
+use crate::io::writer::write_measurements;
 
 /// A calibration job: the setup, and the robot it names.
 #[derive(Debug, Clone, PartialEq)]

@@ -14,7 +14,7 @@
 //! setup's `ignore_columns` is skipped, empty cells included.
 //!
 //! Conversion to SI, exact to the decimal: `io::cells`; the writer:
-//! [`super::writer`].
+//! [`crate::io::writer`].
 //!
 //! Rejected, with file, line and column: an unreadable file, a missing,
 //! unknown or duplicate column, a row of the wrong length, a cell that is
@@ -42,10 +42,11 @@
 
 use std::path::{Path, PathBuf};
 
-use super::cells::{self, Scale};
-use super::setup::Setup;
-use super::urdf::Robot;
-use super::{ErrorKind, InputError, InputWarning};
+use crate::io::cells::{self, Scale};
+use crate::io::error::{ErrorKind, InputError, InputWarning};
+use crate::io::setup::Setup;
+pub use crate::io::units::{MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S};
+use crate::io::urdf::Robot;
 
 mod header;
 mod pairing;
@@ -58,17 +59,6 @@ use records::chunked;
 /// Largest difference (rad or m) between the joint values of a loaded row
 /// and its unloaded row before a warning says the robot moved in between.
 pub const PAIR_Q_TOLERANCE: f64 = 1e-3;
-
-/// Largest `load_kg` \[kg\]: 100 t, beyond any robot's payload.
-pub const MAX_LOAD_KG: f64 = 1e5;
-
-/// Largest position \[m\] in any unit: 10 km, beyond any instrument.
-pub const MAX_POSITION_M: f64 = 1e4;
-
-/// Largest `|t|` \[s\]: 10¹⁰ s (317 years; Unix time in seconds is
-/// 1.8·10⁹). Larger is another unit (ms since 1970 is 1.8·10¹²) or an
-/// overflow, and differences of such times lose the seconds.
-pub const MAX_TIME_S: f64 = 1e10;
 
 /// One CSV row, in SI units.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -414,14 +404,14 @@ pub fn read_measurements(
     robot: &Robot,
     setup: &Setup,
 ) -> Result<Measurements, InputError> {
-    read_measurements_limited(path, robot, setup, super::input::MAX_DATA_BYTES)
+    read_measurements_limited(path, robot, setup, crate::io::input::MAX_DATA_BYTES)
 }
 
 /// As [`read_measurements`], refusing a file larger than `max_bytes`.
 ///
 /// # Errors
 /// See [`read_measurements`]; [`ErrorKind::Io`] for a file larger than
-/// `max_bytes` or one that is not a regular file ([`super::input`]).
+/// `max_bytes` or one that is not a regular file ([`crate::io::input`]).
 pub fn read_measurements_limited(
     path: impl AsRef<Path>,
     robot: &Robot,
@@ -433,7 +423,7 @@ pub fn read_measurements_limited(
     if let Some(read) = stream::read(path, max_bytes, robot, setup) {
         return read;
     }
-    let bytes = super::input::read_limited(path, "the measurements", max_bytes)?;
+    let bytes = crate::io::input::read_limited(path, "the measurements", max_bytes)?;
     parse_bytes(&bytes, path.to_path_buf(), robot, setup)
 }
 
@@ -472,10 +462,10 @@ fn parse_bytes(
     // after CRLF line ends and does not count blank lines. A line ends at
     // `\n`, `\r\n` or a lone `\r` (old Mac files), as the csv crate's
     // records do.
-    let threads = crate::calibrate::parallel::threads();
+    let threads = crate::parallel::threads();
     let newlines: Vec<usize> = if threads > 1 && bytes.len() >= 1 << 21 {
         let n = bytes.len();
-        crate::calibrate::parallel::map(threads, threads, |k| {
+        crate::parallel::map(threads, threads, |k| {
             records::line_ends(bytes, k * n / threads..(k + 1) * n / threads)
         })
         .concat()

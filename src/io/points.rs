@@ -16,13 +16,13 @@
 //! with its line and column, and a value no robot has: a payload above
 //! [`MAX_LOAD_KG`], a length (centre of mass, target, prismatic joint)
 //! beyond ±[`MAX_POSITION_M`] (the measurement reader's bounds,
-//! [`super::measurements`]), an angle beyond ±[`MAX_JOINT_RAD`] (this
+//! [`crate::io::measurements`]), an angle beyond ±[`MAX_JOINT_RAD`] (this
 //! reader's own: the measurement reader bounds a limited joint by ±2π).
 
 use std::path::Path;
 
-use super::measurements::{MAX_LOAD_KG, MAX_POSITION_M};
-use super::{ErrorKind, InputError};
+use crate::io::units::{MAX_LOAD_KG, MAX_POSITION_M};
+use crate::io::{error::ErrorKind, error::InputError};
 use crate::robot::JointKind;
 
 /// Largest joint angle \[rad\] read (1 591 turns: a continuous joint's
@@ -169,7 +169,7 @@ pub fn parse_points(
             let v: f64 = text.parse().map_err(|_| {
                 err(
                     ErrorKind::Syntax,
-                    format!("{} is not a number", super::input::quote(text)),
+                    format!("{} is not a number", crate::io::input::quote(text)),
                 )
                 .at_line(line)
                 .in_column(&header[c])
@@ -208,7 +208,7 @@ pub fn parse_points(
             Some(c) => Some(cell(c).parse::<u32>().map_err(|_| {
                 err(
                     ErrorKind::Syntax,
-                    format!("{} is not a marker id", super::input::quote(cell(c))),
+                    format!("{} is not a marker id", crate::io::input::quote(cell(c))),
                 )
                 .at_line(line)
                 .in_column("marker")

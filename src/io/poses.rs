@@ -43,7 +43,7 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
-use super::{ErrorKind, InputError};
+use crate::io::{error::ErrorKind, error::InputError};
 
 /// What to keep.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -110,13 +110,14 @@ pub fn import_poses(
     options: &ImportOptions,
 ) -> Result<ImportedPoses, InputError> {
     let (input, out) = (in_csv.as_ref(), out_csv.as_ref());
-    super::atomic::check_target(out, &[input]).map_err(|e| {
-        let why = format!("cannot write: {}", super::atomic::reason(out, &e));
+    crate::io::atomic::check_target(out, &[input]).map_err(|e| {
+        let why = format!("cannot write: {}", crate::io::atomic::reason(out, &e));
         InputError::new(out, ErrorKind::Io, why)
     })?;
-    let text = super::input::read_text(input, "the pose file", super::input::MAX_DATA_BYTES)?;
+    let text =
+        crate::io::input::read_text(input, "the pose file", crate::io::input::MAX_DATA_BYTES)?;
     let (csv_text, summary) = convert_poses(&text, input, options)?;
-    super::atomic::write_atomic(out, csv_text.as_bytes()).map_err(|e| {
+    crate::io::atomic::write_atomic(out, csv_text.as_bytes()).map_err(|e| {
         InputError::new(
             out,
             ErrorKind::Io,
@@ -454,7 +455,7 @@ pub fn convert_poses(
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::io::poses::*;
 
     fn opts(split: Option<&str>) -> ImportOptions {
         ImportOptions {

@@ -61,50 +61,9 @@ pub const MAX_GRAVITY_MPS2: f64 = 100.0;
 
 use serde::{Deserialize, Serialize};
 
-use super::urdf::Robot;
-use super::{ErrorKind, InputError};
-
-/// Unit of the CSV's revolute joint columns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AngleUnit {
-    /// Degrees.
-    Deg,
-    /// Radians (default).
-    #[default]
-    Rad,
-}
-
-/// Unit of the CSV's `x`, `y`, `z` and prismatic joint columns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LengthUnit {
-    /// Millimetres.
-    Mm,
-    /// Metres (default).
-    #[default]
-    M,
-}
-
-/// `[units]`: units of the CSV columns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Units {
-    /// Revolute and continuous joint columns.
-    #[serde(default)]
-    pub angle: AngleUnit,
-    /// `x`, `y`, `z` and prismatic joint columns.
-    #[serde(default)]
-    pub length: LengthUnit,
-}
-
-impl Units {
-    /// SI units: rad and m.
-    pub const SI: Units = Units {
-        angle: AngleUnit::Rad,
-        length: LengthUnit::M,
-    };
-}
+use crate::io::error::{ErrorKind, InputError};
+pub use crate::io::units::{AngleUnit, LengthUnit, Units};
+use crate::io::urdf::Robot;
 
 /// `[[marker]]`: a point on the robot that the measuring system sees.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -330,7 +289,7 @@ impl Setup {
     }
 
     /// Reads and checks a setup file (without the robot; see
-    /// [`super::Job::load`]).
+    /// [`crate::io::job::Job::load`]).
     ///
     /// # Errors
     /// Unreadable file, TOML syntax, unknown key, wrong type, or a value
@@ -338,7 +297,8 @@ impl Setup {
     /// errors, the line.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, InputError> {
         let path = path.as_ref();
-        let text = super::input::read_text(path, "the setup", super::input::MAX_SETUP_BYTES)?;
+        let text =
+            crate::io::input::read_text(path, "the setup", crate::io::input::MAX_SETUP_BYTES)?;
         Self::parse(&text, path)
     }
 
@@ -357,7 +317,7 @@ impl Setup {
             };
             let err = InputError::new(file.clone(), kind, message);
             match e.span() {
-                Some(span) => err.at_line(super::line_of_offset(text, span.start)),
+                Some(span) => err.at_line(crate::io::error::line_of_offset(text, span.start)),
                 None => err,
             }
         })?;

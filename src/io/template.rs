@@ -1,12 +1,12 @@
 //! `robcal init`: a commented setup file for a robot, with every key of the
 //! data contract (section 2 and 7) and its default, the robot's movable
 //! joints named where a key takes them, and the CSV header the measurements
-//! need. The text parses as a [`super::Setup`] and passes
-//! [`super::Setup::check_robot`] as written.
+//! need. The text parses as a [`crate::io::setup::Setup`] and passes
+//! [`crate::io::setup::Setup::check_robot`] as written.
 
 use std::fmt::Write as _;
 
-use super::urdf::Robot;
+use crate::io::urdf::Robot;
 
 /// The setup text for `robot`, read from `robot_path` (written as given:
 /// relative paths are relative to the setup file's directory).
@@ -98,6 +98,9 @@ fn toml_string(s: &str) -> String {
 mod tests {
     #[test]
     fn strings_are_escaped() {
-        assert_eq!(super::toml_string("a\"b\\c\n"), "\"a\\\"b\\\\c\\u000A\"");
+        assert_eq!(
+            crate::io::template::toml_string("a\"b\\c\n"),
+            "\"a\\\"b\\\\c\\u000A\""
+        );
     }
 }

@@ -2,16 +2,16 @@
 
 use std::path::Path;
 
-use super::cells::{format_real, Scale};
-use super::measurements::Observation;
-use super::setup::Units;
-use super::urdf::Robot;
-use super::{ErrorKind, InputError};
+use crate::io::cells::{format_real, Scale};
+use crate::io::measurements::Observation;
+use crate::io::setup::Units;
+use crate::io::urdf::Robot;
+use crate::io::{error::ErrorKind, error::InputError};
 
 /// Writes `rows` (SI) as a measurement file for `robot` in `units`:
 /// header `config,rep,marker,load_kg,<joints in chain order>,x,y,z[,t][,sx,sy,sz]`
 /// (`t` when the rows have times, `sx, sy, sz` when they have the
-/// instrument's σ). [`super::read_measurements`] reads it back to
+/// instrument's σ). [`crate::io::measurements::read_measurements`] reads it back to
 /// the same values (see the module doc for deg).
 ///
 /// The file is written to a temporary file next to `path` and renamed over
@@ -119,5 +119,5 @@ pub fn write_measurements(
     }
     let bytes = out.into_inner().map_err(|e| io_err(&e))?;
 
-    super::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
+    crate::io::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
 }

@@ -9,7 +9,7 @@
 use nalgebra::RealField;
 
 use super::param::{angle_urad, BIN_TOLERANCE_RAD};
-use crate::Error;
+use crate::error::Error;
 
 /// The angle bins of one joint: its distinct angles \[µrad\] over the
 /// configurations, in order of first appearance, and whether they make a

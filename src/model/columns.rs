@@ -66,9 +66,9 @@ use nalgebra::{RealField, Vector3};
 use super::layout::in_bin;
 use super::param::Param;
 use super::sample::Sample;
+use crate::error::Error;
 use crate::robot::load::check_len;
 use crate::robot::{Frames, JointFrame, JointKind};
-use crate::Error;
 
 impl Param {
     /// The column `∂p/∂x` \[m per reported unit\] of this parameter at

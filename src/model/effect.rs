@@ -27,8 +27,8 @@ use nalgebra::RealField;
 pub use super::bins::{joint_bins, JointBins, MAX_CONFIGS};
 use super::layout::Layout;
 use super::param::Param;
+use crate::error::Error;
 use crate::robot::{Chain, JointKind};
-use crate::Error;
 
 /// An effect of the library (data contract §6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

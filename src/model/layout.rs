@@ -30,8 +30,8 @@ use nalgebra::{DefaultAllocator, Dim, DimName, Matrix, OMatrix, RealField, Vecto
 
 use super::param::{Param, Unit, BIN_TOLERANCE_RAD};
 use super::sample::Sample;
+use crate::error::Error;
 use crate::robot::{gravity_torques, joint_torques, Chain, JointKind, PointLoad};
-use crate::Error;
 
 /// One column of a layout: the parameter and its unit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -191,7 +191,7 @@ impl<const N: usize> Layout<N> {
     /// position, [`Layout::absolute_block`].
     ///
     /// # Errors
-    /// As [`crate::Chain::frames`] and [`Layout::fill`].
+    /// As [`crate::robot::Chain::frames`] and [`Layout::fill`].
     pub fn block<T: RealField + Copy, const J: usize, D: DimName>(
         &self,
         chain: &Chain<T, J>,
@@ -223,7 +223,7 @@ impl<const N: usize> Layout<N> {
     /// the forward kinematics of the current model.
     ///
     /// # Errors
-    /// As [`crate::Chain::frames`] and [`Layout::fill`].
+    /// As [`crate::robot::Chain::frames`] and [`Layout::fill`].
     pub fn absolute_block<T: RealField + Copy, const J: usize, D: DimName>(
         &self,
         chain: &Chain<T, J>,

@@ -3,8 +3,8 @@
 
 use nalgebra::{RealField, Vector3};
 
+use crate::error::Error;
 use crate::robot::{Frames, Wrench};
-use crate::Error;
 
 /// One measured point at the current model: the pose, where the marker is,
 /// the torques behind it, the load, the time.

@@ -144,10 +144,10 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// one), and moves the tip onto it.
     ///
     /// # Errors
-    /// [`crate::Error::CapacityExceeded`] when the chain already holds `J`
-    /// joints (or 255); [`crate::Error::NonFinite`] when the joint holds a
+    /// [`crate::error::Error::CapacityExceeded`] when the chain already holds `J`
+    /// joints (or 255); [`crate::error::Error::NonFinite`] when the joint holds a
     /// non-finite number. The chain is unchanged on error.
-    pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::Error> {
+    pub fn push(&mut self, joint: Joint<T>) -> Result<(), crate::error::Error> {
         let parent = self.tip_joint();
         let _index = self.push_child(joint, parent)?;
         // `index + 1 ≤ 255`: `push_child` refuses more joints.
@@ -165,18 +165,18 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// taken, and the tip follows it.
     ///
     /// # Errors
-    /// As [`Chain::push`]; [`crate::Error::OutOfRange`] when `parent` is not
+    /// As [`Chain::push`]; [`crate::error::Error::OutOfRange`] when `parent` is not
     /// a joint of the chain (without `tree`: not the last one). The chain is
     /// unchanged on error.
     pub fn push_child(
         &mut self,
         joint: Joint<T>,
         parent: Option<usize>,
-    ) -> Result<usize, crate::Error> {
+    ) -> Result<usize, crate::error::Error> {
         let index = self.joints.len();
         if let Some(p) = parent {
             if p >= index || (cfg!(not(feature = "tree")) && p + 1 != index) {
-                return Err(crate::Error::OutOfRange {
+                return Err(crate::error::Error::OutOfRange {
                     what: "parent joint",
                     index: p,
                     len: index,
@@ -184,7 +184,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
             }
         }
         if index >= J.min(255) {
-            return Err(crate::Error::CapacityExceeded {
+            return Err(crate::error::Error::CapacityExceeded {
                 what: "chain joints",
                 capacity: J.min(255),
             });
@@ -201,11 +201,11 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
                 .link
                 .is_none_or(|l| l.mass_kg.is_finite() && l.com_m.iter().all(|v| v.is_finite()));
         if !finite {
-            return Err(crate::Error::NonFinite { what: "joint" });
+            return Err(crate::error::Error::NonFinite { what: "joint" });
         }
         #[cfg(feature = "tree")]
         {
-            let full = |_| crate::Error::CapacityExceeded {
+            let full = |_| crate::error::Error::CapacityExceeded {
                 what: "chain joints",
                 capacity: J,
             };
@@ -216,7 +216,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         }
         #[cfg(not(feature = "tree"))]
         if parent.is_none() && index > 0 {
-            return Err(crate::Error::OutOfRange {
+            return Err(crate::error::Error::OutOfRange {
                 what: "parent joint",
                 index: 0,
                 len: index,
@@ -224,7 +224,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         }
         self.joints
             .push(joint)
-            .map_err(|_| crate::Error::CapacityExceeded {
+            .map_err(|_| crate::error::Error::CapacityExceeded {
                 what: "chain joints",
                 capacity: J,
             })?;
@@ -240,13 +240,13 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
     /// a tree (see the [module docs](self); the `tree` feature).
     ///
     /// # Errors
-    /// [`crate::Error::OutOfRange`] when `end.joint` is not a joint of the
-    /// chain; [`crate::Error::NonFinite`] for a non-finite transform.
+    /// [`crate::error::Error::OutOfRange`] when `end.joint` is not a joint of the
+    /// chain; [`crate::error::Error::NonFinite`] for a non-finite transform.
     #[cfg(feature = "tree")]
-    pub fn with_tip(&self, end: &End<T>) -> Result<Self, crate::Error> {
+    pub fn with_tip(&self, end: &End<T>) -> Result<Self, crate::error::Error> {
         if let Some(j) = end.joint {
             if j >= self.dof() {
-                return Err(crate::Error::OutOfRange {
+                return Err(crate::error::Error::OutOfRange {
                     what: "tip joint",
                     index: j,
                     len: self.dof(),
@@ -257,7 +257,7 @@ impl<T: RealField + Copy, const J: usize> Chain<T, J> {
         if !(o.translation.vector.iter().all(|v| v.is_finite())
             && o.rotation.coords.iter().all(|v| v.is_finite()))
         {
-            return Err(crate::Error::NonFinite { what: "tip" });
+            return Err(crate::error::Error::NonFinite { what: "tip" });
         }
         let mut c = self.clone();
         // `j < dof ≤ 255`.

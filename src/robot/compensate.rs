@@ -39,7 +39,7 @@ use nalgebra::{RealField, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use super::chain::{Chain, JointKind};
 use super::equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
-use crate::Error;
+use crate::error::Error;
 
 /// When [`compensate`] stops, and how far one step may go.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -30,7 +30,7 @@ use nalgebra::{Point3, RealField, SMatrix, Vector3};
 use super::chain::{Chain, JointKind};
 use super::kinematics::{Frames, JointFrame};
 use super::load::{check_len, gravity_torques, joint_torques, PointLoad, Wrench};
-use crate::Error;
+use crate::error::Error;
 
 /// What loads the joints at the deflected pose.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,7 +39,7 @@ pub struct Loading<T: RealField + Copy> {
     /// A mass hanging from the tip (the calibration tool).
     pub load: Option<PointLoad<T>>,
     /// Gravity \[m/s², in the chain's base frame\] acting on the chain's own
-    /// link masses ([`crate::LinkInertia`]); `None`: the robot's own weight
+    /// link masses ([`crate::robot::LinkInertia`]); `None`: the robot's own weight
     /// is not modelled.
     pub own_weight_mps2: Option<Vector3<T>>,
 }

@@ -25,7 +25,7 @@
 use nalgebra::{Isometry3, Point3, RealField, Unit, Vector3};
 
 use super::chain::{Chain, JointKind};
-use crate::Error;
+use crate::error::Error;
 
 /// One joint of a posed chain, in the base frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

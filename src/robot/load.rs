@@ -33,7 +33,7 @@ use nalgebra::{Point3, RealField, Vector3};
 
 use super::chain::{Chain, JointKind};
 use super::kinematics::{Frames, JointFrame};
-use crate::Error;
+use crate::error::Error;
 
 /// A force and a moment, in the base frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -118,7 +118,7 @@ pub fn joint_torques<T: RealField + Copy, const J: usize>(
 /// \[m/s², base frame\], written to `tau[..dof]`: the weight `m_l g` of link
 /// `l` acts at its centre of mass `T_l · com_l` and loads joint `l` and the
 /// joints it hangs from (`0..=l` in a serial chain).
-/// Links without [`crate::LinkInertia`] weigh nothing.
+/// Links without [`crate::robot::LinkInertia`] weigh nothing.
 ///
 /// # Errors
 /// [`Error::Mismatch`] when `tau` is shorter than the number of joints or

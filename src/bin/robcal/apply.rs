@@ -9,8 +9,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use robcal::calibrate::model_file::ModelFile;
-use robcal::calibrate::predict::{Payload, Predictor};
+use robcal::calibrate::ModelFile;
+use robcal::calibrate::{Payload, Predictor};
 use robcal::io::points::{joint_column, parse_points, PointRow};
 use robcal::robot::CompensateSettings;
 

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use robcal::calibrate::model_file::ModelFile;
+use robcal::calibrate::ModelFile;
 use robcal::calibrate::{EffectStep, LeftOut, NearDependent, Report, Unexplained, Validation};
 
 /// `--json`: the report (contract §5).

@@ -426,8 +426,8 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     if let Some(dir) = &a.output {
         let urdf = calibrate::export::calibrated_urdf(report.urdf_model(), &job)
             .map_err(|e| e.to_string())?;
-        let robot = calibrate::predict::Predictor::new(&report.model, &job);
-        let model = json::ModelJson::of(&report, calibrate::model_file::ModelFile::of(&robot));
+        let robot = calibrate::Predictor::new(&report.model, &job);
+        let model = json::ModelJson::of(&report, calibrate::ModelFile::of(&robot));
         let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
         let figures = plots::figures(&report, html::t975(&report).1)?;
         let page = html::page(

@@ -1,16 +1,15 @@
 //! How a [`Design`] is built: its columns computed at every row, into
-//! the storage of the design before, held or not ([`super::source`]), and
+//! the storage of the design before, held or not ([`crate::calibrate::design::source`]), and
 //! in the pass of a relinearisation ([`Design::relinearised`]).
-
-use std::borrow::Cow;
 
 use nalgebra::{DMatrix, Vector3};
 
-use super::super::linearisation::Linearisation;
-use super::super::rows::{Row, Rows};
-use super::{source, unit_sums, Design};
+use crate::calibrate::design::columns::Columns;
+use crate::calibrate::design::{source, unit_sums, Design};
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::rows::{Row, Rows};
+use crate::error::Error;
 use crate::model::Param;
-use crate::Error;
 
 /// Each run's piece of every column of a design's storage `data` (resized
 /// to `3·rows × params`, column-major; every element is then written, so
@@ -54,101 +53,10 @@ pub struct Storage {
     group: Vec<usize>,
 }
 
-/// How the columns of some parameters are computed at a row.
-pub(super) struct Columns<'a> {
-    pub(super) params: &'a [Param],
-    /// Each parameter's reported unit in SI.
-    pub(super) si: Cow<'a, [f64]>,
-    /// Whether a column needs the joints' compliances (the load's centre of
-    /// mass).
-    pub(super) linearised: bool,
-    pub(super) lin: &'a Linearisation,
-    /// Whether the rows mix both kinds ([`super::super::rows::noise_scale`]).
-    pub(super) mixed: bool,
-    /// The markers' positions on their links \[m\] (a row's predicted
-    /// point is its frames' at its marker: [`Rows::point_m`]).
-    pub(super) markers: &'a [Vector3<f64>],
-}
-
-impl<'a> Columns<'a> {
-    fn new(
-        params: &'a [Param],
-        lin: &'a Linearisation,
-        names: &super::super::names::Names,
-        all: &Rows,
-        markers: &'a [Vector3<f64>],
-    ) -> Self {
-        Self {
-            params,
-            si: params.iter().map(|p| names.unit(p).si).collect(),
-            linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
-            lin,
-            mixed: all.mixed(),
-            markers,
-        }
-    }
-
-    /// The row's columns at its `frames` into row `k` of a run's `piece`
-    /// of every column.
-    fn write(
-        &self,
-        row: &Row,
-        frames: &crate::robot::Frames<f64, { super::super::geometry::J }>,
-        gravity_unit: Vector3<f64>,
-        piece: &mut [&mut [f64]],
-        k: usize,
-    ) -> Result<(), Error> {
-        self.each(row, frames, gravity_unit, |c, col| {
-            if let Some(column) = piece.get_mut(c) {
-                column[3 * k..3 * k + 3].copy_from_slice(col.as_slice());
-            }
-        })
-    }
-
-    /// `f(c, column)` for each parameter's column `c` of the row at its
-    /// `frames`, in order (what [`Columns::write`] writes, and what a
-    /// design not held computes where read: `source`).
-    pub(super) fn each(
-        &self,
-        row: &Row,
-        frames: &crate::robot::Frames<f64, { super::super::geometry::J }>,
-        gravity_unit: Vector3<f64>,
-        mut f: impl FnMut(usize, Vector3<f64>),
-    ) -> Result<(), Error> {
-        let compliance = if self.linearised {
-            self.lin.compliance_at(&row.q)
-        } else {
-            Vec::new()
-        };
-        let point = frames.point_m(&super::super::rows::marker_m(self.markers, row));
-        let sample = row.sample(frames, point, &compliance, gravity_unit);
-        let scale = super::super::rows::noise_scale(self.mixed, row.kind);
-        for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
-            let mut col = p.column_si(&sample)? * si;
-            if scale != 1.0 {
-                col *= scale;
-            }
-            f(c, col);
-        }
-        Ok(())
-    }
-
-    /// How the columns are computed again where read (`source`).
-    fn recipe(&self) -> source::Recipe {
-        source::Recipe {
-            rows: None,
-            lin: self.lin.clone(),
-            si: self.si.to_vec(),
-            linearised: self.linearised,
-            mixed: self.mixed,
-        }
-    }
-}
-
 impl Design {
     /// Columns of `params` at `rows` (at their last relinearisation, each
     /// row's frames recomputed there); `load_com` about the compliances of
-    /// `lin`. The rows' columns on [`super::super::parallel::for_rows`] threads.
+    /// `lin`. The rows' columns on [`crate::parallel::for_rows`] threads.
     ///
     /// # Errors
     /// [`Error`] when a column cannot be computed (a parameter naming a
@@ -157,9 +65,9 @@ impl Design {
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
     ) -> Result<Self, Error> {
-        let threads = super::super::parallel::for_rows(all.rows.len());
+        let threads = crate::parallel::for_rows(all.rows.len());
         Self::new_on(all, params, lin, names, threads)
     }
 
@@ -174,15 +82,15 @@ impl Design {
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
     ) -> Result<Self, Error> {
-        let threads = super::super::parallel::for_rows(all.rows.len());
+        let threads = crate::parallel::for_rows(all.rows.len());
         Self::build(all, params, lin, names, threads, old.into_storage(), true)
     }
 
     /// [`Design::new`] into `old`'s storage when given, its columns held
     /// when the rows are at most `max_held`
-    /// ([`crate::calibrate::Policy::max_held_design_rows`]), else computed from the
+    /// ([`crate::calibrate::settings::Policy::max_held_design_rows`]), else computed from the
     /// rows where read (after [`Design::reading`]; the build computes each
     /// once, for its errors).
     ///
@@ -192,11 +100,11 @@ impl Design {
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
         old: Option<Storage>,
         max_held: usize,
     ) -> Result<Self, Error> {
-        let threads = super::super::parallel::for_rows(all.rows.len());
+        let threads = crate::parallel::for_rows(all.rows.len());
         let hold = all.rows.len() <= max_held;
         Self::build(
             all,
@@ -218,7 +126,7 @@ impl Design {
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
         threads: usize,
     ) -> Result<Self, Error> {
         Self::build(all, params, lin, names, threads, Storage::default(), true)
@@ -230,7 +138,7 @@ impl Design {
         all: &Rows,
         params: &[Param],
         lin: &Linearisation,
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
         threads: usize,
         storage: Storage,
         hold: bool,
@@ -238,7 +146,7 @@ impl Design {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
         let columns = Columns::new(params, lin, names, all, &all.markers);
-        let per = super::super::rows::run_length(m, threads);
+        let per = crate::calibrate::rows::run_length(m, threads);
         let Storage {
             b: mut data,
             mut y,
@@ -248,13 +156,17 @@ impl Design {
         // ([`Rows::y`]: the rows keep none).
         zeroed(&mut y, 3 * m);
         let y_runs = y.as_chunks_mut::<3>().0.chunks_mut(per);
-        let lhs = |row: &Row, frames: &crate::robot::Frames<f64, { super::super::geometry::J }>| {
-            super::super::rows::scaled_y(columns.mixed, row, all.y(row, frames)).into()
+        let lhs = |row: &Row,
+                   frames: &crate::robot::Frames<
+            f64,
+            { crate::calibrate::params::geometry::J },
+        >| {
+            crate::calibrate::rows::scaled_y(columns.mixed, row, all.y(row, frames)).into()
         };
         if !hold {
             // Each column once, for its error.
             let mut runs: Vec<_> = rows.chunks(per).zip(y_runs).collect();
-            super::super::parallel::for_each_mut(&mut runs, threads, |_, (run, ys)| {
+            crate::parallel::for_each_mut(&mut runs, threads, |_, (run, ys)| {
                 let mut frames = crate::robot::Frames::empty();
                 for (row, y) in run.iter().zip(ys.iter_mut()) {
                     all.frames_into(row, &mut frames)?;
@@ -268,11 +180,16 @@ impl Design {
                 y,
                 group,
             };
-            return Ok(Self::finish(all, params, storage, Some(columns.recipe())));
+            return Ok(Self::finish(
+                all,
+                params,
+                storage,
+                Some(source::Recipe::of(&columns)),
+            ));
         }
         let pieces = pieces(&mut data, m, n, per);
         let mut runs: Vec<_> = rows.chunks(per).zip(pieces).zip(y_runs).collect();
-        super::super::parallel::for_each_mut(&mut runs, threads, |_, ((run, piece), ys)| {
+        crate::parallel::for_each_mut(&mut runs, threads, |_, ((run, piece), ys)| {
             let mut frames = crate::robot::Frames::empty();
             for (k, (row, y)) in run.iter().zip(ys.iter_mut()).enumerate() {
                 all.frames_into(row, &mut frames)?;
@@ -302,14 +219,14 @@ impl Design {
     /// [`Design::new`]'s error.
     pub fn relinearised(
         all: &mut Rows,
-        geometry: &super::super::geometry::Geometry,
+        geometry: &crate::calibrate::params::geometry::Geometry,
         lin: &Linearisation,
         params: &[Param],
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
         old: Option<Storage>,
         max_held: usize,
-    ) -> Result<Result<Self, Error>, super::super::settings::CalibrationError> {
-        let threads = super::super::parallel::for_rows(all.rows.len());
+    ) -> Result<Result<Self, Error>, crate::calibrate::settings::CalibrationError> {
+        let threads = crate::parallel::for_rows(all.rows.len());
         let hold = all.rows.len() <= max_held;
         Self::relinearised_on(all, geometry, lin, params, names, old, threads, hold)
     }
@@ -322,16 +239,16 @@ impl Design {
     #[allow(clippy::too_many_arguments)]
     pub fn relinearised_on(
         all: &mut Rows,
-        geometry: &super::super::geometry::Geometry,
+        geometry: &crate::calibrate::params::geometry::Geometry,
         lin: &Linearisation,
         params: &[Param],
-        names: &super::super::names::Names,
+        names: &crate::calibrate::params::names::Names,
         old: Option<Storage>,
         threads: usize,
         hold: bool,
-    ) -> Result<Result<Self, Error>, super::super::settings::CalibrationError> {
+    ) -> Result<Result<Self, Error>, crate::calibrate::settings::CalibrationError> {
         let (m, n) = (all.rows.len(), params.len());
-        let per = super::super::rows::run_length(m, threads);
+        let per = crate::calibrate::rows::run_length(m, threads);
         let Storage {
             b: mut data,
             mut y,
@@ -369,8 +286,8 @@ impl Design {
             threads,
             states.iter_mut().collect(),
             |(piece, one, sums, ys), k, row, frames, g| {
-                let y = super::super::rows::lhs(markers, row, frames);
-                let y: [f64; 3] = super::super::rows::scaled_y(columns.mixed, row, y).into();
+                let y = crate::calibrate::rows::lhs(markers, row, frames);
+                let y: [f64; 3] = crate::calibrate::rows::scaled_y(columns.mixed, row, y).into();
                 if let Some(at) = ys.get_mut(k) {
                     *at = y;
                 }
@@ -397,7 +314,7 @@ impl Design {
             let runs = states.into_iter().filter_map(|(_, _, s, _)| s).collect();
             unit_sums::merge_runs(n, runs)
         });
-        let recipe = (!hold).then(|| columns.recipe());
+        let recipe = (!hold).then(|| source::Recipe::of(columns));
         Ok(done.map(|()| {
             let mut d = Self::finish(all, params, Storage { b: data, y, group }, recipe);
             d.unit_sums = sums.flatten();
@@ -455,10 +372,10 @@ impl Design {
         // The groups by runs of rows on worker threads (the left-hand sides
         // are the passes' that computed the columns).
         zeroed(&mut group, rows.len());
-        let threads = super::super::parallel::for_rows(rows.len());
+        let threads = crate::parallel::for_rows(rows.len());
         let per = rows.len().div_ceil(threads).max(1);
         let mut runs: Vec<_> = group.chunks_mut(per).zip(rows.chunks(per)).collect();
-        let filled = super::super::parallel::for_each_mut(&mut runs, threads, |_, (gs, rs)| {
+        let filled = crate::parallel::for_each_mut(&mut runs, threads, |_, (gs, rs)| {
             for (g, r) in gs.iter_mut().zip(rs.iter()) {
                 *g = r.group();
             }

@@ -1,4 +1,4 @@
-//! The rows of every group of a [`super::Design`], in row order.
+//! The rows of every group of a [`crate::calibrate::design::Design`], in row order.
 
 /// The rows of every group, in row order: in two flat vectors (a vector
 /// per group was 10⁶ allocations for a million configurations), or none

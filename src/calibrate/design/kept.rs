@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::Design;
+use crate::calibrate::design::Design;
 
 impl Design {
     /// Which of the columns `cols` are kept, in order, by the pivots

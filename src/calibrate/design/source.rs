@@ -1,10 +1,10 @@
 //! Where a [`Design`]'s columns are: held (`3·rows × params`, column-major:
 //! 384 B a row at 16 parameters, 384 MB at 10⁶ rows), or computed again
 //! from the rows where a pass reads them, a block of rows at a time
-//! ([`crate::calibrate::Policy::max_held_design_rows`]).
+//! ([`crate::calibrate::settings::Policy::max_held_design_rows`]).
 //!
 //! A column computed again is the held one bit for bit: the same function
-//! ([`super::Columns`]) of the same row at the same frames (the rows the
+//! ([`crate::calibrate::design::Columns`]) of the same row at the same frames (the rows the
 //! design was built from, shared: [`crate::calibrate::engine::Engine::rows`],
 //! which a relinearisation changes only once the design is let go).
 
@@ -13,10 +13,10 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, Vector3};
 
-use super::super::linearisation::Linearisation;
-use super::super::rows::Rows;
-use super::build::Columns;
-use super::Design;
+use crate::calibrate::design::columns::Columns;
+use crate::calibrate::design::Design;
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::rows::Rows;
 
 /// The columns of a design ([`Design`]'s).
 #[derive(Debug, Clone)]
@@ -42,6 +42,19 @@ pub(super) struct Recipe {
     pub(super) linearised: bool,
     /// Whether the rows mix both kinds.
     pub(super) mixed: bool,
+}
+
+impl Recipe {
+    /// How `columns` are computed again where read.
+    pub(super) fn of(columns: &Columns<'_>) -> Self {
+        Self {
+            rows: None,
+            lin: columns.lin.clone(),
+            si: columns.si.to_vec(),
+            linearised: columns.linearised,
+            mixed: columns.mixed,
+        }
+    }
 }
 
 impl Design {
@@ -191,7 +204,7 @@ impl Design {
         };
         let mut frames = crate::robot::Frames::empty();
         for (k, i) in rows.enumerate() {
-            let done = all.rows.get(i).ok_or(crate::Error::Mismatch {
+            let done = all.rows.get(i).ok_or(crate::error::Error::Mismatch {
                 what: "a design row the rows do not have",
             });
             let done = done.and_then(|row| {

@@ -1,6 +1,6 @@
 //! Pseudo-random designs for the tests.
 
-use super::Design;
+use crate::calibrate::design::Design;
 use nalgebra::DMatrix;
 
 /// Uniform values in (−0.5, 0.5) from `seed` (a linear congruential

@@ -1,14 +1,14 @@
 //! A design's unit-weight sums made in the pass that builds it
-//! ([`super::Design::relinearised`]): each block of
-//! [`super::super::view::BLOCK_ROWS`] rows summed from its columns while
+//! ([`crate::calibrate::design::Design::relinearised`]): each block of
+//! [`crate::calibrate::design::view::BLOCK_ROWS`] rows summed from its columns while
 //! they are in cache, the blocks merged in order, as
-//! [`super::super::view::View::information`] sums and merges them, bit for
+//! [`crate::calibrate::design::view::View::information`] sums and merges them, bit for
 //! bit. The Gauss–Newton step at a linearisation then makes no pass of its
 //! own over the design for them (at 10⁶ rows a pass is ~0.15 s).
 
 use nalgebra::Dyn;
 
-use super::super::view::{block_sums, merged, Sums, Term, BLOCK_ROWS};
+use crate::calibrate::design::view::{block_sums, merged, Sums, Term, BLOCK_ROWS};
 use crate::estimate::Accumulator;
 
 /// One run's rows' columns, a block at a time, and its blocks' sums.
@@ -19,7 +19,7 @@ pub(super) struct RunSums {
     /// `[(3r + a) n..(3r + a + 1) n]` (the view's layout).
     b: Vec<f64>,
     /// The block's rows' `Δp`, scaled as the design's
-    /// ([`super::super::rows::noise_scale`]).
+    /// ([`crate::calibrate::rows::noise_scale`]).
     y: Vec<[f64; 3]>,
     /// The run's blocks' sums, in order.
     sums: Vec<Sums>,
@@ -75,7 +75,7 @@ pub(super) fn aligned(rows: usize, per: usize) -> bool {
 }
 
 /// The unit-weight sums of `n` columns from the runs' blocks, in order:
-/// [`super::super::view::View::information`]'s; `None` where it has none.
+/// [`crate::calibrate::design::view::View::information`]'s; `None` where it has none.
 pub(super) fn merge_runs(n: usize, runs: Vec<RunSums>) -> Option<Accumulator<f64, Dyn>> {
     let blocks = runs
         .into_iter()
@@ -87,9 +87,9 @@ pub(super) fn merge_runs(n: usize, runs: Vec<RunSums>) -> Option<Accumulator<f64
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::calibrate::design::testing::design;
-    use crate::calibrate::view::View;
+    use crate::calibrate::design::unit_sums::*;
+    use crate::calibrate::design::view::View;
 
     /// Runs of whole blocks, their rows added one by one, give the view's
     /// sums of the design, bit for bit.

@@ -1,17 +1,17 @@
 //! The engine's leave-one-configuration-out prediction error
-//! ([`Engine::heldout`]): OLS in closed form ([`super::super::heldout`]),
+//! ([`Engine::heldout`]): OLS in closed form ([`crate::calibrate::fit::heldout`]),
 //! weighted fits from the moments per configuration and axis, refits where
 //! those cannot.
 
 use nalgebra::Vector3;
 
-use super::super::fit::{fit, fit_moments, Method};
-use super::super::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
-use super::super::moments::DesignMoments;
-use super::super::residuals::SquareSum;
-use super::super::settings::CalibrationError;
-use super::{Engine, Fitted};
-use crate::Error;
+use crate::calibrate::engine::{Engine, Fitted};
+use crate::calibrate::fit::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
+use crate::calibrate::fit::moments::DesignMoments;
+use crate::calibrate::fit::residuals::SquareSum;
+use crate::calibrate::fit::{fit, fit_moments, Method};
+use crate::calibrate::settings::CalibrationError;
+use crate::error::Error;
 
 impl Engine<'_> {
     /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
@@ -61,12 +61,8 @@ impl Engine<'_> {
         let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
             Some(m) => {
                 let small = groups * groups * cols.len() * cols.len() < 20_000;
-                let threads = if small {
-                    1
-                } else {
-                    super::super::parallel::threads()
-                };
-                super::super::parallel::map(groups, threads, |g| {
+                let threads = if small { 1 } else { crate::parallel::threads() };
+                crate::parallel::map(groups, threads, |g| {
                     // An error is left to the refit below, which decides as
                     // before (a column dropped, no held-out error, or the
                     // error).

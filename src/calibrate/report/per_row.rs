@@ -32,7 +32,7 @@ pub struct RowError {
     /// Whether the row is a deflection (loaded minus unloaded) rather than
     /// an absolute position.
     pub deflection: bool,
-    /// The nominal robot's error \[µm\] (as [`super::Nominal`]).
+    /// The nominal robot's error \[µm\] (as [`crate::calibrate::report::Nominal`]).
     pub nominal_um: Vector3<f64>,
     /// The final model's residual \[µm\].
     pub final_um: Vector3<f64>,
@@ -235,7 +235,7 @@ impl<'a> IntoIterator for &'a ConfigNoises {
 mod tests {
     use nalgebra::Vector3;
 
-    use super::{ConfigNoise, ConfigNoises, RowError, RowErrors};
+    use crate::calibrate::report::per_row::{ConfigNoise, ConfigNoises, RowError, RowErrors};
 
     /// Each row's error is the one a vector of [`RowError`] held, made
     /// the same way: the residual times 1e6, named by configuration and

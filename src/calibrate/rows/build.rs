@@ -6,10 +6,10 @@ use std::borrow::Cow;
 
 use nalgebra::Vector3;
 
-use super::{DataKinds, Row, RowExtra, RowKind, Rows};
-use crate::calibrate::names::Names;
+use crate::calibrate::params::names::Names;
+use crate::calibrate::rows::{DataKinds, Row, RowExtra, RowKind, Rows};
 use crate::calibrate::settings::{CalibrationError, Policy};
-use crate::io::{Job, Measurements};
+use crate::io::{job::Job, measurements::Measurements};
 use crate::model::bins::{by_first_appearance, clusters};
 use crate::model::{angle_urad, BIN_TOLERANCE_RAD};
 
@@ -85,7 +85,7 @@ impl Rows {
         // The joints are independent (each sorts every value: on worker
         // threads with many rows); a joint's cells as written are read only
         // for its bins' centres.
-        let entering: Vec<&crate::io::Observation> = if use_absolute {
+        let entering: Vec<&crate::io::measurements::Observation> = if use_absolute {
             data.unloaded().collect()
         } else {
             data.deflections
@@ -93,8 +93,8 @@ impl Rows {
                 .map(|d| &data.observations[d.rows[1]])
                 .collect()
         };
-        let threads = crate::calibrate::parallel::for_rows(entering.len()).min(dof);
-        let per_joint = crate::calibrate::parallel::map(dof, threads, |j| {
+        let threads = crate::parallel::for_rows(entering.len()).min(dof);
+        let per_joint = crate::parallel::map(dof, threads, |j| {
             let values: Vec<f64> = entering.iter().map(|o| o.q[j]).collect();
             let mut jb = Vec::new();
             let mut counts = Vec::new();
@@ -124,13 +124,14 @@ impl Rows {
         });
         // The bins' names: the cells as written of their first rows.
         let rows_in = &entering;
-        let wanted: Vec<(&crate::io::Observation, usize)> = (per_joint.iter().enumerate())
-            .flat_map(|(j, (_, _, firsts))| {
-                firsts
-                    .iter()
-                    .filter_map(move |&(_, first)| Some((*rows_in.get(first?)?, j)))
-            })
-            .collect();
+        let wanted: Vec<(&crate::io::measurements::Observation, usize)> =
+            (per_joint.iter().enumerate())
+                .flat_map(|(j, (_, _, firsts))| {
+                    firsts
+                        .iter()
+                        .filter_map(move |&(_, first)| Some((*rows_in.get(first?)?, j)))
+                })
+                .collect();
         let mut written = data
             .written_cells(&wanted)
             .map_err(|e| CalibrationError::Data(e.to_string()))?
@@ -179,7 +180,7 @@ impl Rows {
                 })
             }),
         };
-        let absolute_row = |o: &crate::io::Observation, hint: &mut usize| {
+        let absolute_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
             row(
                 RowKind::Absolute,
                 o.config,
@@ -222,9 +223,9 @@ impl Rows {
         };
         let total = deflections + unloaded;
         let mut rows = Vec::with_capacity(total);
-        let threads = crate::calibrate::parallel::for_rows(deflections);
+        let threads = crate::parallel::for_rows(deflections);
         let per = deflections.div_ceil(threads).max(1);
-        for run in crate::calibrate::parallel::map(deflections.div_ceil(per), threads, |t| {
+        for run in crate::parallel::map(deflections.div_ceil(per), threads, |t| {
             let mut hint = 0;
             (t * per..((t + 1) * per).min(deflections))
                 .map(|k| deflection_row(k, &mut hint))
@@ -236,7 +237,7 @@ impl Rows {
         // chunk at a time (its runs on worker threads), each chunk's rows
         // appended in reverse and the whole reversed at the end; with the
         // observations taken, each chunk is freed once its rows are made.
-        let threads = crate::calibrate::parallel::for_rows(unloaded);
+        let threads = crate::parallel::for_rows(unloaded);
         let mut end = if use_absolute {
             data.observations.len()
         } else {
@@ -246,7 +247,7 @@ impl Rows {
             let start = end.saturating_sub(CHUNK);
             let chunk = &source.observations[start..end];
             let per = chunk.len().div_ceil(threads).max(1);
-            let runs = crate::calibrate::parallel::map(chunk.len().div_ceil(per), threads, |t| {
+            let runs = crate::parallel::map(chunk.len().div_ceil(per), threads, |t| {
                 let mut hint = 0;
                 chunk[t * per..((t + 1) * per).min(chunk.len())]
                     .iter()
@@ -308,7 +309,7 @@ fn release_from(data: &mut Cow<'_, Measurements>, start: usize) {
 fn forget_cells(data: &mut Cow<'_, Measurements>) {
     if let Cow::Owned(m) = data {
         for o in &mut m.observations {
-            o.q_written = crate::io::WrittenCells::default();
+            o.q_written = crate::io::measurements::WrittenCells::default();
         }
     }
 }
@@ -375,7 +376,7 @@ const PREFIX: usize = 4096;
 
 #[cfg(test)]
 mod tests {
-    use super::{clusters, clusters_at_most};
+    use crate::calibrate::rows::build::{clusters, clusters_at_most};
 
     #[test]
     fn the_clusters_of_a_prefix_decide_as_those_of_all_values() {

@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use super::{Row, RowKind, Rows};
+use crate::calibrate::rows::{Row, RowKind, Rows};
 
 /// The factor a row of `kind` enters the design with (`y`, columns,
 /// instrument σ) when the rows mix both kinds (`mixed`): `1/√2` for a
@@ -22,7 +22,7 @@ pub fn noise_scale(mixed: bool, kind: RowKind) -> f64 {
 
 /// A row's left-hand side `y` ([`Rows::y`]) as the design holds it: times
 /// [`noise_scale`] (not multiplied where the scale is 1): the same values
-/// wherever a pass needs them ([`super::super::design::Design`]).
+/// wherever a pass needs them ([`crate::calibrate::design::Design`]).
 pub fn scaled_y(mixed: bool, row: &Row, y: Vector3<f64>) -> Vector3<f64> {
     let s = noise_scale(mixed, row.kind);
     if s == 1.0 {

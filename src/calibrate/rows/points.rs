@@ -4,10 +4,10 @@
 
 use nalgebra::Vector3;
 
-use super::super::geometry::{Geometry, J};
-use super::{Row, RowKind, Rows};
+use crate::calibrate::params::geometry::{Geometry, J};
+use crate::calibrate::rows::{Row, RowKind, Rows};
+use crate::error::Error;
 use crate::robot::Frames;
-use crate::Error;
 
 impl Rows {
     /// The frames of `row` (one of these rows) at the last
@@ -48,12 +48,12 @@ impl Rows {
     }
 
     /// The left-hand side of `row` \[m\] at its `frames` ([`Rows::frames`]),
-    /// linearised at the current model ([`crate::calibrate::linearisation`]):
+    /// linearised at the current model ([`crate::calibrate::params::linearisation`]):
     /// measured minus predicted plus the linearised joint-law part,
     /// `measured − f(x₀) + B(x₀) x₀`. With the first-order model the
     /// measured deflection, or the measured position minus the rigid
     /// forward kinematics ([`Rows::point_m`]); with the exact model, as
-    /// [`Rows::relinearise`] kept it ([`super::RowExtra::y`]). Not kept per row
+    /// [`Rows::relinearise`] kept it ([`crate::calibrate::rows::RowExtra::y`]). Not kept per row
     /// otherwise (24 MB at 10⁶ rows).
     pub fn y(&self, row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
         lhs(&self.markers, row, frames)
@@ -75,7 +75,7 @@ impl Rows {
 
     /// [`Rows::lhs`] of every row as [`Rows::relinearise`] at `geometry`
     /// without a joint law (the nominal robot's: first order, no row's
-    /// [`super::RowExtra::y`]) gives it, without relinearising: the frames at each
+    /// [`crate::calibrate::rows::RowExtra::y`]) gives it, without relinearising: the frames at each
     /// row's `q` on `geometry`'s chains.
     ///
     /// # Errors
@@ -118,9 +118,9 @@ fn per_row<R: std::borrow::Borrow<Row> + Sync>(
     rows: &[R],
     f: impl Fn(&Row, &mut Frames<f64, J>) -> Result<Vector3<f64>, Error> + Sync,
 ) -> Result<Vec<Vector3<f64>>, Error> {
-    let threads = super::super::parallel::for_rows(rows.len());
+    let threads = crate::parallel::for_rows(rows.len());
     let per = rows.len().div_ceil(threads).max(1);
-    let runs = super::super::parallel::map(rows.len().div_ceil(per), threads, |t| {
+    let runs = crate::parallel::map(rows.len().div_ceil(per), threads, |t| {
         let mut frames = Frames::empty();
         rows[t * per..((t + 1) * per).min(rows.len())]
             .iter()

@@ -1,15 +1,15 @@
 //! How the rows of a pass are split between worker threads.
 
-use super::super::view::BLOCK_ROWS;
+use crate::calibrate::design::view::BLOCK_ROWS;
 
-/// Rows a run of [`super::Rows::relinearise_with`] has on `threads` threads
+/// Rows a run of [`crate::calibrate::rows::Rows::relinearise_with`] has on `threads` threads
 /// (the last run fewer): all of them on one thread; else about eight runs
 /// per thread (`RUNS_PER_THREAD`), taken in turn, so that a thread the
 /// system slows leaves the others the runs it has not started (one run per
 /// thread waited ~0.05–0.1 s per relinearisation of 10⁶ rows for the slower
 /// thread on a shared machine). Runs of four of a view's blocks of rows or
 /// more are whole blocks, so that a design's pass can make the blocks' sums
-/// ([`super::super::design::Design::relinearised`]).
+/// ([`crate::calibrate::design::Design::relinearised`]).
 pub fn run_length(rows: usize, threads: usize) -> usize {
     if threads <= 1 {
         return rows.max(1);
@@ -22,12 +22,12 @@ pub fn run_length(rows: usize, threads: usize) -> usize {
     }
 }
 
-/// Runs per thread of [`super::Rows::relinearise_with`] ([`run_length`]).
+/// Runs per thread of [`crate::calibrate::rows::Rows::relinearise_with`] ([`run_length`]).
 const RUNS_PER_THREAD: usize = 8;
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use crate::calibrate::rows::runs::*;
 
     #[test]
     fn long_runs_are_whole_blocks() {

@@ -1,7 +1,7 @@
 //! [`Values`]: `f64` values a row holds only sometimes.
 
 /// Values a row holds only sometimes (its joint torques, its
-/// equilibrium's `θ`, both in [`super::RowExtra`]): none, or a slice of
+/// equilibrium's `θ`, both in [`crate::calibrate::rows::RowExtra`]): none, or a slice of
 /// their own, written over in place when the number is the same. 16 B where
 /// the `Vec` they were in was 24 B even when empty.
 #[derive(Debug, Clone, Default)]
@@ -30,7 +30,7 @@ impl Values {
 
 #[cfg(test)]
 mod tests {
-    use super::Values;
+    use crate::calibrate::rows::values::Values;
 
     #[test]
     fn values_are_what_was_set_last() {
@@ -52,9 +52,9 @@ mod tests {
 
 #[cfg(test)]
 mod size {
-    /// What a row costs at 10⁶ rows (the doc of [`super::super::Row`]).
+    /// What a row costs at 10⁶ rows (the doc of [`crate::calibrate::rows::Row`]).
     #[test]
     fn a_row_is_112_bytes() {
-        assert_eq!(core::mem::size_of::<super::super::Row>(), 112);
+        assert_eq!(core::mem::size_of::<crate::calibrate::rows::Row>(), 112);
     }
 }

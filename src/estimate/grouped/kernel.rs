@@ -5,8 +5,8 @@
 use nalgebra::{DefaultAllocator, Dim, RealField};
 
 use super::AxisMoments;
+use crate::error::Error;
 use crate::estimate::Alloc;
-use crate::Error;
 
 /// Rows of `B` per block of [`add_rows`]: the block's rows, axis by axis,
 /// on the stack.

@@ -20,11 +20,11 @@ use super::{
     add_group, add_upper, axis_factors, finite_sums, middle_factors, moment_weight, overflow_first,
     Information,
 };
+use crate::error::Error;
 use crate::estimate::grouped::{support_indices, GroupMoments, GroupedStats};
 use crate::estimate::irls::Noise;
 use crate::estimate::weights::RobustWeight;
 use crate::estimate::Alloc;
-use crate::Error;
 
 impl<T: RealField + Copy, D: Dim, const G: usize> GroupedStats<T, D, G>
 where

@@ -8,7 +8,7 @@ use super::super::factor::{
     cholesky_in_place, pivot_tolerance, solve_lower_in_place, solve_upper_t_in_place,
 };
 use super::super::Alloc;
-use crate::Error;
+use crate::error::Error;
 
 /// The kept block of the scaled `a` (identity elsewhere), factored by a
 /// plain Cholesky in layout order with pivot tolerance `tol`.

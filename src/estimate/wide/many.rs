@@ -11,7 +11,7 @@ use super::copy::InSimd;
 #[cfg(target_arch = "x86_64")]
 use super::copy::InV4;
 use super::WideAccumulator;
-use crate::{Block, Error};
+use crate::{error::Error, estimate::Block};
 
 /// A batched update stopped at an input it refused: `index` is its
 /// position in the batch, `error` what [`WideAccumulator::update`] says of

@@ -10,11 +10,11 @@ use pulp::{Arch, Simd, WithSimd};
 
 use super::kernel::at;
 use super::{aligned_mut, Rejected, WideAccumulator};
-use crate::Error;
+use crate::error::Error;
 
 /// Measurement rows, row-major: row `i` is the equation
 /// `w[i] (b[i·N .. (i + 1)·N] · x − dp[i])`, with `σ = sigma[i]` when
-/// given (for `M`, as a block's σ) — the rows of [`crate::Block`]s, one
+/// given (for `M`, as a block's σ) — the rows of [`crate::estimate::Block`]s, one
 /// axis each, laid out one after the other.
 #[derive(Debug, Clone, Copy)]
 pub struct Rows<'a> {
@@ -54,7 +54,7 @@ impl WideAccumulator {
     /// sums, to the last bit, as [`Self::update`] with blocks holding the
     /// same rows in the same order (a row is a block's row: one axis of one
     /// measurement). For a caller that has its rows this way, or can write
-    /// them so as cheaply as a [`crate::Block`]: the copy into the buffer
+    /// them so as cheaply as a [`crate::estimate::Block`]: the copy into the buffer
     /// needs no de-interleave of a column-major block, and the checks run
     /// once per buffer of rows, in the vector code. On AVX-512 a block's
     /// three rows take about 40 % less time than [`Self::update`] of the
@@ -182,7 +182,7 @@ impl WideAccumulator {
     }
 }
 
-/// Row `i` of `rows` as [`crate::Block::validate`] and
+/// Row `i` of `rows` as [`crate::estimate::Block::validate`] and
 /// [`WideAccumulator::update`] see a one-row block: the same errors in the
 /// same order, and the overflow of `w²` or `w⁴σ²` (the core's sums of that
 /// row are then infinite or NaN).

@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
-use super::super::setup::Setup;
-use super::super::urdf::Robot;
-use super::super::{ErrorKind, InputError};
-use super::records::Layout;
-use super::{Col, FIXED};
+use crate::io::measurements::records::Layout;
+use crate::io::measurements::{Col, FIXED};
+use crate::io::setup::Setup;
+use crate::io::urdf::Robot;
+use crate::io::{error::ErrorKind, error::InputError};
 
 /// A file's header as read: what its columns are, and where its records
 /// start.
@@ -28,7 +28,7 @@ pub(super) struct Header {
 impl Header {
     /// The csv crate's reader of a measurement file's `bytes` from its
     /// start, as [`Header::read`] takes it: the whole file's and the first
-    /// block's ([`super::stream`]) alike, so that both read the same header.
+    /// block's ([`crate::io::measurements::stream`]) alike, so that both read the same header.
     pub(super) fn reader(bytes: &[u8]) -> csv::Reader<&[u8]> {
         csv::ReaderBuilder::new()
             .has_headers(true)

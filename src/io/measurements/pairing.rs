@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use super::{Deflection, Observation, PAIR_Q_TOLERANCE};
-use crate::io::setup::{AngleUnit, LengthUnit, Units};
+use crate::io::measurements::{Deflection, Observation, PAIR_Q_TOLERANCE};
+use crate::io::units::{AngleUnit, LengthUnit, Units};
 use crate::io::urdf::Robot;
-use crate::io::{ErrorKind, InputError, InputWarning, WarningKind};
+use crate::io::{error::ErrorKind, error::InputError, error::InputWarning, error::WarningKind};
 
 /// Each loaded row paired with the unloaded row of the same config, rep and
 /// marker: the deflections, and how many pairs moved between their two rows

@@ -4,11 +4,13 @@
 
 use std::path::Path;
 
-use super::super::cells::{parse_int, parse_real, parse_real_written, Scale};
-use super::super::setup::{AngleUnit, LengthUnit, Setup};
-use super::super::urdf::{Robot, UrdfJointKind};
-use super::super::{ErrorKind, InputError};
-use super::{Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S};
+use crate::io::cells::{parse_int, parse_real, parse_real_written, Scale};
+use crate::io::measurements::{
+    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S,
+};
+use crate::io::setup::{AngleUnit, LengthUnit, Setup};
+use crate::io::urdf::{Robot, UrdfJointKind};
+use crate::io::{error::ErrorKind, error::InputError};
 
 /// Fewest bytes of records a chunk is made for: smaller files are read by
 /// one reader.
@@ -220,7 +222,7 @@ impl Layout<'_> {
 const BATCH_BYTES: usize = 1 << 20;
 
 /// Observations read in order, their joint cells as written in one text
-/// per ~[`BATCH_BYTES`] ([`super::WrittenCells`]).
+/// per ~[`BATCH_BYTES`] ([`crate::io::measurements::WrittenCells`]).
 pub(super) struct Batch {
     /// The observations.
     pub(super) out: Vec<Observation>,
@@ -386,7 +388,7 @@ pub(super) struct Read {
     /// Their stats.
     pub(super) stats: Stats,
     /// Each chunk's observations before they are joined, kept (empty) for
-    /// the next call: a file read a block at a time ([`super::stream`])
+    /// the next call: a file read a block at a time ([`crate::io::measurements::stream`])
     /// then allocates them once, not once a block. (Allocated and freed
     /// again in every block, they left memory to the threads' allocator:
     /// the peak of a run of 10⁶ rows was 842–851 MiB, against 816–824 MiB
@@ -430,7 +432,7 @@ impl Read {
 
     /// The same, keeping no joint cell as written (the observations'
     /// [`Observation::q_written`] empty): a large file's are read again
-    /// where needed ([`super::Measurements::written_cells`]).
+    /// where needed ([`crate::io::measurements::Measurements::written_cells`]).
     pub(super) fn without_cells(self) -> Self {
         Self {
             cells: false,
@@ -512,7 +514,7 @@ pub(super) fn in_chunks(
         .iter_mut()
         .map(|p| std::sync::Mutex::new(std::mem::take(p)))
         .collect();
-    let parts = crate::calibrate::parallel::map_until(
+    let parts = crate::parallel::map_until(
         bounds.len(),
         threads,
         |k| {

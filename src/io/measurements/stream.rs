@@ -4,7 +4,7 @@
 //! file at the default limit 1 GiB).
 //!
 //! Each block is cut after its last line end `\n`; its records are read as
-//! the whole file's are ([`super::records::in_chunks`]: in chunks on the
+//! the whole file's are ([`crate::io::measurements::records::in_chunks`]: in chunks on the
 //! engine's threads, joined in file order), the line numbers counted on
 //! from the blocks before, and the rest of the block carried to the next.
 //! The observations, stats and therefore the measurements are the ones the
@@ -17,12 +17,12 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use super::super::setup::Setup;
-use super::super::urdf::Robot;
-use super::super::ErrorKind;
-use super::super::InputError;
-use super::records::{in_chunks, line_ends, Read as Records};
-use super::{finish, CellsInFile, Header, Measurements};
+use crate::io::error::ErrorKind;
+use crate::io::error::InputError;
+use crate::io::measurements::records::{in_chunks, line_ends, Read as Records};
+use crate::io::measurements::{finish, CellsInFile, Header, Measurements};
+use crate::io::setup::Setup;
+use crate::io::urdf::Robot;
 
 /// Files at least this large are read a block at a time ([`read`]).
 pub(super) const STREAM_FROM_BYTES: u64 = 32 << 20;
@@ -47,7 +47,7 @@ pub(super) fn read(
     robot: &Robot,
     setup: &Setup,
 ) -> Option<Result<Measurements, InputError>> {
-    let threads = crate::calibrate::parallel::threads();
+    let threads = crate::parallel::threads();
     let blocks = Blocks::of(path, limit, threads, STREAM_FROM_BYTES)?;
     let file = std::fs::File::open(path).ok()?;
     blocks.read(file, robot, setup)
@@ -99,7 +99,9 @@ impl Blocks {
         // (its first line must be whole in the block).
         memchr::memchr(b'\n', &buf)?;
         let mut rdr = Header::reader(&buf);
-        let no = |_: csv::Error| InputError::new(&self.file, super::ErrorKind::Syntax, "");
+        let no = |_: csv::Error| {
+            InputError::new(&self.file, crate::io::measurements::ErrorKind::Syntax, "")
+        };
         let head = Header::read(&mut rdr, &self.file, robot, setup, &no).ok()?;
         let layout = head.layout(&self.file, robot, setup);
         // The joint cells as written are not kept (~115 MB at 10⁶ rows,

@@ -32,13 +32,13 @@
 //! spherical joint on the path, a mimic joint on the path, a zero axis, more
 //! than [`MAX_JOINTS`] movable joints, no movable joint at all, a non-finite
 //! number (origin, axis, limit, mass, centre of mass), an origin beyond
-//! [`crate::io::measurements::MAX_POSITION_M`] or a negative mass.
+//! [`crate::io::units::MAX_POSITION_M`] or a negative mass.
 
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
-use super::{ErrorKind, InputError};
+use crate::io::{error::ErrorKind, error::InputError};
 use crate::robot::{Chain, End, JointKind};
 
 /// Capacity of [`Robot::chain`]: the most movable joints a chain may have.
@@ -197,7 +197,7 @@ pub struct JointLimits {
 }
 
 /// A movable joint off the chain whose subtree hangs from a moving body but
-/// is left out of its [`crate::LinkInertia`] (see the module doc).
+/// is left out of its [`crate::robot::LinkInertia`] (see the module doc).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OffChainBranch {
     /// The off-chain joint.
@@ -408,7 +408,7 @@ pub(super) fn nth_element_line(text: &str, tag: &str, name: &str, n: usize) -> O
                 && !element.contains('>')
             {
                 if seen == n {
-                    return Some(super::line_of_offset(text, lt));
+                    return Some(crate::io::error::line_of_offset(text, lt));
                 }
                 seen += 1;
             }
@@ -463,7 +463,7 @@ mod tests {
     #[test]
     fn an_assumed_link_mass_is_an_inertial_at_the_joint_origin() {
         let parse = |inertial: &str| {
-            super::Robot::parse(&arm(inertial), "arm.urdf", Some("base"), Some("tool"))
+            crate::io::urdf::Robot::parse(&arm(inertial), "arm.urdf", Some("base"), Some("tool"))
                 .expect("a valid URDF")
         };
         let mut assumed = parse("/>");
@@ -487,7 +487,7 @@ mod tests {
     /// before it gets here) is an error, not an abort.
     #[test]
     fn a_panic_of_the_xml_parser_is_an_error() {
-        let e = super::read_urdf("<t xmlns=\"i\" :=\"\"/>").unwrap_err();
+        let e = crate::io::urdf::read_urdf("<t xmlns=\"i\" :=\"\"/>").unwrap_err();
         assert!(e.contains("XML parser failed"), "{e}");
     }
 }

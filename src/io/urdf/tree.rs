@@ -6,11 +6,11 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::{
+use crate::io::urdf::{
     finite, nth_element_line, pose, Ctx, JointLimits, OffChainBranch, Robot, UrdfJointKind,
     MAX_JOINTS,
 };
-use crate::io::{ErrorKind, InputError};
+use crate::io::{error::ErrorKind, error::InputError};
 use crate::robot::{Chain, End, Joint, LinkInertia};
 
 /// The link tree: who is whose parent and child.
@@ -270,7 +270,7 @@ impl<'u> Tree<'u> {
                 // has (1e308 m read as a joint's origin made every column
                 // infinite, and the run said "parameter 0 is not
                 // identifiable").
-                let far = crate::io::measurements::MAX_POSITION_M;
+                let far = crate::io::units::MAX_POSITION_M;
                 if o.xyz.0.iter().any(|v| v.abs() > far) {
                     return Err(ctx.err_at(
                         "joint",

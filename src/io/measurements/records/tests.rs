@@ -1,6 +1,6 @@
 //! Tests of the records and of the chunks joined.
 
-use super::{each_record, line_ends, Observation, Read, WrittenCells};
+use crate::io::measurements::records::{each_record, line_ends, Observation, Read, WrittenCells};
 
 /// Chunks' observations joined keep their cells as written: with the
 /// texts joined whole, attached past the limit, and after a chunk that

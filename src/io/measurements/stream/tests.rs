@@ -3,10 +3,10 @@
 //! warnings), whatever the block size and the threads; and every file the
 //! blocks cannot read is left to the whole file's reading.
 
-use super::super::super::setup::Setup;
-use super::super::super::urdf::Robot;
-use super::super::{parse_measurements, Measurements, WrittenCells};
-use super::Blocks;
+use crate::io::measurements::stream::Blocks;
+use crate::io::measurements::{parse_measurements, Measurements, WrittenCells};
+use crate::io::setup::Setup;
+use crate::io::urdf::Robot;
 
 /// `m` without its joint cells as written (the blocks keep none).
 fn without_cells(m: &Measurements) -> Measurements {
@@ -190,7 +190,7 @@ fn a_file_is_read_in_blocks_only_within_its_sizes() {
     let text = file(3000);
     std::fs::write(&path, &text).expect("written");
     let len = text.len() as u64;
-    assert!(len > super::BLOCK_BYTES as u64 / 16);
+    assert!(len > crate::io::measurements::stream::BLOCK_BYTES as u64 / 16);
     let of = |limit, threads, from| Blocks::of(&path, limit, threads, from).is_some();
     assert!(of(len, 2, len));
     assert!(!of(len - 1, 2, 0), "larger than the limit");
@@ -222,7 +222,7 @@ fn a_file_is_read_in_blocks_only_within_its_sizes() {
     let all = lines_of_text(&text);
     let own: Vec<String> = lines.iter().map(|&l| all[l - 1].clone()).collect();
     for block in [7, 64, 1000] {
-        let got = super::lines_of(&path, &lines, block).expect("read");
+        let got = crate::io::measurements::stream::lines_of(&path, &lines, block).expect("read");
         let bad = (got.iter().zip(&own)).position(|(g, o)| g != o);
         assert!(
             bad.is_none() && got.len() == own.len(),
@@ -254,7 +254,7 @@ fn a_file_is_read_in_blocks_only_within_its_sizes() {
 }
 
 /// The lines of `text` (the header's first), their line ends `\n`,
-/// `\r\n` or a lone `\r` (as [`super::line_ends`] counts them).
+/// `\r\n` or a lone `\r` (as [`crate::io::measurements::stream::line_ends`] counts them).
 fn lines_of_text(text: &str) -> Vec<String> {
     let (mut out, mut after_cr) = (Vec::new(), false);
     for s in text.split_inclusive(['\n', '\r']) {

@@ -1,0 +1,92 @@
+//! How the columns of some parameters are computed at a row (`B` of
+//! eq. 4, in the reported units): the one function a held design writes
+//! (`build`) and a design not held computes again where read (`source`).
+
+use std::borrow::Cow;
+
+use nalgebra::Vector3;
+
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::rows::{Row, Rows};
+use crate::error::Error;
+use crate::model::Param;
+
+/// How the columns of some parameters are computed at a row.
+pub(super) struct Columns<'a> {
+    pub(super) params: &'a [Param],
+    /// Each parameter's reported unit in SI.
+    pub(super) si: Cow<'a, [f64]>,
+    /// Whether a column needs the joints' compliances (the load's centre of
+    /// mass).
+    pub(super) linearised: bool,
+    pub(super) lin: &'a Linearisation,
+    /// Whether the rows mix both kinds ([`crate::calibrate::rows::noise_scale`]).
+    pub(super) mixed: bool,
+    /// The markers' positions on their links \[m\] (a row's predicted
+    /// point is its frames' at its marker: [`Rows::point_m`]).
+    pub(super) markers: &'a [Vector3<f64>],
+}
+
+impl<'a> Columns<'a> {
+    pub(super) fn new(
+        params: &'a [Param],
+        lin: &'a Linearisation,
+        names: &crate::calibrate::params::names::Names,
+        all: &Rows,
+        markers: &'a [Vector3<f64>],
+    ) -> Self {
+        Self {
+            params,
+            si: params.iter().map(|p| names.unit(p).si).collect(),
+            linearised: params.iter().any(|p| matches!(p, Param::LoadCom { .. })),
+            lin,
+            mixed: all.mixed(),
+            markers,
+        }
+    }
+
+    /// The row's columns at its `frames` into row `k` of a run's `piece`
+    /// of every column.
+    pub(super) fn write(
+        &self,
+        row: &Row,
+        frames: &crate::robot::Frames<f64, { crate::calibrate::params::geometry::J }>,
+        gravity_unit: Vector3<f64>,
+        piece: &mut [&mut [f64]],
+        k: usize,
+    ) -> Result<(), Error> {
+        self.each(row, frames, gravity_unit, |c, col| {
+            if let Some(column) = piece.get_mut(c) {
+                column[3 * k..3 * k + 3].copy_from_slice(col.as_slice());
+            }
+        })
+    }
+
+    /// `f(c, column)` for each parameter's column `c` of the row at its
+    /// `frames`, in order (what [`Columns::write`] writes, and what a
+    /// design not held computes where read: `source`).
+    pub(super) fn each(
+        &self,
+        row: &Row,
+        frames: &crate::robot::Frames<f64, { crate::calibrate::params::geometry::J }>,
+        gravity_unit: Vector3<f64>,
+        mut f: impl FnMut(usize, Vector3<f64>),
+    ) -> Result<(), Error> {
+        let compliance = if self.linearised {
+            self.lin.compliance_at(&row.q)
+        } else {
+            Vec::new()
+        };
+        let point = frames.point_m(&crate::calibrate::rows::marker_m(self.markers, row));
+        let sample = row.sample(frames, point, &compliance, gravity_unit);
+        let scale = crate::calibrate::rows::noise_scale(self.mixed, row.kind);
+        for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
+            let mut col = p.column_si(&sample)? * si;
+            if scale != 1.0 {
+                col *= scale;
+            }
+            f(c, col);
+        }
+        Ok(())
+    }
+}

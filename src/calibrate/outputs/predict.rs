@@ -1,0 +1,600 @@
+//! The calibrated model applied: where a marker (or any tool point) is for
+//! given joint values and payload, and the joint command that puts it at a
+//! desired point ([`crate::robot::compensate()`]).
+//!
+//! A [`Predictor`] holds the final geometry of a calibration (its last
+//! Gauss–Newton step applied, as in the calibrated URDF), the base placed
+//! in the measurement frame, and the calibrated joint law. A prediction is
+//! the exact static equilibrium ([`crate::robot::equilibrium()`]) of the
+//! robot commanded to `q` under its own weight (the URDF's link masses) and
+//! the payload, whichever deflection model fitted the compliances, with
+//! every joint-law term the calibration found (compliances, compensator
+//! tables interpolated between their angles, nonlinear stiffness,
+//! backlash, the gear's cyclic error, the gravity compliance at the
+//! commanded pose) and, to first order as it was fitted, a link's bending
+//! under the payload ([`crate::model::Param::LinkCompliance`]). Not
+//! applied: the drift of the measurement system and the calibration tool's
+//! centre-of-mass estimate (properties of the calibration, not of the
+//! robot). All positions are in metres in the measurement frame; joint
+//! values in rad (or m); [`payload`] says when a payload is extrapolated.
+//!
+//! [`Predictor::predict_covariance`] propagates the calibration's
+//! covariance (eq. 8 / 11) to a prediction, `Σₚ = B Σ Bᵀ` with `B = ∂p/∂x`
+//! by central differences of the predictor itself (steps of 1 % of each
+//! parameter's σ): the error floor a compensation cannot go below.
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+use crate::calibrate::params::geometry::J;
+use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::report::calibrated::CalibratedModel;
+use crate::calibrate::settings::CalibrationError;
+use crate::error::Error;
+use crate::io::job::Job;
+use crate::model::{Param, Sample};
+use crate::robot::{
+    compensate, compensate_pose, equilibrium, Chain, CompensateSettings, Compensation,
+    EquilibriumSettings, Loading, PointLoad,
+};
+pub mod payload;
+
+/// A mass carried by the tool.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Payload {
+    /// Mass \[kg\], ≥ 0.
+    pub mass_kg: f64,
+    /// Centre of mass \[m, tip frame\].
+    pub com_m: Vector3<f64>,
+}
+
+/// The calibrated robot, ready to predict and compensate (see the
+/// [module docs](self)).
+#[derive(Debug, Clone)]
+pub struct Predictor {
+    chain: Chain<f64, J>,
+    /// A tree's other chains (data contract 7.1): the chain ending at each
+    /// other link markers are on, placed. Empty for a serial robot.
+    branches: Vec<Chain<f64, J>>,
+    /// Each marker's end: 0 for `chain`'s tip, `k` for `branches[k - 1]`.
+    marker_ends: Vec<usize>,
+    markers: Vec<Vector3<f64>>,
+    marker_ids: Vec<u32>,
+    gravity_mps2: Vector3<f64>,
+    lin: Linearisation,
+    /// `(Param::LinkCompliance, estimate)`: applied to first order.
+    bending: Vec<(Param, f64)>,
+    /// The fitted shift of the calibration load's centre of mass \[m, tip frame\].
+    load_com_shift_m: Vector3<f64>,
+    joint_names: Vec<String>,
+    /// The calibration and its gravity \[m/s², robot base frame\], for
+    /// [`Self::predict_covariance`] (absent when read from a model file).
+    calibration: Option<(Box<CalibratedModel>, Vector3<f64>)>,
+    /// The heaviest payload of the calibration \[kg\] ([`payload`]).
+    heaviest_payload_kg: Option<f64>,
+}
+
+/// The equilibrium settings of a prediction (the rows' own).
+const EQUILIBRIUM: EquilibriumSettings<f64> = EquilibriumSettings {
+    tolerance: 1e-13,
+    max_iterations: 50,
+};
+
+impl Predictor {
+    /// The calibrated robot of `model`, for the robot and setup of `job`
+    /// (its gravity, given in the robot's base frame).
+    pub fn new(model: &CalibratedModel, job: &Job) -> Self {
+        let gravity = job
+            .setup
+            .load
+            .map_or(Vector3::new(0.0, 0.0, -9.80665), |l| {
+                Vector3::from(l.gravity)
+            });
+        Self::at(model, gravity, &model.x)
+    }
+
+    /// The predictor of `model` with estimate `x` instead of its own.
+    fn at(model: &CalibratedModel, gravity_mps2: Vector3<f64>, x: &[f64]) -> Self {
+        let mut g = model.geometry.clone();
+        g.apply(&model.params, x);
+        Self {
+            chain: g.placed_chain(),
+            branches: g.placed_chains().into_iter().skip(1).collect(),
+            marker_ends: g.marker_ends.clone(),
+            markers: g.markers.clone(),
+            marker_ids: (0..g.markers.len())
+                .map(|m| model.names.marker_id(m as u8))
+                .collect(),
+            gravity_mps2: g.base.rotation * gravity_mps2,
+            lin: Linearisation::of(model.linearisation.model, &model.params, x, &model.names),
+            bending: model
+                .params
+                .iter()
+                .zip(x)
+                .filter(|(p, _)| matches!(p, Param::LinkCompliance { .. }))
+                .map(|(p, v)| (*p, *v))
+                .collect(),
+            load_com_shift_m: model
+                .params
+                .iter()
+                .zip(x)
+                .filter_map(|(p, v)| match *p {
+                    Param::LoadCom { axis } => {
+                        Some(Vector3::ith(usize::from(axis), v * model.names.unit(p).si))
+                    }
+                    _ => None,
+                })
+                .sum(),
+            joint_names: model.names.joints.clone(),
+            calibration: Some((Box::new(model.clone()), gravity_mps2)),
+            heaviest_payload_kg: Some(model.heaviest_payload_kg),
+        }
+    }
+
+    /// A predictor from its parts (a model file): the chain placed in the
+    /// measurement frame, marker ids and positions \[m, tip frame\], gravity
+    /// \[m/s², measurement frame\], the joint law, the link bending
+    /// parameters with their estimates (reported units), the load's
+    /// centre-of-mass shift \[m\] and the joint names.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_parts(
+        chain: Chain<f64, J>,
+        markers: Vec<(u32, Vector3<f64>)>,
+        gravity_mps2: Vector3<f64>,
+        lin: Linearisation,
+        bending: Vec<(Param, f64)>,
+        load_com_shift_m: Vector3<f64>,
+        joint_names: Vec<String>,
+    ) -> Self {
+        Self {
+            branches: Vec::new(),
+            marker_ends: vec![0; markers.len()],
+            chain,
+            marker_ids: markers.iter().map(|m| m.0).collect(),
+            markers: markers.iter().map(|m| m.1).collect(),
+            gravity_mps2,
+            lin,
+            bending,
+            load_com_shift_m,
+            joint_names,
+            calibration: None,
+            heaviest_payload_kg: None,
+        }
+    }
+
+    /// The chain, placed in the measurement frame.
+    pub fn chain(&self) -> &Chain<f64, J> {
+        &self.chain
+    }
+
+    /// Sets where each marker is (a tree, data contract 7.1): `ends` the
+    /// chain's ends besides its tip's (placed in the measurement frame, as
+    /// the chain is), `marker_ends[m]` marker `m`'s end (0: the tip, `k`:
+    /// `ends[k - 1]`).
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for an end the chain does not have or a marker
+    /// end past `ends`; [`Error::Mismatch`] for one end per marker missing.
+    pub fn with_ends(
+        mut self,
+        ends: &[crate::robot::End<f64>],
+        marker_ends: Vec<usize>,
+    ) -> Result<Self, Error> {
+        if marker_ends.len() != self.markers.len() {
+            return Err(Error::Mismatch {
+                what: "one end per marker",
+            });
+        }
+        if let Some(&k) = marker_ends.iter().find(|&&k| k > ends.len()) {
+            return Err(Error::OutOfRange {
+                what: "marker end",
+                index: k,
+                len: ends.len() + 1,
+            });
+        }
+        self.branches = ends
+            .iter()
+            .map(|e| self.chain.with_tip(e))
+            .collect::<Result<_, _>>()?;
+        self.marker_ends = marker_ends;
+        Ok(self)
+    }
+
+    /// This predictor with its tip at marker `id`'s link: [`Self::predict`],
+    /// [`Self::compensate`] and [`Self::compensate_pose`] of a point on that
+    /// link (a tree's other branch, data contract 7.1). The same predictor
+    /// for a marker on the tip link.
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when there is no marker `id`.
+    pub fn for_marker(&self, id: u32) -> Result<Self, CalibrationError> {
+        self.marker_m(id)?;
+        let m = self.marker_ids.iter().position(|&i| i == id).unwrap_or(0);
+        let k = self.marker_ends.get(m).copied().unwrap_or(0);
+        if k == 0 {
+            return Ok(self.clone());
+        }
+        let chain = self
+            .branches
+            .get(k - 1)
+            .cloned()
+            .unwrap_or_else(|| self.chain.clone());
+        Ok(Self {
+            branches: Vec::new(),
+            marker_ends: vec![0; self.markers.len()],
+            chain,
+            // The covariance's finite differences rebuild the tip's chain.
+            calibration: None,
+            ..self.clone()
+        })
+    }
+
+    /// The chain's ends besides the tip's (placed) and each marker's end, as
+    /// [`Predictor::with_ends`] takes them.
+    pub fn ends(&self) -> (Vec<crate::robot::End<f64>>, &[usize]) {
+        (
+            self.branches.iter().map(Chain::tip_end).collect(),
+            &self.marker_ends,
+        )
+    }
+
+    /// Marker ids and calibrated positions \[m, tip frame\].
+    pub fn markers(&self) -> impl Iterator<Item = (u32, Vector3<f64>)> + '_ {
+        self.marker_ids
+            .iter()
+            .copied()
+            .zip(self.markers.iter().copied())
+    }
+
+    /// Gravity \[m/s², measurement frame\].
+    pub fn gravity_mps2(&self) -> Vector3<f64> {
+        self.gravity_mps2
+    }
+
+    /// The calibrated joint law.
+    pub fn joint_law(&self) -> &Linearisation {
+        &self.lin
+    }
+
+    /// The links' bending parameters and their estimates (reported units).
+    pub fn bending(&self) -> &[(Param, f64)] {
+        &self.bending
+    }
+
+    /// The movable joints' names, chain order.
+    pub fn joint_names(&self) -> &[String] {
+        &self.joint_names
+    }
+
+    /// The chain's number of joints.
+    pub fn dof(&self) -> usize {
+        self.chain.dof()
+    }
+
+    /// The calibrated position of marker `id` \[m, tip frame\].
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when the setup has no marker `id`.
+    pub fn marker_m(&self, id: u32) -> Result<Vector3<f64>, CalibrationError> {
+        self.marker_ids
+            .iter()
+            .position(|&m| m == id)
+            .map(|i| self.markers[i])
+            .ok_or_else(|| {
+                CalibrationError::Data(format!(
+                    "no marker {id} in the calibration (markers {:?})",
+                    self.marker_ids
+                ))
+            })
+    }
+
+    /// The fitted shift of the calibration load's centre of mass \[m, tip
+    /// frame\] (`load_com_x/y/z`; zero without them).
+    pub fn load_com_shift_m(&self) -> Vector3<f64> {
+        self.load_com_shift_m
+    }
+
+    fn loading(&self, payload: Option<&Payload>) -> Result<Loading<f64>, Error> {
+        if let Some(p) = payload {
+            if !(p.mass_kg.is_finite() && p.com_m.iter().all(|v| v.is_finite())) {
+                return Err(Error::NonFinite { what: "payload" });
+            }
+            if p.mass_kg < 0.0 {
+                return Err(Error::NotPositive {
+                    what: "payload mass",
+                });
+            }
+        }
+        Ok(Loading {
+            load: payload.map(|p| PointLoad {
+                mass_kg: p.mass_kg,
+                com_m: p.com_m,
+                gravity_mps2: self.gravity_mps2,
+            }),
+            own_weight_mps2: Some(self.gravity_mps2),
+        })
+    }
+
+    fn check_q(&self, q: &[f64]) -> Result<(), Error> {
+        if q.len() != self.dof() {
+            return Err(Error::Mismatch {
+                what: "joint values: one per joint of the chain",
+            });
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "joint values",
+            });
+        }
+        Ok(())
+    }
+
+    /// Where the point `tool_m` \[m, tip frame\] settles \[m, measurement
+    /// frame\] when the robot is commanded to `q` carrying `payload`, under
+    /// its own weight.
+    ///
+    /// # Errors
+    /// [`Error::Mismatch`] / [`Error::NonFinite`] for bad joint values or
+    /// payload; the errors of [`equilibrium()`].
+    pub fn predict(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<Vector3<f64>, Error> {
+        self.predict_with(tool_m, q, payload, true)
+    }
+
+    /// The payload's deflection of the point `tool_m` at command `q`: the
+    /// point with the payload minus without it, the robot's own weight left
+    /// out of both (the same loaded and unloaded) — what a calibration's
+    /// deflection rows model, so that `--validate` evaluates the fitted
+    /// model on them exactly \[m\].
+    ///
+    /// # Errors
+    /// As [`Self::predict`].
+    pub fn predict_deflection(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: &Payload,
+    ) -> Result<Vector3<f64>, Error> {
+        Ok(self.predict_with(tool_m, q, Some(payload), false)?
+            - self.predict_with(tool_m, q, None, false)?)
+    }
+
+    /// [`Self::predict`] of marker index `m` (at its calibrated position, on
+    /// its own link: a tree's markers are on several, data contract 7.1).
+    ///
+    /// # Errors
+    /// As [`Self::predict`]; [`Error::OutOfRange`] for no marker `m`.
+    pub fn predict_marker(
+        &self,
+        m: usize,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<Vector3<f64>, Error> {
+        let (chain, tool) = self.marker_chain(m)?;
+        self.predict_on(chain, &tool, q, payload, true)
+    }
+
+    /// [`Self::predict_deflection`] of marker index `m` (see
+    /// [`Self::predict_marker`]).
+    ///
+    /// # Errors
+    /// As [`Self::predict_marker`].
+    pub fn predict_marker_deflection(
+        &self,
+        m: usize,
+        q: &[f64],
+        payload: &Payload,
+    ) -> Result<Vector3<f64>, Error> {
+        let (chain, tool) = self.marker_chain(m)?;
+        Ok(self.predict_on(chain, &tool, q, Some(payload), false)?
+            - self.predict_on(chain, &tool, q, None, false)?)
+    }
+
+    fn marker_chain(&self, m: usize) -> Result<(&Chain<f64, J>, Vector3<f64>), Error> {
+        let out = Error::OutOfRange {
+            what: "marker",
+            index: m,
+            len: self.markers.len(),
+        };
+        let tool = *self.markers.get(m).ok_or(out)?;
+        let chain = self
+            .marker_ends
+            .get(m)
+            .and_then(|&k| k.checked_sub(1))
+            .and_then(|k| self.branches.get(k))
+            .unwrap_or(&self.chain);
+        Ok((chain, tool))
+    }
+
+    fn predict_with(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+        own_weight: bool,
+    ) -> Result<Vector3<f64>, Error> {
+        self.predict_on(&self.chain, tool_m, q, payload, own_weight)
+    }
+
+    fn predict_on(
+        &self,
+        chain: &Chain<f64, J>,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+        own_weight: bool,
+    ) -> Result<Vector3<f64>, Error> {
+        self.check_q(q)?;
+        let mut loading = self.loading(payload)?;
+        if !own_weight {
+            loading.own_weight_mps2 = None;
+        }
+        let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
+        let p = eq.frames.point_m(tool_m);
+        Ok(p + self.bending_m(&eq.frames, &p, &loading)?)
+    }
+
+    /// The calibrated joint law at command `q`, the gravity compliance's
+    /// deflection at the commanded pose (as fitted; NaN, so that the
+    /// equilibrium fails, if the pose has no frames).
+    fn law_at(&self, q: &[f64]) -> crate::calibrate::params::linearisation::Law {
+        let gravity = match self.lin.needs_gravity().then(|| self.chain.frames(q)) {
+            Some(Ok(f)) => self.lin.gravity_at(&f, &self.gravity_mps2),
+            _ => Vec::new(),
+        };
+        self.lin.joint_law(q, true, &gravity)
+    }
+
+    /// The links' bending under the payload at `frames` (first order, the
+    /// fitted `LinkCompliance` columns times their estimates) \[m\].
+    fn bending_m(
+        &self,
+        frames: &crate::robot::Frames<f64, J>,
+        p: &Vector3<f64>,
+        loading: &Loading<f64>,
+    ) -> Result<Vector3<f64>, Error> {
+        let Some(load) = loading.load.filter(|_| !self.bending.is_empty()) else {
+            return Ok(Vector3::zeros());
+        };
+        let sample = Sample::deflection(frames, *p, 0, &[], Some(load.wrench(frames)));
+        self.bending
+            .iter()
+            .try_fold(Vector3::zeros(), |s, (param, x)| {
+                Ok(s + param.column(&sample)? * *x)
+            })
+    }
+
+    /// [`Self::predict`] and its covariance \[m²\] from the calibration's
+    /// parameter covariance (see the [module docs](self)).
+    ///
+    /// # Errors
+    /// As [`Self::predict`]; [`Error::Mismatch`] for a predictor read from
+    /// a model file (the covariance is in the file, the calibration's
+    /// geometry before folding is not).
+    pub fn predict_covariance(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<(Vector3<f64>, Matrix3<f64>), Error> {
+        let p = self.predict(tool_m, q, payload)?;
+        let Some((model, gravity)) = &self.calibration else {
+            return Err(Error::Mismatch {
+                what: "a prediction's covariance needs the calibration, not a model file",
+            });
+        };
+        let n = model.params.len();
+        let cov = &model.covariance;
+        let mut b = nalgebra::DMatrix::<f64>::zeros(3, n);
+        for k in 0..n {
+            let sigma = cov[(k, k)].max(0.0).sqrt();
+            if sigma == 0.0 || !sigma.is_finite() {
+                continue;
+            }
+            let h = 0.01 * sigma;
+            let mut x = model.x.clone();
+            x[k] += h;
+            let plus = Self::at(model, *gravity, &x).predict(tool_m, q, payload)?;
+            x[k] -= 2.0 * h;
+            let minus = Self::at(model, *gravity, &x).predict(tool_m, q, payload)?;
+            b.set_column(k, &((plus - minus) / (2.0 * h)));
+        }
+        let c = &b * cov * b.transpose();
+        Ok((p, Matrix3::from_fn(|i, j| c[(i, j)])))
+    }
+
+    /// The joint command that puts `tool_m` \[m, tip frame\] at `target_m`
+    /// \[m, measurement frame\] with `payload`, by Newton's method from
+    /// `q_start` ([`compensate()`]; the compensator tables at each step's
+    /// command).
+    ///
+    /// # Errors
+    /// As [`Self::predict`] and [`compensate()`] (`NotConverged` for a target
+    /// the robot cannot reach near `q_start`).
+    pub fn compensate(
+        &self,
+        tool_m: &Vector3<f64>,
+        target_m: &Vector3<f64>,
+        q_start: &[f64],
+        payload: Option<&Payload>,
+        settings: &CompensateSettings<f64>,
+    ) -> Result<Compensation<f64, J>, Error> {
+        self.check_q(q_start)?;
+        let loading = self.loading(payload)?;
+        let solve = |target: &Vector3<f64>, start: &[f64]| {
+            compensate(
+                &self.chain,
+                tool_m,
+                target,
+                start,
+                &loading,
+                |q: &[f64]| self.law_at(q),
+                settings,
+            )
+        };
+        let mut c = solve(target_m, q_start)?;
+        if self.bending.is_empty() || loading.load.is_none() {
+            return Ok(c);
+        }
+        // The links' bending is not a joint law: aim the rigid-link
+        // solution at the target minus the bending there, until the bending
+        // stops changing (it is microns on a robot, a few passes).
+        let dof = self.dof();
+        for _ in 0..settings.max_iterations {
+            let bend = self.bending_m(&c.equilibrium.frames, &c.reached_m, &loading)?;
+            let reached = c.reached_m + bend;
+            if (target_m - reached).norm() <= settings.tolerance_m {
+                c.error_m = (target_m - reached).norm();
+                c.reached_m = reached;
+                return Ok(c);
+            }
+            let aim = target_m - bend;
+            let next = solve(&aim, &c.q[..dof])?;
+            c = Compensation {
+                iterations: c.iterations + next.iterations,
+                ..next
+            };
+        }
+        Err(Error::NotConverged {
+            iterations: c.iterations,
+        })
+    }
+
+    /// As [`Self::compensate`] for a pose: `tool_m` at `target_m` with the
+    /// tip frame turned to `target_rotation` (measurement frame;
+    /// [`compensate_pose`]). The links' bending is not applied here.
+    ///
+    /// # Errors
+    /// As [`Self::compensate`]; [`Error::Mismatch`] when the model has link
+    /// bending (a pose compensation would ignore it).
+    pub fn compensate_pose(
+        &self,
+        tool_m: &Vector3<f64>,
+        target_m: &Vector3<f64>,
+        target_rotation: &UnitQuaternion<f64>,
+        q_start: &[f64],
+        payload: Option<&Payload>,
+        settings: &CompensateSettings<f64>,
+    ) -> Result<Compensation<f64, J>, Error> {
+        self.check_q(q_start)?;
+        if !self.bending.is_empty() && payload.is_some() {
+            return Err(Error::Mismatch {
+                what: "a pose compensation of a model with link bending",
+            });
+        }
+        let loading = self.loading(payload)?;
+        compensate_pose(
+            &self.chain,
+            tool_m,
+            target_m,
+            target_rotation,
+            q_start,
+            &loading,
+            |q: &[f64]| self.law_at(q),
+            settings,
+        )
+    }
+}
