@@ -29,9 +29,9 @@ use std::path::PathBuf;
 use host_tests::arms::tracker_frame;
 use host_tests::exact::Fk;
 use nalgebra::{Isometry3, Point3, Rotation3, UnitQuaternion, Vector3};
-use robcal::calibrate::model_file::ModelFile;
-use robcal::calibrate::predict::{Payload, Predictor};
+use robcal::calibrate::ModelFile;
 use robcal::calibrate::{self, Method, Settings};
+use robcal::calibrate::{Payload, Predictor};
 use robcal::io::Job;
 use robcal::robot::{
     compensate, CompensateSettings, Compliances, EquilibriumSettings, Loading, PointLoad,

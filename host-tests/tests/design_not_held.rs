@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-mod tiago_common;
+use crate::tiago_common;
 
 use robcal::calibrate::{self, Method, Policy, Settings};
 use robcal::io::Job;

@@ -20,15 +20,7 @@
 //! 2 %, RMS within 1e-4, and at most one candidate fewer tried (one whose
 //! column f32 cannot tell from the model's).
 
-#[allow(dead_code)]
-#[path = "../../examples/firmware_diagnose/closed_loop.rs"]
-mod closed_loop;
-#[allow(dead_code)]
-#[path = "../../examples/firmware/kr270.rs"]
-mod kr270;
-#[allow(dead_code)]
-#[path = "../../examples/firmware_diagnose/table.rs"]
-mod table;
+use crate::{closed_loop, table};
 
 use std::path::PathBuf;
 

@@ -5,14 +5,14 @@
 //! (`model::effect::stream_candidates`) — list the same candidates for a
 //! stream of deflections.
 
-mod model_common;
+use crate::model_common;
 
 use std::collections::BTreeMap;
 
 use model_common::kr270;
 use nalgebra::Vector3;
 use robcal::calibrate::effects::candidates;
-use robcal::calibrate::names::Names;
+use robcal::calibrate::Names;
 use robcal::calibrate::{DataKinds, Effect};
 use robcal::model::effect::{joint_bins, stream_candidates, JointBins};
 use robcal::model::{Layout, Param};

@@ -4,9 +4,7 @@
 //! the same rows, and its f32 and f64 fits against the host reference the
 //! table carries (`robcal::calibrate` on the CSV, `examples/firmware_table.rs`).
 
-#[allow(dead_code)]
-#[path = "../../examples/firmware/kr270.rs"]
-mod kr270;
+use crate::kr270;
 
 use std::path::Path;
 

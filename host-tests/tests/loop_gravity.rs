@@ -182,8 +182,8 @@ fn rigid_robot_gets_no_gravity_compliance() {
 /// file's predictor is the calibration's.
 #[test]
 fn the_prediction_applies_the_gravity_compliance() {
-    use robcal::calibrate::model_file::ModelFile;
-    use robcal::calibrate::predict::Predictor;
+    use robcal::calibrate::ModelFile;
+    use robcal::calibrate::Predictor;
     let v = Vector3::new(3.0e-3, 0.0, -4.0e-3);
     let (job, data) = simulate(v, 30, 41);
     let r = calibrate::calibrate(&job, &data, &Settings::default(), &mut |_| {}).unwrap();

@@ -1,7 +1,7 @@
 //! Geometric (eq. 2) and elastostatic (eq. 3) columns against central finite
 //! differences of the independent 4×4 reference model (`model_common`).
 
-mod model_common;
+use crate::model_common;
 
 use model_common::*;
 use nalgebra::{Matrix3, Vector3};

@@ -2,7 +2,7 @@
 //! joints yield, its torque Jacobian and its sensitivity — against central
 //! differences and against the independent 4×4 reference of `model_common`.
 
-mod model_common;
+use crate::model_common;
 
 use model_common::*;
 use nalgebra::Vector3;

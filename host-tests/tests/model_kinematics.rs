@@ -2,7 +2,7 @@
 //! reference of `model_common`, on the KR-270 and a 7-joint arm with a
 //! prismatic joint.
 
-mod model_common;
+use crate::model_common;
 
 use model_common::*;
 use nalgebra::Vector3;

@@ -1,7 +1,7 @@
 //! Parameter layout, the combined row `B` (eq. 4) and the identifiability
 //! report, on the KR-270 with the paper's 15 configurations (Table 2).
 
-mod model_common;
+use crate::model_common;
 
 use model_common::*;
 use nalgebra::{Const, SMatrix, SVector, Vector3, U1};

@@ -3,7 +3,7 @@
 //! paper's configurations within its joint limits, and gives the same
 //! forward kinematics as the reference when turned into a `Chain`.
 
-mod model_common;
+use crate::model_common;
 
 use model_common::*;
 use nalgebra::{Isometry3, UnitQuaternion};

@@ -6,7 +6,7 @@
 //! and axis, and the covariances, within 1e-10 relative. The core's eq. 7
 //! covariance of the same rows too.
 
-mod paper_common;
+use crate::paper_common;
 
 use nalgebra::{DMatrix, DVector, Vector3};
 use paper_common::*;

@@ -2,7 +2,7 @@
 //! the product: every estimate within ±3σ of the truth, WLS never worse
 //! than OLS, and the Kantorovich bound on what weighting can gain.
 
-mod paper_common;
+use crate::paper_common;
 
 use nalgebra::{Const, OMatrix, Vector3};
 use paper_common::*;

@@ -16,7 +16,7 @@
 //! Everything is deterministic (Gauss–Newton to a 1 nm / 1 µrad step), so
 //! the pinned numbers have a rounding tolerance only: [`TOL_MM`].
 
-mod tiago_common;
+use crate::tiago_common;
 
 use host_tests::exact::Fk;
 use nalgebra::Vector3;

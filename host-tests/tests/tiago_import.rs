@@ -1,7 +1,7 @@
 //! FIGAROH mocap importer (`robcal::io::figaroh`) on the TIAGo recordings of
 //! `shared/datasets/tiago-mocap`, and the shipped setup `data/tiago/setup.toml`.
 
-mod tiago_common;
+use crate::tiago_common;
 use tiago_common::*;
 
 use std::path::Path;
