@@ -50,6 +50,13 @@ fail() { echo "firmware: FAILED: $*" >&2; failed=$((failed + 1)); }
 log=$(mktemp)
 marks=$(mktemp)
 trap 'rm -f "$log" "$marks"' EXIT
+# Both targets in one build each: a firmware build is link-time optimised in
+# one codegen unit, one core a target, so the two go side by side.
+target_flags=()
+for target in "${targets[@]}"; do target_flags+=(--target "$target"); done
+cargo build --quiet --profile firmware "${target_flags[@]}" --example firmware
+cargo build --quiet --profile firmware-diagnose "${target_flags[@]}" --example firmware_diagnose
+
 for target in "${targets[@]}"; do
     # The aliases `cargo firmware` / `cargo firmware-m3` (.cargo/config.toml).
     run=(cargo run --quiet --profile firmware --target "$target" --example firmware --)
