@@ -8,6 +8,9 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 
+#[path = "common/round_trip.rs"]
+mod round_trip;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -601,4 +604,23 @@ fn designs_not_held_give_the_same_report_and_a_bad_value_is_refused() {
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.contains("ROBCAL_MAX_HELD_DESIGN_ROWS"), "{err}");
     assert!(bad.stdout.is_empty());
+}
+
+/// robcal's own `robot.urdf` as the next calibration's nominal robot
+/// (issue 59): its measurement frame and markers are placed again, not
+/// refused, and the second run changes nothing beyond its σ.
+#[test]
+fn kr270_recalibrates_from_its_own_output() {
+    let d = temp_dir("round-trip");
+    std::fs::create_dir_all(&d).unwrap();
+    std::fs::copy(root().join("data/kr270/setup.toml"), d.join("setup.toml")).unwrap();
+    let urdf = root().join("data/kr270/kr270.urdf");
+    let data = root().join("data/kr270/measurements.csv");
+    round_trip::assert_round_trip(
+        &d,
+        "setup.toml",
+        urdf.to_str().unwrap(),
+        &["--data", data.to_str().unwrap(), "--no-diagnose"],
+    );
+    let _ = std::fs::remove_dir_all(&d);
 }

@@ -12,13 +12,17 @@
 //! - a new root link `measurement_frame` and a fixed joint
 //!   `measurement_frame_joint` to the URDF's root link, placed so that
 //!   `base_link` sits where the calibration put it (the base pose in the
-//!   measurement frame; the identity when the base frame is not declared);
+//!   measurement frame; the identity when the base frame is not declared).
+//!   A URDF robcal wrote (a recalibration from its own output) already has
+//!   that root above `base_link`: its joint is placed again instead;
 //! - each marker as a fixed link `marker_<id>` on its link (`tip_link`
 //!   by default; joint `marker_<id>_joint`) at its calibrated position.
-//!   When the URDF already has `marker_<id>` on a fixed joint from that
-//!   link, that joint's origin takes the calibrated position (its rotation
-//!   kept) and nothing is added; when it has a `marker_<id>` elsewhere, the
-//!   new link is `marker_<id>_calibrated` ([`marker_link`]).
+//!   When the URDF already has `marker_<id>` as a leaf on a fixed joint
+//!   from that link or one fixed to it (a maker's reflector, or the marker
+//!   an earlier `--output` wrote), that joint's origin takes the calibrated
+//!   position (its rotation kept) and nothing is added; when it has a
+//!   `marker_<id>` elsewhere (on another body, or with links below it),
+//!   the new link is `marker_<id>_calibrated` ([`marker_link`]).
 //!
 //! Forward kinematics of this file alone, from `measurement_frame` to
 //! `marker_<id>`, give the prediction of that marker by the geometric model
@@ -47,7 +51,7 @@ use crate::io::job::Job;
 use crate::model::Param;
 
 /// Name of the new root link.
-pub const MEASUREMENT_FRAME: &str = "measurement_frame";
+pub use crate::io::urdf::MEASUREMENT_FRAME;
 
 fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
     Isometry3::from_parts(
@@ -66,17 +70,42 @@ fn to_pose(t: &Isometry3<f64>) -> urdf_rs::Pose {
 }
 
 /// Where marker `id`, fixed to link `on`, goes in the calibrated URDF.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum MarkerLink {
     /// A new fixed link of this name (`marker_<id>`, or
     /// `marker_<id>_calibrated` when the URDF has a link `marker_<id>`
-    /// that is not on a fixed joint from `on`).
+    /// that is not a leaf on a fixed joint from `on`'s rigid body).
     New(String),
-    /// The URDF's own `marker_<id>`, a leaf on this fixed joint from `on`
-    /// (a reflector modelled by its maker, as in the data sets of
-    /// `../shared`): the joint's origin takes the calibrated position, its
-    /// rotation kept.
-    Existing(String),
+    /// The URDF's own `marker_<id>`, a leaf on this fixed joint from a link
+    /// rigidly fixed to `on` (`on` itself, or one joined to it by fixed
+    /// joints only: a reflector modelled by its maker, as in the data sets
+    /// of `../shared`, or the marker robcal wrote): the joint's origin takes
+    /// the calibrated position, its rotation kept, and the link keeps its
+    /// name.
+    Existing {
+        /// The fixed joint that holds the marker.
+        joint: String,
+        /// The pose of that joint's parent link in `on`'s frame.
+        parent_in_on: Isometry3<f64>,
+    },
+}
+
+/// The pose of `link` in the frame at the top of its rigid body (up
+/// through fixed joints), and that top link.
+fn rigid_top<'a>(urdf: &'a urdf_rs::Robot, link: &'a str) -> (Isometry3<f64>, &'a str) {
+    let mut at = Isometry3::identity();
+    let mut top = link;
+    // At most one parent joint per link; a loop cannot outlast the joints.
+    for _ in 0..=urdf.joints.len() {
+        match urdf.joints.iter().find(|j| j.child.link == top) {
+            Some(j) if j.joint_type == urdf_rs::JointType::Fixed => {
+                at = pose(&j.origin) * at;
+                top = &j.parent.link;
+            }
+            _ => break,
+        }
+    }
+    (at, top)
 }
 
 /// Where marker `id` on link `on` goes (see [`MarkerLink`]).
@@ -85,8 +114,15 @@ pub fn marker_link(urdf: &urdf_rs::Robot, id: u32, on: &str) -> MarkerLink {
     // A leaf: moving its joint moves nothing else.
     let leaf = !urdf.joints.iter().any(|j| j.parent.link == name);
     if let Some(j) = urdf.joints.iter().find(|j| j.child.link == name) {
-        if leaf && j.joint_type == urdf_rs::JointType::Fixed && j.parent.link == on {
-            return MarkerLink::Existing(j.name.clone());
+        if leaf && j.joint_type == urdf_rs::JointType::Fixed {
+            let (parent_at, parent_top) = rigid_top(urdf, &j.parent.link);
+            let (on_at, on_top) = rigid_top(urdf, on);
+            if parent_top == on_top {
+                return MarkerLink::Existing {
+                    joint: j.name.clone(),
+                    parent_in_on: on_at.inverse() * parent_at,
+                };
+            }
         }
     }
     if urdf.links.iter().any(|l| l.name == name) {
@@ -188,12 +224,11 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             .ok_or_else(|| data(format!("joint '{name}' not found again")))?;
         origins.push((name.clone(), pose(&joint.origin) * d));
     }
-    if urdf.links.iter().any(|l| l.name == MEASUREMENT_FRAME) {
-        return Err(data(format!("already has a link '{MEASUREMENT_FRAME}'")));
-    }
-    // base_link in the URDF's root frame, through fixed joints only.
+    // base_link in the URDF's root frame, through fixed joints only; the
+    // joint that hangs from the root on the way.
     let mut root_to_base = Isometry3::identity();
     let mut link = robot.base_link.clone();
+    let mut from_root = None;
     while let Some(j) = urdf.joints.iter().find(|j| j.child.link == link) {
         if j.joint_type != urdf_rs::JointType::Fixed {
             return Err(data(format!(
@@ -204,8 +239,22 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
         }
         root_to_base = pose(&j.origin) * root_to_base;
         link = j.parent.link.clone();
+        from_root = Some(j);
     }
     let root = link;
+    // robcal's own output as the nominal robot (a recalibration): its
+    // measurement frame is the root above base_link, and this calibration
+    // places it again (the joint below it moved) instead of adding one.
+    let own_frame = match from_root {
+        Some(j) if root == MEASUREMENT_FRAME => Some(j),
+        _ => None,
+    };
+    if own_frame.is_none() && urdf.links.iter().any(|l| l.name == MEASUREMENT_FRAME) {
+        return Err(data(format!(
+            "already has a link '{MEASUREMENT_FRAME}' that is not the root above base_link '{}'",
+            robot.base_link
+        )));
+    }
     // A new link and the fixed joint that places it or hangs from it.
     let fixed = |link: &str, name: &str, parent: &str, child: &str, origin: &Isometry3<f64>| {
         format!(
@@ -218,13 +267,22 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             o = origin_element(origin)
         )
     };
-    let mut added = fixed(
-        MEASUREMENT_FRAME,
-        &format!("{MEASUREMENT_FRAME}_joint"),
-        MEASUREMENT_FRAME,
-        &root,
-        &(g.base * root_to_base.inverse()),
-    );
+    let mut added = String::new();
+    match own_frame {
+        // measurement_frame → base_link is `O · rest`, `O` the joint's own
+        // origin: `O' · rest` = the calibrated base.
+        Some(j) => origins.push((
+            j.name.clone(),
+            g.base * root_to_base.inverse() * pose(&j.origin),
+        )),
+        None => added.push_str(&fixed(
+            MEASUREMENT_FRAME,
+            &format!("{MEASUREMENT_FRAME}_joint"),
+            MEASUREMENT_FRAME,
+            &root,
+            &(g.base * root_to_base.inverse()),
+        )),
+    }
     for (m, (id, _)) in model.names.markers.iter().enumerate() {
         let p = g.markers[m];
         // The marker's own link (data contract 7.1), tip_link by default.
@@ -235,14 +293,19 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             .and_then(|s| s.link.as_deref())
             .unwrap_or(&robot.tip_link);
         match marker_link(&urdf, *id, on) {
-            MarkerLink::Existing(joint) => {
+            MarkerLink::Existing {
+                joint,
+                parent_in_on,
+            } => {
                 let origin = urdf
                     .joints
                     .iter()
                     .find(|j| j.name == joint)
                     .map_or_else(Isometry3::identity, |j| pose(&j.origin));
+                // The calibrated point in the parent link's frame.
+                let q = parent_in_on.inverse_transform_point(&nalgebra::Point3::from(p));
                 let at = Isometry3::from_parts(
-                    nalgebra::Translation3::new(p.x, p.y, p.z),
+                    nalgebra::Translation3::new(q.x, q.y, q.z),
                     origin.rotation,
                 );
                 origins.push((joint, at));

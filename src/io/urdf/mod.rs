@@ -210,6 +210,11 @@ pub struct OffChainBranch {
     pub mass_kg: f64,
 }
 
+/// The root link `robcal calibrate --output` adds above the robot (the
+/// measurement frame); a URDF that has it as its root, on one fixed joint,
+/// defaults `base_link` to the link below it.
+pub const MEASUREMENT_FRAME: &str = "measurement_frame";
+
 /// A robot read from a URDF: the chain from `base_link` to `tip_link` and
 /// what the chain type does not hold.
 #[derive(Debug, Clone, PartialEq)]

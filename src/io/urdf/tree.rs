@@ -130,6 +130,12 @@ impl<'u> Tree<'u> {
             .filter(|l| !self.parent_joint.contains_key(l))
             .collect();
         match roots.as_slice() {
+            // A URDF robcal wrote: the robot's own root is below the
+            // measurement frame it added.
+            [root] if *root == crate::io::urdf::MEASUREMENT_FRAME => match self.children(root) {
+                [j] if j.joint_type == urdf_rs::JointType::Fixed => Ok(j.child.link.as_str()),
+                _ => Ok(root),
+            },
             [root] => Ok(root),
             _ => Err(ctx.err(
                 ErrorKind::Robot,
