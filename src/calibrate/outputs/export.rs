@@ -90,22 +90,27 @@ pub enum MarkerLink {
     },
 }
 
-/// The pose of `link` in the frame at the top of its rigid body (up
-/// through fixed joints), and that top link.
-fn rigid_top<'a>(urdf: &'a urdf_rs::Robot, link: &'a str) -> (Isometry3<f64>, &'a str) {
+/// The top of `link`'s rigid body, up through fixed joints: the pose of
+/// `link` in the top link's frame, the top link, and the fixed joint that
+/// hangs from it on the way (`None` when `link` is the top).
+fn rigid_top<'a>(
+    urdf: &'a urdf_rs::Robot,
+    link: &'a str,
+) -> (Isometry3<f64>, &'a str, Option<&'a urdf_rs::Joint>) {
     let mut at = Isometry3::identity();
-    let mut top = link;
+    let (mut top, mut below) = (link, None);
     // At most one parent joint per link; a loop cannot outlast the joints.
     for _ in 0..=urdf.joints.len() {
         match urdf.joints.iter().find(|j| j.child.link == top) {
             Some(j) if j.joint_type == urdf_rs::JointType::Fixed => {
                 at = pose(&j.origin) * at;
                 top = &j.parent.link;
+                below = Some(j);
             }
             _ => break,
         }
     }
-    (at, top)
+    (at, top, below)
 }
 
 /// Where marker `id` on link `on` goes (see [`MarkerLink`]).
@@ -115,8 +120,8 @@ pub fn marker_link(urdf: &urdf_rs::Robot, id: u32, on: &str) -> MarkerLink {
     let leaf = !urdf.joints.iter().any(|j| j.parent.link == name);
     if let Some(j) = urdf.joints.iter().find(|j| j.child.link == name) {
         if leaf && j.joint_type == urdf_rs::JointType::Fixed {
-            let (parent_at, parent_top) = rigid_top(urdf, &j.parent.link);
-            let (on_at, on_top) = rigid_top(urdf, on);
+            let (parent_at, parent_top, _) = rigid_top(urdf, &j.parent.link);
+            let (on_at, on_top, _) = rigid_top(urdf, on);
             if parent_top == on_top {
                 return MarkerLink::Existing {
                     joint: j.name.clone(),
@@ -226,22 +231,14 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
     }
     // base_link in the URDF's root frame, through fixed joints only; the
     // joint that hangs from the root on the way.
-    let mut root_to_base = Isometry3::identity();
-    let mut link = robot.base_link.clone();
-    let mut from_root = None;
-    while let Some(j) = urdf.joints.iter().find(|j| j.child.link == link) {
-        if j.joint_type != urdf_rs::JointType::Fixed {
-            return Err(data(format!(
-                "joint '{}' between the root and base_link '{}' is not fixed: the \
-                 measurement frame cannot be placed",
-                j.name, robot.base_link
-            )));
-        }
-        root_to_base = pose(&j.origin) * root_to_base;
-        link = j.parent.link.clone();
-        from_root = Some(j);
+    let (root_to_base, root, from_root) = rigid_top(&urdf, &robot.base_link);
+    if let Some(j) = urdf.joints.iter().find(|j| j.child.link == root) {
+        return Err(data(format!(
+            "joint '{}' between the root and base_link '{}' is not fixed: the \
+             measurement frame cannot be placed",
+            j.name, robot.base_link
+        )));
     }
-    let root = link;
     // robcal's own output as the nominal robot (a recalibration): its
     // measurement frame is the root above base_link, and this calibration
     // places it again (the joint below it moved) instead of adding one.
@@ -279,7 +276,7 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             MEASUREMENT_FRAME,
             &format!("{MEASUREMENT_FRAME}_joint"),
             MEASUREMENT_FRAME,
-            &root,
+            root,
             &(g.base * root_to_base.inverse()),
         )),
     }
