@@ -618,9 +618,13 @@ fn kr270_recalibrates_from_its_own_output() {
     let data = root().join("data/kr270/measurements.csv");
     round_trip::assert_round_trip(
         &d,
-        "setup.toml",
-        urdf.to_str().unwrap(),
-        &["--data", data.to_str().unwrap(), "--no-diagnose"],
+        round_trip::Trip {
+            setup: "setup.toml",
+            robot: urdf.to_str().unwrap(),
+            args: &["--data", data.to_str().unwrap(), "--no-diagnose"],
+            markers_from_first: false,
+            origin_tolerance: 1e-9,
+        },
     );
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -419,9 +419,13 @@ fn the_tree_recalibrates_from_its_own_output() {
     let d = job("round-trip", &MARKERS);
     round_trip::assert_round_trip(
         &d,
-        "setup.toml",
-        "y.urdf",
-        &["--data", "data.csv", "--no-diagnose"],
+        round_trip::Trip {
+            setup: "setup.toml",
+            robot: "y.urdf",
+            args: &["--data", "data.csv", "--no-diagnose"],
+            markers_from_first: false,
+            origin_tolerance: 1e-9,
+        },
     );
     let _ = std::fs::remove_dir_all(&d);
 }

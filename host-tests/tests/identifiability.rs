@@ -352,11 +352,11 @@ proptest! {
 
     /// The same random chains fitted by IRLS (the default method), whose
     /// weights move the pivots of `Λ`: never refused, unless Gauss–Newton
-    /// runs away on the chain (its OLS fit says it did not converge: seed
-    /// 13508975950693404068, OLS at an RMS of 2.6e16 m, where IRLS's
-    /// solver met a column it cannot resolve), or the solver refuses a
-    /// column at the weights where the OLS fit flags the problem as poorly
-    /// determined ([`ols_flags_it`]).
+    /// runs away on the chain (its OLS fit says it did not converge), or
+    /// the solver refuses a column at the weights where the OLS fit flags
+    /// the problem as poorly determined ([`ols_flags_it`]). (The three
+    /// refusals once found, seed 13508975950693404068 among them, each
+    /// kept a near-null set: `docs/numerics.md` §8.)
     #[test]
     fn no_declared_model_is_refused_with_irls(seed in any::<u64>()) {
         let c = case(seed);
@@ -396,57 +396,61 @@ fn ols_flags_it(ols: &Report) -> bool {
 }
 
 #[test]
-fn irls_is_refused_only_where_ols_flags_the_problem() {
+fn a_near_null_kept_set_is_taken_again_and_fits_at_the_noise() {
     // Seed 14467912751693006040 of the IRLS property above: a 9-link chain,
-    // geometry "full", 32 configurations of 3 markers. OLS fits it
-    // (converged, RMS 1851.2 µm against 33 µm of noise, first-order
-    // warnings) with j2.ty's variance inflation at 1.16e9; IRLS's weights
-    // leave j5.ry below the solver's pivot tolerance. The refusal names
-    // the parameter and offers the fit without weights.
+    // geometry "full", 32 configurations of 3 markers. With the greedy
+    // pivots' set (j2.ty's variance inflation 1.16e9) OLS ended at 1851.2
+    // µm against 33 µm of noise, with first-order warnings, and IRLS was
+    // refused at its weights (j5.ry). That set breaks the independence
+    // test's criterion as stated (`robcal::estimate::rank`): taken again
+    // with a raised tolerance, both fits reach the noise, and what is left
+    // flagged is a variance inflation of ~1.6e4 (j6.tx with the markers'
+    // z).
     let c = case(14467912751693006040);
     let ols = calibrate_case(&c).expect("OLS fits it");
     assert!(ols.converged);
-    assert!(ols_flags_it(&ols), "{:?}", ols.near_dependent);
-    assert!(
-        ols.near_dependent.iter().any(|n| n.inflation > 1e9),
-        "{:?}",
-        ols.near_dependent
-    );
+    assert!(ols.rms_um < 40.0, "{}", ols.rms_um);
+    let worst = ols
+        .near_dependent
+        .iter()
+        .map(|n| n.inflation)
+        .fold(0.0, f64::max);
+    assert!(worst < 1e5, "{:?}", ols.near_dependent);
     let irls = Settings {
         method: Method::Irls,
         ..quick()
     };
-    let e = calibrate_with(&c, &irls).expect_err("refused at the weights");
-    assert!(
-        e.starts_with("fit: j5.ry cannot be told apart from the other parameters at the weights")
-            && e.ends_with("or fit without weights (--method ols)"),
-        "{e}"
-    );
+    let r = calibrate_with(&c, &irls).expect("IRLS fits it");
+    assert!(r.converged);
+    assert!(r.rms_um < 40.0, "{}", r.rms_um);
 }
 
 #[test]
 fn a_dependence_only_at_the_nominal_robot_is_tested_again_at_the_fitted_one() {
     // Seed 4106693272553127489 of the property above: the marker exactly on
     // j1's axis at the nominal robot, about 0.5 mm off it on the true one.
-    // At the nominal robot base.ry and j1.ry move it alike and are left
-    // out; at the fitted geometry both are independent. base.ry is
-    // significant (F = 1075.9 on (1, 76)) and re-added; j1.ry, given
-    // base.ry, is not (p = 0.058 before Bonferroni) and stays out. Left
+    // At the nominal robot base.ry, j1.rx and j1.ry move it alike; the
+    // independence test keeps none of them there (with j1.rx kept, the set
+    // breaks its criterion as stated: `robcal::estimate::rank`). At the
+    // fitted geometry j1.rx is independent and significant (F = 1075.9 on
+    // (1, 76)) and re-added; given it, base.ry and j1.ry stay out. Left
     // out, the declared model's RMS was 364.6 µm against 33 µm of noise,
     // with no warning.
     let c = case(4106693272553127489);
     let r = calibrate_case(&c).expect("calibrated");
-    assert_readded(&r, "base.ry");
+    assert_readded(&r, "j1.rx");
     assert!(
-        r.left_out.iter().all(|l| l.name != "base.ry"),
+        r.left_out.iter().all(|l| l.name != "j1.rx"),
         "{:?}",
         r.left_out
     );
-    assert!(
-        r.left_out.iter().any(|l| l.name == "j1.ry"),
-        "{:?}",
-        r.left_out
-    );
+    for name in ["base.ry", "j1.ry"] {
+        assert!(
+            r.left_out.iter().any(|l| l.name == name),
+            "{name}: {:?}",
+            r.left_out
+        );
+    }
     assert!(r.declared_rms_um < 40.0, "{}", r.declared_rms_um);
 }
 

@@ -4,6 +4,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::calibrate::design::Design;
+use crate::estimate::rank::{ESCALATION, MAX_ESCALATED_TOLERANCE};
 
 impl Design {
     /// Which of the columns `cols` are kept, in order, by the pivots
@@ -40,29 +41,96 @@ impl Design {
         }
         let norms: Vec<f64> = (0..n).map(|j| r.column(j).norm_squared()).collect();
         let floor = f64::EPSILON * f64::EPSILON * norms.iter().copied().fold(0.0, f64::max);
-        let mut basis: Vec<DVector<f64>> = Vec::new();
-        (0..n)
-            .map(|j| {
-                if norms[j].is_nan() || norms[j] <= floor {
-                    return false;
-                }
-                let mut v = r.column(j).into_owned();
-                for _ in 0..2 {
-                    for q in &basis {
-                        let p = q.dot(&v);
-                        v.axpy(-p, q, 1.0);
-                    }
-                }
-                let d = v.norm_squared() / norms[j];
-                let keep = d > tolerance;
-                if keep {
-                    basis.push(&v / v.norm());
-                }
-                keep
-            })
-            .collect()
+        // As in `Λ` (`crate::estimate::rank`): the tolerance raised tenfold
+        // while the kept set breaks the criterion as stated, else the first.
+        let mut t = tolerance;
+        let first = greedy(&r, &norms, floor, t);
+        let mut kept = first.clone();
+        while !within_inflation(&r, &norms, &kept, tolerance) {
+            t *= ESCALATION;
+            if t > MAX_ESCALATED_TOLERANCE {
+                return first;
+            }
+            kept = greedy(&r, &norms, floor, t);
+        }
+        kept
     }
+}
+
+/// The greedy pivots of the columns of `R` (squared norms `norms`, those
+/// at most `floor` without information): in order, each orthogonalised
+/// twice on the kept ones before it, kept when `1 − R²` exceeds
+/// `tolerance`.
+fn greedy(r: &DMatrix<f64>, norms: &[f64], floor: f64, tolerance: f64) -> Vec<bool> {
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    (0..r.ncols())
+        .map(|j| {
+            if norms[j].is_nan() || norms[j] <= floor {
+                return false;
+            }
+            let mut v = r.column(j).into_owned();
+            for _ in 0..2 {
+                for q in &basis {
+                    let p = q.dot(&v);
+                    v.axpy(-p, q, 1.0);
+                }
+            }
+            let d = v.norm_squared() / norms[j];
+            let keep = d > tolerance;
+            if keep {
+                basis.push(&v / v.norm());
+            }
+            keep
+        })
+        .collect()
+}
+
+/// Whether every kept column of `R` has `1 − R²` on all the other kept
+/// ones (`1/VIF`) above `tolerance`: `VIFᵢ` is the squared norm of row
+/// `i` of `R_K⁻¹`, `R_K` the triangle of a QR of the kept columns scaled
+/// to unit norm.
+fn within_inflation(r: &DMatrix<f64>, norms: &[f64], kept: &[bool], tolerance: f64) -> bool {
+    let cols: Vec<usize> = (0..kept.len()).filter(|&j| kept[j]).collect();
+    if cols.is_empty() {
+        return true;
+    }
+    let scaled = DMatrix::from_fn(r.nrows(), cols.len(), |i, k| {
+        r[(i, cols[k])] / norms[cols[k]].sqrt()
+    });
+    let rk = scaled.qr().r();
+    let k = cols.len();
+    let Some(inv) = rk.solve_upper_triangular(&DMatrix::identity(k, k)) else {
+        return false;
+    };
+    (0..k).all(|i| {
+        let vif = inv.row(i).norm_squared();
+        vif.is_finite() && 1.0 / vif > tolerance
+    })
 }
 
 /// Rows added to `R` at a time in [`Design::kept_by_columns`].
 const QR_ROWS: usize = 4096;
+
+#[cfg(test)]
+mod tests {
+    use crate::calibrate::design::Design;
+    use crate::estimate::rank::independence_tolerance;
+    use nalgebra::DMatrix;
+
+    /// The columns of `crate::estimate::rank`'s test (`e0`, `e0 + ε e1`,
+    /// `e1 + ε e2`, `e2`; ε = 3e-3) as one row of three equations: the
+    /// greedy pivots keep the first three (a VIF of ~1e10); with the
+    /// tolerance ×10 the second is left out and the fourth kept, as in `Λ`.
+    #[test]
+    fn a_near_null_set_is_taken_again_with_a_raised_tolerance() {
+        let e = 3e-3;
+        let b = DMatrix::from_row_slice(
+            3,
+            4,
+            &[1.0, 1.0, 0.0, 0.0, 0.0, e, 1.0, 0.0, 0.0, 0.0, e, 1.0],
+        );
+        let d = Design::from_columns(Vec::new(), b, vec![0.0; 3], vec![0], 1, None);
+        let kept = d.kept_by_columns(&[0, 1, 2, 3], independence_tolerance());
+        assert_eq!(kept, [true, false, true, true]);
+    }
+}

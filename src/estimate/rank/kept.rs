@@ -34,6 +34,31 @@ where
     Ok(l)
 }
 
+/// Whether every kept column of the scaled `a` has `1 − R²` on all the
+/// other kept ones (`1/VIF`, from the kept block factored in layout
+/// order) above `tolerance`; `false` when the block does not factor.
+pub(super) fn within_inflation<T: RealField + Copy, D: Dim>(
+    a: &OMatrix<T, D, D>,
+    kept: &OVector<bool, D>,
+    tolerance: T,
+) -> bool
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let Ok(l) = kept_factor(a, kept, T::zero()) else {
+        return false;
+    };
+    let (n, dim) = (a.nrows(), a.shape_generic().0);
+    (0..n).filter(|&d| kept[d]).all(|d| {
+        let mut x = OVector::<T, D>::zeros_generic(dim, Const::<1>);
+        x[d] = T::one();
+        solve_lower_in_place(&l, &mut x);
+        solve_upper_t_in_place(&l, &mut x);
+        let vif = x[d];
+        vif.is_finite() && vif > T::zero() && T::one() / vif > tolerance
+    })
+}
+
 /// The greedy pivots bound each kept column's `1 − R²` on the columns kept
 /// *before it in pivot order*, not on all the others. On rare near-dependent
 /// sets (a random 6R chain with 24 geometric parameters and 21 poses:
