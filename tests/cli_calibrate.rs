@@ -172,7 +172,8 @@ fn kr270_naive_model_traces_the_compensator() {
     ];
     for (p, t) in params.iter().zip(truth) {
         assert_eq!(p["unit"], "urad/(N*m)");
-        assert_eq!(keys(p), ["name", "std", "unit", "value"]);
+        assert_eq!(keys(p), ["determined", "name", "std", "unit", "value"]);
+        assert_eq!(p["determined"], true);
         let (x, s) = (p["value"].as_f64().unwrap(), p["std"].as_f64().unwrap());
         assert!(
             s > 0.0 && (x - t).abs() < 4.0 * s + 0.01 * t,

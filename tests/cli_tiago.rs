@@ -268,6 +268,81 @@ fn tiago_recalibrates_from_its_own_output() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Estimates within 2 σ of 0 (issue 59) are flagged wherever the
+/// parameters are: `determined: false` in the JSON, `*` in the text
+/// table (with its footnote), "within 2σ of 0" in the page's table; and
+/// named in one warning.
+#[test]
+fn undetermined_estimates_are_flagged_in_every_output() {
+    if skip("undetermined_estimates_are_flagged_in_every_output") {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("robcal-cli-tiago-flag-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let train = import(&dir, "2021-11-30");
+    let setup = setup_named(&dir, "setup-select.toml");
+    let out = dir.join("out");
+    let args = |json: bool| {
+        let mut a = vec![
+            "calibrate".to_string(),
+            "-q".into(),
+            "--setup".into(),
+            setup.to_string_lossy().into_owned(),
+            "--data".into(),
+            train.to_string_lossy().into_owned(),
+            "--method".into(),
+            "ols".into(),
+        ];
+        if json {
+            a.extend([
+                "--json".into(),
+                "--output".into(),
+                out.to_string_lossy().into_owned(),
+            ]);
+        }
+        a
+    };
+    let o = robcal(&args(true).iter().map(String::as_str).collect::<Vec<_>>());
+    ok(&o);
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let flagged: Vec<&str> = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["determined"] == false)
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(!flagged.is_empty());
+    let text = robcal(&args(false).iter().map(String::as_str).collect::<Vec<_>>());
+    ok(&text);
+    let text = String::from_utf8_lossy(&text.stdout);
+    for name in &flagged {
+        let line = text
+            .lines()
+            .rfind(|l| l.trim_start().starts_with(&format!("{name} ")) && l.contains(" ± "))
+            .unwrap_or_else(|| panic!("{name} not in the table"));
+        assert!(line.contains("* "), "{line}");
+    }
+    assert!(text.contains("* within 2 sd of 0"), "{text}");
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_eq!(
+        page.matches("<td>within 2σ of 0</td>").count(),
+        flagged.len()
+    );
+    let named = warnings(&v)
+        .iter()
+        .filter(|w| w.contains("within 2 sigma of 0"))
+        .map(|w| {
+            flagged
+                .iter()
+                .filter(|n| w.contains(&format!("{n} = ")))
+                .count()
+        })
+        .sum::<usize>();
+    assert_eq!(named, flagged.len(), "{:?}", warnings(&v));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The report's `warnings`.
 fn warnings(v: &Value) -> Vec<&str> {
     v["warnings"]
@@ -377,15 +452,29 @@ fn protocol_pins_the_validation_run() {
     );
     // Its wrist compliance, added at step 2, ends undetermined once the
     // nonlinear stiffness of step 5 takes over (3 562 ± 7 794 urad/(N*m)):
-    // said, by the rule of `plausibility::determined`.
+    // said, by the rule of `plausibility::determined`; so are the four
+    // other estimates within 2 σ of 0, in one warning.
     let warned = warnings(&chosen);
-    assert_eq!(warned.len(), 1, "{warned:?}");
+    assert_eq!(warned.len(), 2, "{warned:?}");
     assert!(
         warned[0].starts_with(
             "joint_compliance on arm_6_joint, added at step 2, is within 2 sigma of 0"
         ),
         "{warned:?}"
     );
+    assert!(
+        warned[1].starts_with("4 estimates are within 2 sigma of 0")
+            && warned[1].contains("arm_6_joint.ry = -4.1726 ± 3.6584 mrad")
+            && !warned[1].contains("k_arm_6_joint"),
+        "{warned:?}"
+    );
+    let flagged = chosen["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["determined"] == false)
+        .count();
+    assert_eq!(flagged, 5, "the compliance and the four");
     assert_eq!(
         effects(&chosen),
         [

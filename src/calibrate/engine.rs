@@ -668,15 +668,20 @@ impl Engine<'_> {
         f.params
             .iter()
             .zip(f.fit.x.iter().zip(&std))
-            .map(|(p, (&x, &std))| Parameter {
-                name: self.names.name(p),
-                value: if p.is_geometric() {
+            .map(|(p, (&x, &std))| {
+                let value = if p.is_geometric() {
                     f.geometry.value(p, x)
                 } else {
                     x
-                },
-                std,
-                unit: self.names.unit(p).name.to_string(),
+                };
+                Parameter {
+                    name: self.names.name(p),
+                    value,
+                    std,
+                    unit: self.names.unit(p).name.to_string(),
+                    determined: matches!(p, Param::Base { .. })
+                        || value.abs() >= self.policy.determined_sigmas * std,
+                }
             })
             .collect()
     }

@@ -48,6 +48,12 @@ pub struct Parameter {
     pub std: f64,
     /// Unit (`urad/(N*m)`, `mm`, `mrad`, …).
     pub unit: String,
+    /// Whether the data tell the estimate from 0: `|value|` at least
+    /// [`crate::calibrate::settings::Policy::determined_sigmas`] (2) σ.
+    /// `false`: the value read as 0 ± 2σ, the nominal robot's (the table's
+    /// flag, and a warning, `plausibility`). Always `true` for the base
+    /// frame, whose value is its pose, not a change from a nominal one.
+    pub determined: bool,
 }
 
 /// One effect the diagnosis added.
@@ -559,15 +565,23 @@ impl fmt::Display for Report {
             "  {:<w$} {:>12} ± {:<10} {:>8}  unit",
             "parameter", "value", "1 sd", "t"
         )?;
+        // `*`: within 2 σ of 0 (`Parameter::determined`).
         for p in &self.parameters {
             writeln!(
                 f,
-                "  {:<w$} {:>12.4} ± {:<10.4} {:>8.1}  {}",
+                "  {:<w$} {:>12.4} ± {:<10.4} {:>8.1}{} {}",
                 p.name,
                 p.value,
                 p.std,
                 p.value / p.std,
+                if p.determined { " " } else { "*" },
                 p.unit
+            )?;
+        }
+        if self.parameters.iter().any(|p| !p.determined) {
+            writeln!(
+                f,
+                "  * within 2 sd of 0: the data do not tell it from the nominal robot's value"
             )?;
         }
         writeln!(

@@ -288,19 +288,21 @@ fn parameters(h: &mut String, r: &Report) {
         h,
         "<section id=\"parameters\"><h2>Final parameters</h2><table class=\"num\"><tr><th>parameter</th>\
          <th>value</th><th>σ (1 sd)</th><th>95 % interval</th><th>unit</th><th>t = value/σ</th>\
-         </tr>"
+         <th></th></tr>"
     );
     for p in &r.parameters {
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>[{}, {}]</td><td>{}</td><td>{:.1}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>[{}, {}]</td><td>{}</td><td>{:.1}</td>\
+             <td>{}</td></tr>",
             esc(&p.name),
             g(p.value),
             g(p.std),
             g(p.value - t975 * p.std),
             g(p.value + t975 * p.std),
             esc(&p.unit),
-            p.value / p.std
+            p.value / p.std,
+            if p.determined { "" } else { "within 2σ of 0" }
         );
     }
     let _ = write!(

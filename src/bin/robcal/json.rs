@@ -68,6 +68,7 @@ struct ParameterJson<'a> {
     value: f64,
     std: f64,
     unit: &'a str,
+    determined: bool,
 }
 
 #[derive(Serialize)]
@@ -145,6 +146,7 @@ impl<'a> ReportJson<'a> {
                     value: p.value,
                     std: p.std,
                     unit: &p.unit,
+                    determined: p.determined,
                 })
                 .collect(),
             rms_um: r.rms_um,

@@ -13,8 +13,16 @@
 //!   generator: a link's bending added first on data with joint
 //!   compliances only, −0.16 ± 0.70 at the end).
 //!
-//! Both are warnings; negative compliances and backlash have their own
-//! rule ([`crate::calibrate::report::plausibility::check_result`]) and are not named twice.
+//! - **any other estimate** within those σ of 0 (a joint's offset or
+//!   frame, a marker, a declared effect; not the base frame, whose value
+//!   is a pose): the data do not tell it from the nominal robot's value,
+//!   and it reads as 0 ± 2σ (the report's table flags it too,
+//!   [`crate::calibrate::report::Parameter::determined`]). One warning
+//!   names them all.
+//!
+//! All are warnings; negative compliances and backlash have their own
+//! rule ([`crate::calibrate::report::plausibility::check_result`]) and no
+//! parameter is named twice.
 
 use std::collections::BTreeSet;
 
@@ -32,23 +40,46 @@ pub(super) fn undetermined(report: &Report, policy: &Policy) -> Vec<String> {
     )
 }
 
+/// The last warning of the [module docs](self): the estimates of
+/// `parameters` that are not [`Parameter::determined`], but those named
+/// in `named`.
+fn the_others(parameters: &[Parameter], named: &BTreeSet<&str>, n: f64) -> Option<String> {
+    let rest: Vec<String> = parameters
+        .iter()
+        .filter(|p| !p.determined && !named.contains(p.name.as_str()))
+        .map(|p| format!("{} = {:.4} ± {:.4} {}", p.name, p.value, p.std, p.unit))
+        .collect();
+    (!rest.is_empty()).then(|| {
+        format!(
+            "{} estimate{} within {n} sigma of 0, which the data do not tell from the nominal \
+             robot's value (read {} as 0 ± {n} sigma): {}",
+            rest.len(),
+            if rest.len() == 1 { " is" } else { "s are" },
+            if rest.len() == 1 { "it" } else { "them" },
+            rest.join(", ")
+        )
+    })
+}
+
 /// [`undetermined`] of the loop's steps `effects` and the final model's
 /// `params` with their estimates `parameters` (the same order), at `n` σ.
-fn findings(
+fn findings<'p>(
     effects: &[EffectStep],
     params: &[Param],
-    parameters: &[Parameter],
+    parameters: &'p [Parameter],
     n: f64,
 ) -> Vec<String> {
     let within = |value: f64, std: f64| value.abs() < n * std;
     let mut warnings = Vec::new();
     // Named by the negative rule already.
-    let negative: BTreeSet<&str> = params
+    let negative: BTreeSet<&'p str> = params
         .iter()
         .zip(parameters)
         .filter(|(p, par)| crate::calibrate::report::plausibility::sign_bound(p) && par.value < 0.0)
         .map(|(_, par)| par.name.as_str())
         .collect();
+    // Named by a warning (here or the negative rule's).
+    let mut named = negative.clone();
     // Parameters the loop added, by the effect that added them.
     let mut added: BTreeSet<&str> = BTreeSet::new();
     for (k, step) in effects.iter().enumerate() {
@@ -72,6 +103,7 @@ fn findings(
             && finals.iter().all(|p| within(p.value, p.std))
             && !finals.iter().any(|p| negative.contains(p.name.as_str()))
         {
+            named.extend(finals.iter().map(|p| p.name.as_str()));
             let values: Vec<String> = finals
                 .iter()
                 .map(|p| format!("{} = {:.4} ± {:.4} {}", p.name, p.value, p.std, p.unit))
@@ -102,8 +134,10 @@ fn findings(
                  under any load; load the joint more, or leave it out of [model]",
                 par.name, par.value, par.std, par.unit
             ));
+            named.insert(par.name.as_str());
         }
     }
+    warnings.extend(the_others(parameters, &named, n));
     warnings
 }
 
@@ -118,6 +152,7 @@ mod tests {
             value,
             std,
             unit: "urad/(N*m)".into(),
+            determined: value.abs() >= 2.0 * std,
         }
     }
 
@@ -139,7 +174,8 @@ mod tests {
     }
 
     /// The helper's wrist: 769 ± 817 on a declared compliance is named;
-    /// 5.0 ± 0.1 is not, nor a geometric parameter within 2 σ of 0.
+    /// 5.0 ± 0.1 is not; a geometric parameter within 2 σ of 0 is named by
+    /// the last warning, the compliance not again.
     #[test]
     fn a_declared_compliance_the_data_do_not_determine_is_named() {
         let params = [
@@ -153,18 +189,53 @@ mod tests {
             par("j2.offset", 0.1, 1.0),
         ];
         let w = findings(&[], &params, &pars, 2.0);
-        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w.len(), 2, "{w:?}");
         assert!(
             w[0].starts_with("k_j6 = 769.1310 ± 816.8440 urad/(N*m) is within 2 sigma of 0"),
+            "{w:?}"
+        );
+        assert!(
+            w[1].starts_with("1 estimate is within 2 sigma of 0")
+                && w[1].ends_with(": j2.offset = 0.1000 ± 1.0000 urad/(N*m)"),
             "{w:?}"
         );
         // A negative one is the negative rule's, not named twice.
         let pars = [
             par("k_j3", 5.0, 0.1),
             par("k_j6", -769.1, 816.8),
-            par("j2.offset", 0.1, 1.0),
+            par("j2.offset", 3.0, 1.0),
         ];
         assert!(findings(&[], &params, &pars, 2.0).is_empty());
+    }
+
+    /// Every estimate within 2 σ of 0 is named once, in one warning, but
+    /// the base frame's pose; one at 2.0 σ is determined.
+    #[test]
+    fn every_other_estimate_within_two_sigma_is_named_once() {
+        let params = [
+            Param::Base { axis: 0 },
+            Param::JointFrame { joint: 3, axis: 2 },
+            Param::Marker { marker: 0, axis: 1 },
+            Param::JointOffset { joint: 0 },
+        ];
+        let mut base = par("base.tx", 0.1, 1.0);
+        base.determined = true;
+        let pars = [
+            base,
+            par("j4.tz", -1.5, 0.9),
+            par("marker1.y", 0.3, 0.2),
+            par("j1.offset", 2.0, 1.0),
+        ];
+        let w = findings(&[], &params, &pars, 2.0);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with("2 estimates are within 2 sigma of 0")
+                && w[0].contains("j4.tz = -1.5000 ± 0.9000")
+                && w[0].contains("marker1.y = 0.3000 ± 0.2000")
+                && !w[0].contains("base.tx")
+                && !w[0].contains("j1.offset"),
+            "{w:?}"
+        );
     }
 
     /// The helper's Panda: a link bending added first, taken over by the
