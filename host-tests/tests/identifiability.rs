@@ -658,3 +658,77 @@ fn skipped_note(why: &str) {
     use std::io::Write as _;
     let _ = writeln!(std::io::stderr(), "{why}");
 }
+
+/// A 4R arm whose wrist (`j3`) the data never turn, `geometry = "full"`,
+/// markers identified: at that one wrist angle the wrist's frame and the
+/// markers move the points alike, so the data leave some of them out,
+/// which poses turning the wrist identify (`calibrate::varied`): a warning
+/// names each, and how far its nominal value's error would show. With
+/// the wrist turned, what is left out is the model's own dependence: no
+/// such warning.
+#[test]
+fn a_parameter_only_these_poses_leave_out_is_a_warning() {
+    use host_tests::arms::Joint;
+    let joint = |name: &str, xyz: [f64; 3], rpy: [f64; 3], axis: [f64; 3]| Joint {
+        name: name.into(),
+        kind: "revolute",
+        xyz,
+        rpy,
+        axis,
+    };
+    let chain = Chain {
+        joints: vec![
+            joint("j0", [0.0, 0.0, 0.4], [0.0; 3], [0.0, 0.0, 1.0]),
+            joint("j1", [0.1, 0.0, 0.2], [0.0; 3], [0.0, 1.0, 0.0]),
+            joint("j2", [0.0, 0.0, 0.6], [0.0; 3], [0.0, 1.0, 0.0]),
+            joint("j3", [0.5, 0.0, 0.0], [0.0; 3], [1.0, 0.0, 0.0]),
+        ],
+    };
+    let markers = [
+        Vector3::new(0.1, 0.05, 0.02),
+        Vector3::new(0.15, -0.04, 0.03),
+    ];
+    let truth = Truth {
+        fk: Fk::parse(&chain.urdf(), "l0", &chain.tip()),
+        offsets: vec![0.0; 4],
+        base: Isometry3::identity(),
+        markers: markers.to_vec(),
+        noise_m: 20e-6,
+    };
+    let setup = chain.setup("full", true, "identify", &markers);
+    let warned = |turned: bool| -> Vec<String> {
+        let mut rng = SplitMix64::new(59);
+        let poses: Vec<Vec<f64>> = (0..40)
+            .map(|_| {
+                let mut q = chain.random_q(&mut rng);
+                if !turned {
+                    q[3] = 0.3;
+                }
+                q
+            })
+            .collect();
+        let csv = truth.csv(&chain.movable(), &poses, &mut rng);
+        let (job, m) = chain.job(&setup, &csv).unwrap();
+        let r = calibrate::calibrate(&job, &m, &quick(), &mut |_| {}).unwrap();
+        r.warnings
+            .into_iter()
+            .filter(|w| w.contains("but poses varied within the joint limits would identify"))
+            .collect()
+    };
+    // (Seen: j1.ty, j2.tx, j3.tz, 2.00–2.17 mm per mm; j3.rz, 0.31 mm
+    // per mrad: the markers absorb them at the one wrist angle.)
+    let fixed = warned(false);
+    assert!(
+        fixed.iter().any(|w| w.starts_with("j3.tz is left out")),
+        "{fixed:?}"
+    );
+    assert!(
+        fixed
+            .iter()
+            .all(|w| w.contains("it keeps its nominal value, and each m")
+                && w.contains(" it is off moves other poses' points by up to ")),
+        "{fixed:?}"
+    );
+    let turned = warned(true);
+    assert!(turned.is_empty(), "{turned:?}");
+}

@@ -9,7 +9,7 @@
 //! [`crate::io`] and [`crate::parallel`]):
 //!
 //! ```text
-//!   params ─► settings ─► rows ─► effects ─► design ─► fit ─► report ─► engine ─► outputs ─► diagnosis ─► run
+//!   params ─► settings ─► rows ─► effects ─► design ─► fit ─► report ─► engine ─► outputs ─► diagnosis ─► varied ─► run
 //! ```
 //!
 //! | module | one concept |
@@ -24,6 +24,7 @@
 //! | [`engine`] | one model fitted to convergence by Gauss–Newton, keeping its best model, and its held-out error |
 //! | [`outputs`] | the calibrated robot handed on: URDF (`export`), `model.json` (`model_file`), prediction and compensation (`predict`), validation on another file |
 //! | [`diagnosis`] | the closed loop: the declared model's first fit and re-tests (`retest`), every candidate tested and tried (`trial`), added while the data ask |
+//! | [`varied`] | the declared geometric parameters on varied poses within the joint limits: which of those the data leave out are the data's dependence, not the model's |
 //! | [`run`] | a job calibrated: rows prepared, the loop run, the report judged |
 //!
 //! Every decision constant is a field of [`Policy`], stated once; what the
@@ -48,6 +49,7 @@ pub mod report;
 pub mod rows;
 pub mod run;
 pub mod settings;
+pub mod varied;
 
 pub use effects::{Candidate, Effect};
 pub use fit::Step;

@@ -18,6 +18,7 @@ use crate::calibrate::rows::RowKind;
 use crate::calibrate::rows::Rows;
 use crate::calibrate::settings::Method;
 use crate::calibrate::settings::{CalibrationError, Policy, Progress, Settings};
+use crate::calibrate::varied;
 use crate::estimate::RobustWeight;
 use crate::model::Param;
 
@@ -250,6 +251,9 @@ fn calibrate_rows(
             }
         }
     }
+    // Which declared geometric parameters other poses would identify: a
+    // left-out one among them is the data's dependence (`varied`).
+    let varied = varied::varied(job, &e, &model)?;
     let mut report = diagnosis::run(
         e,
         declared,
@@ -260,8 +264,16 @@ fn calibrate_rows(
         nominal_rows,
     )?;
     report.nominal = nominal;
-    // The input's, the run's (`diagnosis::run`), then the result's.
+    // The input's, the run's (`diagnosis::run`), the left-out parameters
+    // the data, not the model, leave out, then the result's.
     warnings.append(&mut report.warnings);
+    if let Some(v) = &varied {
+        warnings.extend(
+            v.data_dependences(&report.left_out)
+                .iter()
+                .map(varied::DataDependence::warning),
+        );
+    }
     warnings.extend(plausibility::check_result(&report, &policy)?);
     report.warnings = warnings;
     report.failure = plausibility::failure(&report, &policy);

@@ -113,6 +113,11 @@ pub struct Policy {
     pub gauss_newton_sigma: f64,
     /// Gauss–Newton relinearisations at most. 50.
     pub max_steps: usize,
+    /// Configurations drawn within the joint limits on which the declared
+    /// geometric parameters left out on the data are tested again
+    /// ([`crate::calibrate::varied`]): one kept there is the data's
+    /// dependence, not the model's, and a warning. 0: not tested. 200.
+    pub varied_poses: usize,
     /// Gauss–Newton takes its steps whole, and keeps the linearisation
     /// whose model fitted the rows best (its cost: the sum of squared
     /// residuals with the weights of the fit's first linearisation). A fit
@@ -253,6 +258,7 @@ impl Default for Policy {
             min_rows_per_group: 2,
             irls_tolerance: 1e-3,
             step_tolerance: 1e-6,
+            varied_poses: 200,
             gauss_newton_sigma: 0.01,
             max_variance_inflation: 1000.0,
             max_candidate_inflation: 1e5,
