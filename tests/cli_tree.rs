@@ -429,3 +429,80 @@ fn the_tree_recalibrates_from_its_own_output() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `--keep-nominal-markers` (issue 59): `marker_<id>` is the calibrated
+/// marker and `marker_<id>_nominal` where it was (the setup's `xyz` for
+/// a URDF without one; the input URDF's `marker_<id>` when it has one, as
+/// robcal's own output does), and without the flag no nominal copy is left.
+#[test]
+fn nominal_markers_are_kept_only_when_asked() {
+    let d = job("keep-nominal", &MARKERS);
+    let setup = std::fs::read_to_string(d.join("setup.toml")).unwrap() + "markers = \"identify\"\n";
+    std::fs::write(d.join("setup.toml"), &setup).unwrap();
+    std::fs::write(
+        d.join("again.toml"),
+        setup.replace("robot = \"y.urdf\"", "robot = \"o1/robot.urdf\""),
+    )
+    .unwrap();
+    let run = |setup: &str, out: &str, keep: bool| {
+        let mut args = vec![
+            "calibrate",
+            "-q",
+            "--setup",
+            setup,
+            "--data",
+            "data.csv",
+            "--no-diagnose",
+            "--output",
+            out,
+        ];
+        if keep {
+            args.push("--keep-nominal-markers");
+        }
+        let o = Command::new(env!("CARGO_BIN_EXE_robcal"))
+            .current_dir(&d)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(d.join(out).join("robot.urdf")).unwrap();
+        urdf_rs::read_from_string(&text).unwrap()
+    };
+    let at = |u: &urdf_rs::Robot, joint: &str| -> ([f64; 3], String) {
+        let j = u
+            .joints
+            .iter()
+            .find(|j| j.name == joint)
+            .unwrap_or_else(|| panic!("{joint}"));
+        (j.origin.xyz.0, j.parent.link.clone())
+    };
+    let plain = run("setup.toml", "o0", false);
+    assert!(!plain.links.iter().any(|l| l.name.ends_with("_nominal")));
+    let kept = run("setup.toml", "o1", true);
+    for (id, link, xyz) in MARKERS {
+        let (nominal, on) = at(&kept, &format!("marker_{id}_nominal_joint"));
+        assert_eq!((nominal, on.as_str()), (xyz, link));
+        // The calibrated marker is where the plain run put it.
+        assert_eq!(
+            at(&kept, &format!("marker_{id}_joint")),
+            at(&plain, &format!("marker_{id}_joint"))
+        );
+        assert_ne!(at(&kept, &format!("marker_{id}_joint")).0, xyz);
+    }
+    // Again from that file: the nominal copy is moved to the input's
+    // marker, not added twice.
+    let again = run("again.toml", "o2", true);
+    assert_eq!(again.links.len(), kept.links.len());
+    for (id, _, _) in MARKERS {
+        let before = at(&kept, &format!("marker_{id}_joint"));
+        let (nominal, on) = at(&again, &format!("marker_{id}_nominal_joint"));
+        assert_eq!(on, before.1);
+        for k in 0..3 {
+            assert!(
+                (nominal[k] - before.0[k]).abs() < 1e-12,
+                "{nominal:?} {before:?}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -135,6 +135,10 @@ struct CalibrateArgs {
     /// exit 0. Without it such a run writes its report and exits 1.
     #[arg(long = "accept-unconverged")]
     accept_unconverged: bool,
+    /// With --output: keep each marker's nominal position in robot.urdf
+    /// too, as `marker_<id>_nominal` (`marker_<id>` is the calibrated one).
+    #[arg(long = "keep-nominal-markers")]
+    keep_nominal_markers: bool,
     /// The paper's first-order deflection model (eq. 3: torques and
     /// columns at the commanded pose) instead of the exact equilibrium of
     /// the deflected robot.
@@ -424,7 +428,10 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         dirs.push((dir, files));
     }
     if let Some(dir) = &a.output {
-        let urdf = calibrate::export::calibrated_urdf(report.urdf_model(), &job)
+        let options = calibrate::export::UrdfOptions {
+            keep_nominal_markers: a.keep_nominal_markers,
+        };
+        let urdf = calibrate::export::calibrated_urdf_with(report.urdf_model(), &job, options)
             .map_err(|e| e.to_string())?;
         let robot = calibrate::Predictor::new(&report.model, &job);
         let model = json::ModelJson::of(&report, calibrate::ModelFile::of(&robot));

@@ -22,7 +22,10 @@
 //!   an earlier `--output` wrote), that joint's origin takes the calibrated
 //!   position (its rotation kept) and nothing is added; when it has a
 //!   `marker_<id>` elsewhere (on another body, or with links below it),
-//!   the new link is `marker_<id>_calibrated` ([`marker_link`]).
+//!   the new link is `marker_<id>_calibrated` ([`marker_link`]). The
+//!   nominal marker is gone unless asked for
+//!   ([`UrdfOptions::keep_nominal_markers`]: `marker_<id>_nominal`, where
+//!   it was).
 //!
 //! Forward kinematics of this file alone, from `measurement_frame` to
 //! `marker_<id>`, give the prediction of that marker by the geometric model
@@ -115,7 +118,14 @@ fn rigid_top<'a>(
 
 /// Where marker `id` on link `on` goes (see [`MarkerLink`]).
 pub fn marker_link(urdf: &urdf_rs::Robot, id: u32, on: &str) -> MarkerLink {
-    let name = format!("marker_{id}");
+    leaf_link(urdf, &format!("marker_{id}"), on)
+}
+
+/// Where a point named `name` fixed to link `on` goes: [`marker_link`]'s
+/// rule for any leaf (the marker's nominal copy,
+/// [`UrdfOptions::keep_nominal_markers`], too).
+fn leaf_link(urdf: &urdf_rs::Robot, name: &str, on: &str) -> MarkerLink {
+    let name = name.to_string();
     // A leaf: moving its joint moves nothing else.
     let leaf = !urdf.joints.iter().any(|j| j.parent.link == name);
     if let Some(j) = urdf.joints.iter().find(|j| j.child.link == name) {
@@ -201,15 +211,41 @@ pub(in crate::calibrate) fn rigid_urdf(
     })
 }
 
+/// What [`calibrated_urdf_with`] writes besides the calibrated robot.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct UrdfOptions {
+    /// Keep each marker's nominal position too, as a fixed leaf
+    /// `marker_<id>_nominal` (joint `marker_<id>_nominal_joint`) on the
+    /// same link: where the input URDF's `marker_<id>` was, or the setup's
+    /// `xyz` when it had none. (A `marker_<id>_nominal` the input already
+    /// has, a leaf on a fixed joint from the marker's rigid body, is moved
+    /// there.) Off: `marker_<id>` is the calibrated marker, and the nominal
+    /// one is gone (`robcal calibrate --keep-nominal-markers`).
+    pub keep_nominal_markers: bool,
+}
+
 /// The calibrated URDF of `model` for the robot of `job` (see the module
-/// docs), as text.
+/// docs), as text: [`calibrated_urdf_with`] and the default options.
+///
+/// # Errors
+/// As [`calibrated_urdf_with`].
+pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, CalibrationError> {
+    calibrated_urdf_with(model, job, UrdfOptions::default())
+}
+
+/// The calibrated URDF of `model` for the robot of `job` (see the module
+/// docs), as text, with `options`.
 ///
 /// # Errors
 /// [`CalibrationError::Data`] when the URDF cannot be read again, already
 /// has a link of a name this adds, or has a movable joint between its root
 /// and `base_link` (the measurement frame could not be placed by a fixed
 /// joint).
-pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, CalibrationError> {
+pub fn calibrated_urdf_with(
+    model: &CalibratedModel,
+    job: &Job,
+    options: UrdfOptions,
+) -> Result<String, CalibrationError> {
     let path = job.setup.robot_path(&job.setup_path);
     let data = |m: String| CalibrationError::Data(format!("{}: {m}", path.display()));
     let text = crate::io::input::read_text(&path, "the URDF", crate::io::input::MAX_URDF_BYTES)
@@ -289,7 +325,10 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
             .get(m)
             .and_then(|s| s.link.as_deref())
             .unwrap_or(&robot.tip_link);
-        match marker_link(&urdf, *id, on) {
+        // The point `p` (in `on`'s frame) at `link`: its joint's origin
+        // moved there, or a new leaf; where the link was before, in `on`'s
+        // frame (`None` when it is new).
+        let mut place = |link: MarkerLink, p: nalgebra::Vector3<f64>| match link {
             MarkerLink::Existing {
                 joint,
                 parent_in_on,
@@ -299,18 +338,35 @@ pub fn calibrated_urdf(model: &CalibratedModel, job: &Job) -> Result<String, Cal
                     .iter()
                     .find(|j| j.name == joint)
                     .map_or_else(Isometry3::identity, |j| pose(&j.origin));
-                // The calibrated point in the parent link's frame.
+                // The point in the parent link's frame.
                 let q = parent_in_on.inverse_transform_point(&nalgebra::Point3::from(p));
                 let at = Isometry3::from_parts(
                     nalgebra::Translation3::new(q.x, q.y, q.z),
                     origin.rotation,
                 );
                 origins.push((joint, at));
+                Some((parent_in_on * origin).translation.vector)
             }
             MarkerLink::New(name) => {
                 let at = Isometry3::translation(p.x, p.y, p.z);
                 added.push_str(&fixed(&name, &format!("{name}_joint"), on, &name, &at));
+                None
             }
+        };
+        let before = place(marker_link(&urdf, *id, on), p);
+        if options.keep_nominal_markers {
+            let nominal = before.unwrap_or_else(|| {
+                job.setup
+                    .markers
+                    .get(m)
+                    .map_or(nalgebra::Vector3::zeros(), |s| {
+                        nalgebra::Vector3::from(s.xyz)
+                    })
+            });
+            place(
+                leaf_link(&urdf, &format!("marker_{id}_nominal"), on),
+                nominal,
+            );
         }
     }
     splice(&text, &origins, &added).map_err(data)
