@@ -108,7 +108,7 @@ fn calibrate_rows(
             &job.robot.chain,
             &job.robot.ends,
             &markers,
-            &marker_ends(job),
+            &job.marker_ends(),
         ),
         rows: std::sync::Arc::new(rows),
         names,
@@ -316,14 +316,4 @@ fn weighting(
         }
         Some(w) => Ok(w),
     }
-}
-
-/// Each setup marker's end in the robot ([`crate::io::urdf::Robot::ends`]), in
-/// setup order (the order of [`Names::markers`]).
-pub(crate) fn marker_ends(job: &crate::io::job::Job) -> Vec<usize> {
-    job.setup
-        .markers
-        .iter()
-        .map(|m| job.robot.end_index(m.link.as_deref()).unwrap_or(0))
-        .collect()
 }

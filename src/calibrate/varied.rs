@@ -158,12 +158,7 @@ pub fn varied(
     let mut quiet = |_: &str| {};
     let mut e = Engine {
         cancel: None,
-        geometry: Geometry::nominal_tree(
-            chain,
-            &job.robot.ends,
-            &markers,
-            &crate::calibrate::run::marker_ends(job),
-        ),
+        geometry: Geometry::nominal_tree(chain, &job.robot.ends, &markers, &job.marker_ends()),
         rows: Arc::new(rows),
         names,
         lin: Linearisation::nominal(data.lin.model),

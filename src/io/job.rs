@@ -47,6 +47,16 @@ impl Job {
         })
     }
 
+    /// Each setup marker's end in the robot ([`Robot::ends`]), in setup
+    /// order: 0 for the chain's tip, `k` for `Robot::end_links[k]`.
+    pub fn marker_ends(&self) -> Vec<usize> {
+        self.setup
+            .markers
+            .iter()
+            .map(|m| self.robot.end_index(m.link.as_deref()).unwrap_or(0))
+            .collect()
+    }
+
     /// Reads a measurement file of this job ([`read_measurements`]).
     ///
     /// # Errors

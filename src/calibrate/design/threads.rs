@@ -61,7 +61,7 @@ fn rows_and_design_do_not_depend_on_the_threads() {
         &job.robot.chain,
         &job.robot.ends,
         &markers,
-        &crate::calibrate::run::marker_ends(&job),
+        &job.marker_ends(),
     );
     let x = vec![1.0; params.len()];
     let lin = Linearisation::of(DeflectionModel::Exact, &params, &x, &names);
@@ -351,7 +351,7 @@ fn the_nominal_left_hand_sides_come_back_from_the_geometry() {
         &job.robot.chain,
         &job.robot.ends,
         &markers,
-        &crate::calibrate::run::marker_ends(&job),
+        &job.marker_ends(),
     );
     let lin = Linearisation::nominal(DeflectionModel::Exact);
     rows.relinearise_on(&nominal, &lin, 2).expect("relinearise");
