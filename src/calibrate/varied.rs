@@ -21,6 +21,8 @@
 //! absorbing parameters' share taken as the data take it, moves the points
 //! of the varied poses by up to that many mm
 //! ([`crate::calibrate::report::plausibility`]).
+//!
+//! [`Policy::varied_poses`]: crate::calibrate::settings::Policy::varied_poses
 
 use std::borrow::Cow;
 use std::sync::Arc;
