@@ -219,17 +219,23 @@ fn validate_reports_per_marker_rmse() {
     args.extend(["--validate", "data/kr270/measurements.csv", "--json"]);
     let v = json(&robcal(&args));
     let val = &v["validation"];
+    // (KR-270's deflections alone: no frame to re-fit, no
+    // `reregistration`.)
     assert_eq!(
         keys(val),
         [
+            "as_measured_rms_mm",
             "interpolated_points",
             "per_marker_max_mm",
             "per_marker_mean_mm",
             "per_marker_rms_mm",
             "points",
+            "reregistered",
             "rms_mm"
         ]
     );
+    assert_eq!(val["reregistered"], false);
+    assert_eq!(val["as_measured_rms_mm"], val["rms_mm"]);
     assert_eq!(keys(&val["per_marker_rms_mm"]), ["1", "2", "3"]);
     // The calibration file itself: the validation RMS is the fit's RMS.
     let rms_mm = val["rms_mm"].as_f64().unwrap();

@@ -56,14 +56,14 @@ pub use fit::Step;
 pub use outputs::export;
 pub use outputs::model_file::ModelFile;
 pub use outputs::predict::{Payload, Predictor};
-pub use outputs::validate::validate;
+pub use outputs::validate::{validate, validate_with};
 pub use params::geometry::Geometry;
 pub use params::linearisation::{DeflectionModel, Linearisation};
 pub use params::names::Names;
 pub use report::calibrated::CalibratedModel;
 pub use report::{
     weights_line, Absorbed, ConfigNoise, ConfigNoises, EffectStep, LeftOut, NearDependent, Nominal,
-    Parameter, PlotSeries, Report, RowError, RowErrors, Unexplained, Validation,
+    Parameter, PlotSeries, Report, Reregistration, RowError, RowErrors, Unexplained, Validation,
 };
 pub use rows::{DataKinds, Row, RowKind, Rows};
 pub use run::{calibrate, calibrate_owned};

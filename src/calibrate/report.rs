@@ -151,6 +151,54 @@ pub struct Validation {
     /// Points at which a compensator table was interpolated between its
     /// calibrated angles (or held at its first or last one).
     pub interpolated_points: usize,
+    /// RMS of the points as measured, in the calibration's measurement
+    /// frame \[mm\]: [`Validation::rms_mm`] unless re-registered.
+    pub as_measured_rms_mm: f64,
+    /// The file's measurement frame re-fitted with the calibrated model
+    /// held fixed, when it has three absolute points or more.
+    pub reregistration: Option<Reregistration>,
+    /// Whether the errors above are those after the re-registration
+    /// (`--reregister`), not those as measured.
+    pub reregistered: bool,
+}
+
+/// The measurement frame of a validation file re-fitted, everything of the
+/// calibrated model held fixed (`--reregister`,
+/// [`crate::calibrate::outputs::validate`]): the rigid transform that best
+/// maps the model's predicted points onto the file's, as the calibration
+/// registers its base (unweighted). A tracker set up elsewhere moves
+/// every point by it; the error left is the model's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reregistration {
+    /// Norm RMSE after it \[mm\].
+    pub rms_mm: f64,
+    /// Per marker id, after it \[mm\].
+    pub per_marker_rms_mm: BTreeMap<String, f64>,
+    /// Mean position error norm per marker id, after it \[mm\].
+    pub per_marker_mean_mm: BTreeMap<String, f64>,
+    /// Largest position error norm per marker id, after it \[mm\].
+    pub per_marker_max_mm: BTreeMap<String, f64>,
+    /// How far the centroid of the predicted absolute points moved \[mm,
+    /// the calibration's measurement frame\].
+    pub translation_mm: [f64; 3],
+    /// The frame's turn, as a rotation vector \[mrad\].
+    pub rotation_mrad: [f64; 3],
+    /// One σ of each translation component \[mm\] (the rigid fit's
+    /// residual scatter, `s/√n`).
+    pub translation_std_mm: [f64; 3],
+    /// One σ of each rotation component \[mrad\] (`s² (Σ [q]ₓᵀ[q]ₓ)⁻¹`,
+    /// `q` the points about their centroid).
+    pub rotation_std_mrad: [f64; 3],
+}
+
+impl Reregistration {
+    /// Whether the frame moved beyond `sigmas` σ in some component.
+    pub fn moved(&self, sigmas: f64) -> bool {
+        (0..3).any(|k| {
+            self.translation_mm[k].abs() > sigmas * self.translation_std_mm[k]
+                || self.rotation_mrad[k].abs() > sigmas * self.rotation_std_mrad[k]
+        })
+    }
 }
 
 /// The error of the declared model before any parameter is identified
@@ -312,6 +360,15 @@ pub struct RigidUrdf {
 }
 
 impl Report {
+    /// Sets the validation `v` and adds the warnings of its rule
+    /// ([`plausibility::check_validation`]): a file measured in another
+    /// frame does not pass silently.
+    pub fn set_validation(&mut self, v: Validation) {
+        self.warnings
+            .extend(plausibility::check_validation(&v, &self.model.policy));
+        self.validation = Some(v);
+    }
+
     /// The model whose geometry `robot.urdf` holds: the rigid refit of
     /// [`Report::rigid`] when there is one, else [`Report::model`].
     pub fn urdf_model(&self) -> &CalibratedModel {
@@ -605,11 +662,32 @@ impl fmt::Display for Report {
             )?;
         }
         if let Some(v) = &self.validation {
-            write!(f, "validation: RMS {:.4} mm", v.rms_mm)?;
+            write!(
+                f,
+                "validation{}: RMS {:.4} mm",
+                if v.reregistered {
+                    " (measurement frame re-registered)"
+                } else {
+                    ""
+                },
+                v.rms_mm
+            )?;
             for (m, r) in &v.per_marker_rms_mm {
                 write!(f, ", marker {m} {r:.4} mm")?;
             }
             writeln!(f)?;
+            if let Some(g) = &v.reregistration {
+                let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                writeln!(
+                    f,
+                    "validation: as measured RMS {:.4} mm; re-registered RMS {:.4} mm, the frame \
+                     moved {:.3} mm and turned {:.3} mrad",
+                    v.as_measured_rms_mm,
+                    g.rms_mm,
+                    n(g.translation_mm),
+                    n(g.rotation_mrad)
+                )?;
+            }
             if v.interpolated_points > 0 {
                 writeln!(
                     f,

@@ -118,6 +118,14 @@ pub struct Policy {
     /// ([`crate::calibrate::varied`]): one kept there is the data's
     /// dependence, not the model's, and a warning. 0: not tested. 200.
     pub varied_poses: usize,
+    /// A validation file whose points fit this many times better after its
+    /// measurement frame is re-fitted (the calibrated model held fixed),
+    /// the frame moved beyond [`Policy::frame_sigmas`] σ, was most likely
+    /// measured with the tracker set up elsewhere: a warning unless the
+    /// re-registration was asked for (`--reregister`). 3.
+    pub reregistration_gain: f64,
+    /// See [`Policy::reregistration_gain`]. 3.
+    pub frame_sigmas: f64,
     /// Gauss–Newton takes its steps whole, and keeps the linearisation
     /// whose model fitted the rows best (its cost: the sum of squared
     /// residuals with the weights of the fit's first linearisation). A fit
@@ -259,6 +267,8 @@ impl Default for Policy {
             irls_tolerance: 1e-3,
             step_tolerance: 1e-6,
             varied_poses: 200,
+            reregistration_gain: 3.0,
+            frame_sigmas: 3.0,
             gauss_newton_sigma: 0.01,
             max_variance_inflation: 1000.0,
             max_candidate_inflation: 1e5,

@@ -423,6 +423,24 @@ fn validation(h: &mut String, r: &Report, info: &JobInfo<'_>) {
                 );
             }
             h.push_str("</table>");
+            if let Some(g) = &v.reregistration {
+                let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                let _ = write!(
+                    h,
+                    "<p>{}As measured, RMS {:.4} mm; with the file's measurement frame re-fitted \
+                     (the model held fixed), RMS {:.4} mm: the frame moved {:.3} mm and turned \
+                     {:.3} mrad.</p>",
+                    if v.reregistered {
+                        "The table is after re-registration (<code>--reregister</code>). "
+                    } else {
+                        ""
+                    },
+                    v.as_measured_rms_mm,
+                    g.rms_mm,
+                    n(g.translation_mm),
+                    n(g.rotation_mrad)
+                );
+            }
             if v.interpolated_points > 0 {
                 let _ = write!(
                     h,

@@ -99,6 +99,26 @@ struct ValidationJson<'a> {
     per_marker_max_mm: &'a BTreeMap<String, f64>,
     points: usize,
     interpolated_points: usize,
+    /// (An extension of §5.) Whether the errors above are those after the
+    /// file's frame was re-fitted (`--reregister`).
+    reregistered: bool,
+    /// (An extension of §5.) The RMS as measured, in the calibration's
+    /// frame.
+    as_measured_rms_mm: f64,
+    /// (An extension of §5.) The file's frame re-fitted with the model held
+    /// fixed; absent with fewer than three absolute points.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reregistration: Option<ReregistrationJson<'a>>,
+}
+
+#[derive(Serialize)]
+struct ReregistrationJson<'a> {
+    rms_mm: f64,
+    per_marker_rms_mm: &'a BTreeMap<String, f64>,
+    translation_mm: [f64; 3],
+    translation_std_mm: [f64; 3],
+    rotation_mrad: [f64; 3],
+    rotation_std_mrad: [f64; 3],
 }
 
 #[derive(Serialize)]
@@ -216,6 +236,16 @@ impl<'a> ValidationJson<'a> {
             per_marker_max_mm: &v.per_marker_max_mm,
             points: v.points,
             interpolated_points: v.interpolated_points,
+            reregistered: v.reregistered,
+            as_measured_rms_mm: v.as_measured_rms_mm,
+            reregistration: v.reregistration.as_ref().map(|g| ReregistrationJson {
+                rms_mm: g.rms_mm,
+                per_marker_rms_mm: &g.per_marker_rms_mm,
+                translation_mm: g.translation_mm,
+                translation_std_mm: g.translation_std_mm,
+                rotation_mrad: g.rotation_mrad,
+                rotation_std_mrad: g.rotation_std_mrad,
+            }),
         }
     }
 }

@@ -135,6 +135,11 @@ struct CalibrateArgs {
     /// exit 0. Without it such a run writes its report and exits 1.
     #[arg(long = "accept-unconverged")]
     accept_unconverged: bool,
+    /// With --validate: re-fit the validation file's measurement frame
+    /// (the calibrated model held fixed) and report the error after it:
+    /// for a file measured with the tracker set up elsewhere.
+    #[arg(long, requires = "validate")]
+    reregister: bool,
     /// With --output: keep each marker's nominal position in robot.urdf
     /// too, as `marker_<id>_nominal` (`marker_<id>` is the calibrated one).
     #[arg(long = "keep-nominal-markers")]
@@ -410,8 +415,9 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     }
     let mut report = result.map_err(|e| e.to_string())?;
     if let Some(v) = &validation_data {
-        report.validation =
-            Some(calibrate::validate(&report.model, &job, v).map_err(|e| e.to_string())?);
+        let v = calibrate::validate_with(&report.model, &job, v, a.reregister)
+            .map_err(|e| e.to_string())?;
+        report.set_validation(v);
     }
     // Every file of --plots and --output in one all-or-nothing write: a
     // failure of one writes neither.

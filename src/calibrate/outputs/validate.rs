@@ -10,16 +10,32 @@
 //! ([`Predictor::predict_deflection`]). The drift of the
 //! measurement system is a property of the calibration session and is not
 //! carried over to another file.
+//!
+//! **Re-registration.** A file measured with the tracker set up elsewhere
+//! differs from the calibration's frame by a rigid transform, which moves
+//! every point. With three absolute points or more, the file's frame is
+//! re-fitted with the calibrated model held fixed — every effect kept,
+//! only the transform fitted, as the calibration registers its base
+//! ([`Geometry::register`], unweighted) — and the error after it is
+//! reported beside the error as measured
+//! ([`crate::calibrate::report::Reregistration`]; deflections turned by
+//! its rotation). [`validate_with`] and `--reregister` make it the
+//! headline; without it, a file that fits [`Policy::reregistration_gain`]
+//! times better re-registered is a warning
+//! ([`crate::calibrate::report::plausibility::check_validation`]).
+//!
+//! [`Policy::reregistration_gain`]: crate::calibrate::settings::Policy::reregistration_gain
 
 use std::collections::BTreeMap;
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Point3, Vector3};
 
 use crate::calibrate::effects::declared::needs_absolute;
 use crate::calibrate::fit::residuals::rms_um;
 use crate::calibrate::outputs::predict::{Payload, Predictor};
+use crate::calibrate::params::geometry::Geometry;
 use crate::calibrate::report::calibrated::CalibratedModel;
-use crate::calibrate::report::Validation;
+use crate::calibrate::report::{Reregistration, Validation};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
@@ -27,7 +43,8 @@ use crate::io::{job::Job, measurements::Measurements};
 
 /// Evaluates `model` on `data` (rows of the kinds the calibration used,
 /// predicted by [`Predictor`]): the norm RMSE of each marker's position
-/// error \[mm\].
+/// error \[mm\], as measured; the re-registration beside it (see the
+/// module docs).
 ///
 /// A joint with a compensator table at an angle the calibration did not
 /// measure gets the table's linear interpolation (held at its ends), and
@@ -41,6 +58,21 @@ pub fn validate(
     model: &CalibratedModel,
     job: &Job,
     data: &Measurements,
+) -> Result<Validation, CalibrationError> {
+    validate_with(model, job, data, false)
+}
+
+/// [`validate`], its errors those after the file's measurement frame is
+/// re-fitted when `reregister` (and the file has three absolute points or
+/// more: else as measured, [`Validation::reregistered`] false).
+///
+/// # Errors
+/// As [`validate`].
+pub fn validate_with(
+    model: &CalibratedModel,
+    job: &Job,
+    data: &Measurements,
+    reregister: bool,
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
@@ -59,6 +91,8 @@ pub fn validate(
     let payload_com = rows.com + robot.load_com_shift_m();
     let mut all = Vec::new();
     let mut per: BTreeMap<u32, Vec<Vector3<f64>>> = BTreeMap::new();
+    // Each point: its kind, marker id, prediction and measurement [m].
+    let mut points = Vec::new();
     for row in &rows.rows {
         let at = |e: Error| {
             CalibrationError::NoEquilibrium(format!(
@@ -82,6 +116,12 @@ pub fn validate(
         let r = row.measured - predicted;
         all.push(r);
         per.entry(names.marker_id(row.marker)).or_default().push(r);
+        points.push((
+            row.kind,
+            names.marker_id(row.marker),
+            predicted,
+            row.measured,
+        ));
     }
     if all.is_empty() {
         return Err(CalibrationError::Data(format!(
@@ -94,17 +134,116 @@ pub fn validate(
             }
         )));
     }
+    let (rms_mm, per_marker_rms_mm, per_marker_mean_mm, per_marker_max_mm) = summary(&all, &per);
+    let reregistration = reregistration(job, &points);
+    let mut v = Validation {
+        rms_mm,
+        per_marker_rms_mm,
+        per_marker_mean_mm,
+        per_marker_max_mm,
+        points: all.len(),
+        interpolated_points,
+        as_measured_rms_mm: rms_mm,
+        reregistration,
+        reregistered: false,
+    };
+    if let (true, Some(g)) = (reregister, &v.reregistration) {
+        v.rms_mm = g.rms_mm;
+        v.per_marker_rms_mm = g.per_marker_rms_mm.clone();
+        v.per_marker_mean_mm = g.per_marker_mean_mm.clone();
+        v.per_marker_max_mm = g.per_marker_max_mm.clone();
+        v.reregistered = true;
+    }
+    Ok(v)
+}
+
+/// RMS \[mm\] of `all`; per marker id of `per`: RMS, mean and largest
+/// norm \[mm\].
+type Summary = (
+    f64,
+    BTreeMap<String, f64>,
+    BTreeMap<String, f64>,
+    BTreeMap<String, f64>,
+);
+
+fn summary(all: &[Vector3<f64>], per: &BTreeMap<u32, Vec<Vector3<f64>>>) -> Summary {
     let per_marker = |f: &dyn Fn(&[Vector3<f64>]) -> f64| -> BTreeMap<String, f64> {
         per.iter().map(|(m, v)| (m.to_string(), f(v))).collect()
     };
-    Ok(Validation {
-        rms_mm: rms_um(&all) * 1e-3,
-        per_marker_rms_mm: per_marker(&|v| rms_um(v) * 1e-3),
-        per_marker_mean_mm: per_marker(&|v| {
-            v.iter().map(|r| r.norm()).sum::<f64>() / v.len() as f64 * 1e3
-        }),
-        per_marker_max_mm: per_marker(&|v| v.iter().map(|r| r.norm()).fold(0.0, f64::max) * 1e3),
-        points: all.len(),
-        interpolated_points,
-    })
+    (
+        rms_um(all) * 1e-3,
+        per_marker(&|v| rms_um(v) * 1e-3),
+        per_marker(&|v| v.iter().map(|r| r.norm()).sum::<f64>() / v.len() as f64 * 1e3),
+        per_marker(&|v| v.iter().map(|r| r.norm()).fold(0.0, f64::max) * 1e3),
+    )
+}
+
+/// The file's measurement frame re-fitted (module docs) from `points`
+/// (kind, marker id, predicted, measured \[m\]); `None` with fewer than
+/// three absolute points, or when the fit leaves no residual degree of
+/// freedom or is not finite.
+fn reregistration(
+    job: &Job,
+    points: &[(RowKind, u32, Vector3<f64>, Vector3<f64>)],
+) -> Option<Reregistration> {
+    let (predicted, measured): (Vec<_>, Vec<_>) = points
+        .iter()
+        .filter(|p| p.0 == RowKind::Absolute)
+        .map(|p| (p.2, p.3))
+        .unzip();
+    let n = predicted.len();
+    if n < 3 {
+        return None;
+    }
+    let mut g = Geometry::nominal(&job.robot.chain, &[]);
+    g.register(&predicted, &measured);
+    let t = g.base;
+    let mut all = Vec::new();
+    let mut per: BTreeMap<u32, Vec<Vector3<f64>>> = BTreeMap::new();
+    let mut square = 0.0;
+    for &(kind, id, p, m) in points {
+        let r = match kind {
+            RowKind::Absolute => m - (t * Point3::from(p)).coords,
+            RowKind::Deflection => m - t.rotation * p,
+        };
+        if kind == RowKind::Absolute {
+            square += r.norm_squared();
+        }
+        all.push(r);
+        per.entry(id).or_default().push(r);
+    }
+    let (rms_mm, per_marker_rms_mm, per_marker_mean_mm, per_marker_max_mm) = summary(&all, &per);
+    // The transform's σ about the predicted points' centroid `c`: the
+    // translation `s/√n` per axis, the rotation `s² (Σ [q]ₓᵀ[q]ₓ)⁻¹`, `q`
+    // the points about `c` turned into the file's frame.
+    let dof = 3 * n - 6;
+    if dof == 0 {
+        return None;
+    }
+    let s2 = square / dof as f64;
+    let c = predicted.iter().sum::<Vector3<f64>>() / n as f64;
+    let mut m = Matrix3::zeros();
+    for p in &predicted {
+        let q = t.rotation * (p - c);
+        m += Matrix3::identity() * q.norm_squared() - q * q.transpose();
+    }
+    let cov_r = m.try_inverse()? * s2;
+    let moved = (t * Point3::from(c)).coords - c;
+    let turn = t.rotation.scaled_axis();
+    let g = Reregistration {
+        rms_mm,
+        per_marker_rms_mm,
+        per_marker_mean_mm,
+        per_marker_max_mm,
+        translation_mm: [moved.x * 1e3, moved.y * 1e3, moved.z * 1e3],
+        rotation_mrad: [turn.x * 1e3, turn.y * 1e3, turn.z * 1e3],
+        translation_std_mm: [(s2 / n as f64).sqrt() * 1e3; 3],
+        rotation_std_mrad: [0, 1, 2].map(|k| cov_r[(k, k)].max(0.0).sqrt() * 1e3),
+    };
+    let finite = g.rms_mm.is_finite()
+        && g.translation_mm
+            .iter()
+            .chain(&g.rotation_mrad)
+            .all(|v| v.is_finite());
+    finite.then_some(g)
 }

@@ -29,6 +29,7 @@
 //! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker |
 //! | `robot.urdf` predicts the measured points worse than the nominal robot | the RMS over the absolute rows of what it holds (the geometric parameters refitted as a rigid robot when the model has parameters a URDF cannot hold, `export::rigid_urdf`; the model's own geometry when that refit fails) above the nominal robot's by more than [`Policy::worse_than_nominal`] | warning |
 //! | validation with no point | `--validate` | error ([`crate::calibrate::outputs::validate`](mod@crate::calibrate::outputs::validate)) |
+//! | a validation file measured in another frame (the tracker set up elsewhere) | its RMS as measured above [`Policy::reregistration_gain`] times that after its frame is re-fitted with the model held fixed, the frame moved beyond [`Policy::frame_sigmas`] σ, and the re-registration not asked for ([`check_validation`]) | warning naming the frame's move and `--reregister` |
 //!
 //! The scale and unit checks read at most [`Policy::unit_check_points`]
 //! unloaded points, evenly spaced in file order.
@@ -45,7 +46,7 @@ use spread::spread;
 
 use crate::calibrate::params::geometry::Geometry;
 use crate::calibrate::params::names::Names;
-use crate::calibrate::report::{Report, RowError};
+use crate::calibrate::report::{Report, RowError, Validation};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::io::{
@@ -335,6 +336,28 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
     warnings.extend(outliers(&report.row_errors, policy));
     warnings.extend(urdf_worse(report, policy.worse_than_nominal));
     Ok(warnings)
+}
+
+/// The rule for a validation measured in another frame (module docs):
+/// the warning, if it applies.
+pub fn check_validation(v: &Validation, policy: &Policy) -> Option<String> {
+    let g = v.reregistration.as_ref()?;
+    // (NaN compares false: no warning on a number that is not one.)
+    let far = v.as_measured_rms_mm > policy.reregistration_gain * g.rms_mm;
+    if v.reregistered || !far || !g.moved(policy.frame_sigmas) {
+        return None;
+    }
+    let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    Some(format!(
+        "validation: RMS {:.4} mm as measured, {:.4} mm once the file's measurement frame is \
+         re-fitted with the calibrated model held fixed (it moved {:.3} mm and turned {:.3} \
+         mrad): the file was most likely measured with the tracker set up elsewhere; \
+         --reregister reports the error after re-registration",
+        v.as_measured_rms_mm,
+        g.rms_mm,
+        n(g.translation_mm),
+        n(g.rotation_mrad)
+    ))
 }
 
 /// Why the result of a run is not a calibration, if it is not one: the
