@@ -51,11 +51,36 @@ pub struct CompensateArgs {
     max_iter: usize,
 }
 
+/// `robcal check`.
+#[derive(clap::Args)]
+pub struct CheckArgs {
+    /// The model file (`DIR/model.json` of `robcal calibrate --output DIR`).
+    #[arg(long)]
+    model: PathBuf,
+    /// The new recording: `x_m, y_m, z_m` (where the tracker saw the
+    /// marker, any frame), `marker`, `load_kg`, `com_x_m..`, `<joint>_rad`
+    /// per joint (the points layout of `compensate`'s targets).
+    #[arg(long)]
+    data: PathBuf,
+    /// Pass at most this RMS after re-registration [mm] (default: 1.5 times
+    /// the calibration's held-out RMS).
+    #[arg(long = "max-rms-mm", allow_negative_numbers = true, value_parser = crate::finite_positive)]
+    max_rms_mm: Option<f64>,
+    /// The verdict as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
 /// Largest model file read [bytes].
 const MAX_MODEL_BYTES: u64 = 64 << 20;
 
 /// The predictor of a model file's `predictor` section.
 fn load_model(path: &Path) -> Result<Predictor, String> {
+    load_model_file(path).map(|(p, _)| p)
+}
+
+/// The predictor of a model file's `predictor` section, and the file.
+fn load_model_file(path: &Path) -> Result<(Predictor, serde_json::Value), String> {
     let text = robcal::io::input::read_text(path, "the model file", MAX_MODEL_BYTES)
         .map_err(|e| e.to_string())?;
     let at = |m: String| format!("{}: {m}", path.display());
@@ -66,7 +91,10 @@ fn load_model(path: &Path) -> Result<Predictor, String> {
     })?;
     let file: ModelFile =
         serde_json::from_value(section.clone()).map_err(|e| at(format!("predictor: {e}")))?;
-    file.predictor().map_err(|e| at(format!("predictor: {e}")))
+    let p = file
+        .predictor()
+        .map_err(|e| at(format!("predictor: {e}")))?;
+    Ok((p, value))
 }
 
 fn read_points(robot: &Predictor, path: &Path, target: bool) -> Result<Vec<PointRow>, String> {
@@ -324,4 +352,139 @@ fn relative_to(target: &Path, dir: &Path) -> String {
             _ => target.display().to_string(),
         },
     }
+}
+
+/// `robcal check`: the verdict on stdout (text, or JSON with `--json`);
+/// a failed check exits 1 after it, with one line on stderr.
+pub fn run_check(a: &CheckArgs) -> Result<(), String> {
+    use robcal::calibrate::outputs::check::{check, CheckPoint, CHECK_FACTOR};
+    let (robot, file) = load_model_file(&a.model)?;
+    // What the calibration claims for poses it did not see.
+    let (own_um, which) = match (file["heldout_rms_um"].as_f64(), file["rms_um"].as_f64()) {
+        (Some(h), _) => (h, "held-out RMS"),
+        (None, Some(r)) => (r, "RMS"),
+        (None, None) => (f64::NAN, "RMS"),
+    };
+    let threshold_mm = match a.max_rms_mm {
+        Some(t) => t,
+        None if own_um.is_finite() => CHECK_FACTOR * own_um * 1e-3,
+        None => {
+            return Err(format!(
+                "{}: no rms_um to set the threshold from: give --max-rms-mm",
+                a.model.display()
+            ))
+        }
+    };
+    let rows = read_points(&robot, &a.data, true)?;
+    let mut points = Vec::with_capacity(rows.len());
+    for row in &rows {
+        let (id, _, payload, _) = tool_and_payload(&robot, row, &a.data)?;
+        let measured = row.target_m.ok_or_else(|| {
+            format!(
+                "{}:{}: no x_m, y_m, z_m: the measured position",
+                a.data.display(),
+                row.line
+            )
+        })?;
+        points.push(CheckPoint {
+            line: row.line,
+            marker: id,
+            q: row.q.clone(),
+            payload,
+            measured_m: Vector3::from(measured),
+        });
+    }
+    // The calibration's σ of each joint's zero (`<joint>.offset`, mrad or
+    // mm), in rad or m.
+    let zero_std: Vec<f64> = robot
+        .joint_names()
+        .iter()
+        .map(|j| {
+            file["parameters"]
+                .as_array()
+                .and_then(|ps| ps.iter().find(|p| p["name"] == format!("{j}.offset")))
+                .and_then(|p| p["std"].as_f64())
+                .map_or(0.0, |s| s * 1e-3)
+        })
+        .collect();
+    let settings = robcal::calibrate::outputs::check::CheckSettings {
+        threshold_mm,
+        zero_std,
+    };
+    let v = check(&robot, &points, &settings).map_err(|e| format!("{}: {e}", a.data.display()))?;
+    let g = &v.reregistration;
+    let norm = |x: [f64; 3]| Vector3::from(x).norm();
+    if a.json {
+        let changed: Vec<serde_json::Value> = v
+            .changed
+            .iter()
+            .map(|c| serde_json::json!({"joint": c.joint, "change": c.change, "std": c.std, "unit": c.unit}))
+            .collect();
+        let out = serde_json::json!({
+            "pass": v.pass,
+            "points": v.points,
+            "rms_mm": g.rms_mm,
+            "per_marker_rms_mm": g.per_marker_rms_mm,
+            "as_measured_rms_mm": v.as_measured_rms_mm,
+            "threshold_mm": v.threshold_mm,
+            "frame": {
+                "translation_mm": g.translation_mm,
+                "translation_std_mm": g.translation_std_mm,
+                "rotation_mrad": g.rotation_mrad,
+                "rotation_std_mrad": g.rotation_std_mrad,
+            },
+            "changed": changed,
+            "untestable": v.untestable,
+        });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?
+        );
+    } else {
+        println!(
+            "check: {} points of {}: RMS {:.4} mm after re-registration ({:.4} mm as measured; \
+             the frame moved {:.3} mm and turned {:.3} mrad)",
+            v.points,
+            a.data.display(),
+            g.rms_mm,
+            v.as_measured_rms_mm,
+            norm(g.translation_mm),
+            norm(g.rotation_mrad)
+        );
+        let why = match a.max_rms_mm {
+            Some(_) => "--max-rms-mm".to_string(),
+            None => format!("{CHECK_FACTOR} x the calibration's {which}, {own_um:.1} um"),
+        };
+        println!(
+            "check: {} at {:.4} mm ({why})",
+            if v.pass { "PASS" } else { "FAIL" },
+            v.threshold_mm
+        );
+        for c in &v.changed {
+            println!(
+                "check: {} moved {:.4} ± {:.4} {}",
+                c.joint, c.change, c.std, c.unit
+            );
+        }
+        if !v.untestable.is_empty() {
+            println!(
+                "check: not tested (the frame's re-fit absorbs them): {}",
+                v.untestable.join(", ")
+            );
+        }
+    }
+    if v.pass {
+        return Ok(());
+    }
+    let named: Vec<&str> = v.changed.iter().map(|c| c.joint.as_str()).collect();
+    Err(format!(
+        "check failed: RMS {:.4} mm after re-registration, above {:.4} mm{}",
+        g.rms_mm,
+        v.threshold_mm,
+        if named.is_empty() {
+            String::new()
+        } else {
+            format!("; moved: {}", named.join(", "))
+        }
+    ))
 }

@@ -70,6 +70,10 @@ enum Command {
     /// The joint commands whose loaded, deflected calibrated robot puts a
     /// marker on each target (geometric and deflection compensation).
     Compensate(apply::CompensateArgs),
+    /// A calibrated robot (a model file of `calibrate --output`) against a
+    /// new recording: the error after re-registering its frame, a verdict
+    /// (exit 1 when it fails), and the joints whose zero moved.
+    Check(apply::CheckArgs),
     /// Write a commented setup file for a robot, every key with its
     /// default and the CSV header its measurements need.
     Init(apply::InitArgs),
@@ -267,6 +271,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => run_calibrate(&args, verbosity),
         Command::Predict(args) => apply::run_predict(&args),
         Command::Compensate(args) => apply::run_compensate(&args),
+        Command::Check(args) => apply::run_check(&args),
         Command::Init(args) => apply::run_init(&args),
         Command::Import(ImportCommand::FigarohMocap { input, output }) => {
             robcal::io::figaroh::import_mocap(&input, &output, None)

@@ -28,18 +28,19 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
 use crate::calibrate::effects::declared::needs_absolute;
 use crate::calibrate::fit::residuals::rms_um;
 use crate::calibrate::outputs::predict::{Payload, Predictor};
-use crate::calibrate::params::geometry::Geometry;
+use crate::calibrate::params::geometry::{Geometry, J};
 use crate::calibrate::report::calibrated::CalibratedModel;
 use crate::calibrate::report::{Reregistration, Validation};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
 use crate::io::{job::Job, measurements::Measurements};
+use crate::robot::Chain;
 
 /// Evaluates `model` on `data` (rows of the kinds the calibration used,
 /// predicted by [`Predictor`]): the norm RMSE of each marker's position
@@ -135,7 +136,7 @@ pub fn validate_with(
         )));
     }
     let (rms_mm, per_marker_rms_mm, per_marker_mean_mm, per_marker_max_mm) = summary(&all, &per);
-    let reregistration = reregistration(job, &points);
+    let reregistration = reregistration(&job.robot.chain, &points).map(|(_, g)| g);
     let mut v = Validation {
         rms_mm,
         per_marker_rms_mm,
@@ -179,13 +180,14 @@ fn summary(all: &[Vector3<f64>], per: &BTreeMap<u32, Vec<Vector3<f64>>>) -> Summ
 }
 
 /// The file's measurement frame re-fitted (module docs) from `points`
-/// (kind, marker id, predicted, measured \[m\]); `None` with fewer than
-/// three absolute points, or when the fit leaves no residual degree of
-/// freedom or is not finite.
-fn reregistration(
-    job: &Job,
+/// (kind, marker id, predicted, measured \[m\]) of a robot whose chain is
+/// `chain`: the transform from the calibration's frame to the file's, and
+/// what it leaves. `None` with fewer than three absolute points, or when
+/// the fit leaves no residual degree of freedom or is not finite.
+pub(crate) fn reregistration(
+    chain: &Chain<f64, J>,
     points: &[(RowKind, u32, Vector3<f64>, Vector3<f64>)],
-) -> Option<Reregistration> {
+) -> Option<(Isometry3<f64>, Reregistration)> {
     let (predicted, measured): (Vec<_>, Vec<_>) = points
         .iter()
         .filter(|p| p.0 == RowKind::Absolute)
@@ -195,7 +197,7 @@ fn reregistration(
     if n < 3 {
         return None;
     }
-    let mut g = Geometry::nominal(&job.robot.chain, &[]);
+    let mut g = Geometry::nominal(chain, &[]);
     g.register(&predicted, &measured);
     let t = g.base;
     let mut all = Vec::new();
@@ -245,5 +247,5 @@ fn reregistration(
             .iter()
             .chain(&g.rotation_mrad)
             .all(|v| v.is_finite());
-    finite.then_some(g)
+    finite.then_some((t, g))
 }
