@@ -71,6 +71,25 @@ pub struct CheckArgs {
     json: bool,
 }
 
+/// `robcal compare`.
+#[derive(clap::Args)]
+pub struct CompareArgs {
+    /// The first model file (`A/model.json`).
+    a: PathBuf,
+    /// The second model file (`B/model.json`).
+    b: PathBuf,
+    /// Poses to compare the two robots' marker positions at (the layout of
+    /// `predict`'s poses).
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// The comparison as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Also write it as a self-contained HTML page here (all or nothing).
+    #[arg(long)]
+    html: Option<PathBuf>,
+}
+
 /// Largest model file read [bytes].
 const MAX_MODEL_BYTES: u64 = 64 << 20;
 
@@ -358,6 +377,7 @@ fn relative_to(target: &Path, dir: &Path) -> String {
 /// a failed check exits 1 after it, with one line on stderr.
 pub fn run_check(a: &CheckArgs) -> Result<(), String> {
     use robcal::calibrate::outputs::check::{check, CheckPoint, CHECK_FACTOR};
+    use robcal::calibrate::outputs::predict::Pose;
     let (robot, file) = load_model_file(&a.model)?;
     // What the calibration claims for poses it did not see.
     let (own_um, which) = match (file["heldout_rms_um"].as_f64(), file["rms_um"].as_f64()) {
@@ -387,10 +407,12 @@ pub fn run_check(a: &CheckArgs) -> Result<(), String> {
             )
         })?;
         points.push(CheckPoint {
-            line: row.line,
-            marker: id,
-            q: row.q.clone(),
-            payload,
+            pose: Pose {
+                line: row.line,
+                marker: id,
+                q: row.q.clone(),
+                payload,
+            },
             measured_m: Vector3::from(measured),
         });
     }
@@ -487,4 +509,250 @@ pub fn run_check(a: &CheckArgs) -> Result<(), String> {
             format!("; moved: {}", named.join(", "))
         }
     ))
+}
+
+/// A model file's parameters (`parameters`) and effects (`effects`, as
+/// `<effect> on <joint>`).
+fn model_contents(
+    file: &serde_json::Value,
+    path: &Path,
+) -> Result<(Vec<robcal::calibrate::Parameter>, Vec<String>), String> {
+    let at = |m: &str| format!("{}: {m}", path.display());
+    let list = file["parameters"]
+        .as_array()
+        .ok_or_else(|| at("no 'parameters' list"))?;
+    let mut params = Vec::with_capacity(list.len());
+    for p in list {
+        let (Some(name), Some(value), Some(std), Some(unit)) = (
+            p["name"].as_str(),
+            p["value"].as_f64(),
+            p["std"].as_f64(),
+            p["unit"].as_str(),
+        ) else {
+            return Err(at("a parameter without name, value, std and unit"));
+        };
+        params.push(robcal::calibrate::Parameter {
+            name: name.into(),
+            value,
+            std,
+            unit: unit.into(),
+            determined: p["determined"].as_bool().unwrap_or(true),
+        });
+    }
+    let effects = file["effects"]
+        .as_array()
+        .map(|e| {
+            e.iter()
+                .map(|x| match (x["effect"].as_str(), x["joint"].as_str()) {
+                    (Some(e), Some(j)) => format!("{e} on {j}"),
+                    (Some(e), None) => e.to_string(),
+                    _ => "?".into(),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    Ok((params, effects))
+}
+
+/// `robcal compare`: two model files side by side (text, or JSON with
+/// `--json`; `--html` writes a page too).
+pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
+    use robcal::calibrate::outputs::compare::{parameters, positions};
+    use robcal::calibrate::outputs::predict::Pose;
+    let (ra, fa) = load_model_file(&a.a)?;
+    let (rb, fb) = load_model_file(&a.b)?;
+    if ra.joint_names() != rb.joint_names() {
+        return Err(format!(
+            "{} and {}: not the same robot (joints {:?} and {:?})",
+            a.a.display(),
+            a.b.display(),
+            ra.joint_names(),
+            rb.joint_names()
+        ));
+    }
+    let (pa, ea) = model_contents(&fa, &a.a)?;
+    let (pb, eb) = model_contents(&fb, &a.b)?;
+    let pairs = parameters(&pa, &pb);
+    let only = |x: &[String], y: &[String]| -> Vec<String> {
+        x.iter().filter(|e| !y.contains(e)).cloned().collect()
+    };
+    let (effects_a, effects_b) = (only(&ea, &eb), only(&eb, &ea));
+    let pos = match &a.poses {
+        None => None,
+        Some(path) => {
+            let rows = read_points(&ra, path, false)?;
+            let mut poses = Vec::with_capacity(rows.len());
+            for row in &rows {
+                let (id, _, payload, _) = tool_and_payload(&ra, row, path)?;
+                poses.push(Pose {
+                    line: row.line,
+                    marker: id,
+                    q: row.q.clone(),
+                    payload,
+                });
+            }
+            Some(positions(&ra, &rb, &poses).map_err(|e| format!("{}: {e}", path.display()))?)
+        }
+    };
+    let norm = |x: [f64; 3]| Vector3::from(x).norm();
+    let beyond = |z: Option<f64>| z.is_some_and(|z| z.abs() > 3.0);
+    let mut text = format!(
+        "compare: A = {} (RMS {:.1} um), B = {} (RMS {:.1} um)\n",
+        a.a.display(),
+        fa["rms_um"].as_f64().unwrap_or(f64::NAN),
+        a.b.display(),
+        fb["rms_um"].as_f64().unwrap_or(f64::NAN)
+    );
+    let w = pairs
+        .iter()
+        .map(|p| p.name.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(24);
+    let _ = writeln!(
+        text,
+        "  {:<w$} {:>12} ± {:<10} {:>12} ± {:<10} {:>9}  unit",
+        "parameter", "A", "1 sd", "B", "1 sd", "(B-A)/sd"
+    );
+    let cell = |x: Option<(f64, f64)>| match x {
+        Some((v, s)) => format!("{v:>12.4} ± {s:<10.4}"),
+        None => format!("{:>12}   {:<10}", "-", ""),
+    };
+    for p in &pairs {
+        let z = p.z();
+        let _ = writeln!(
+            text,
+            "  {:<w$} {} {} {:>9}{} {}",
+            p.name,
+            cell(p.a),
+            cell(p.b),
+            z.map_or("-".into(), |z| format!("{z:.1}")),
+            if beyond(z) { "*" } else { " " },
+            p.unit
+        );
+    }
+    let moved: Vec<&str> = pairs
+        .iter()
+        .filter(|p| beyond(p.z()))
+        .map(|p| p.name.as_str())
+        .collect();
+    let _ = writeln!(
+        text,
+        "  * differs by more than 3 sd; {} of {}{}",
+        moved.len(),
+        pairs.iter().filter(|p| p.z().is_some()).count(),
+        if moved.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", moved.join(", "))
+        }
+    );
+    for (what, list) in [
+        ("effects in A only", &effects_a),
+        ("effects in B only", &effects_b),
+    ] {
+        if !list.is_empty() {
+            let _ = writeln!(text, "compare: {what}: {}", list.join(", "));
+        }
+    }
+    if let Some(p) = &pos {
+        let _ = writeln!(
+            text,
+            "compare: positions at {} poses: RMS {:.4} mm, max {:.4} mm apart, B's frame re-fitted \
+             onto A's (moved {:.3} mm, turned {:.3} mrad)",
+            p.points,
+            p.frame.rms_mm,
+            p.max_mm,
+            norm(p.frame.translation_mm),
+            norm(p.frame.rotation_mrad)
+        );
+    }
+    let json = serde_json::json!({
+        "a": a.a.display().to_string(),
+        "b": a.b.display().to_string(),
+        "parameters": pairs.iter().map(|p| serde_json::json!({
+            "name": p.name,
+            "unit": p.unit,
+            "a_value": p.a.map(|x| x.0),
+            "a_std": p.a.map(|x| x.1),
+            "b_value": p.b.map(|x| x.0),
+            "b_std": p.b.map(|x| x.1),
+            "difference_sigmas": p.z(),
+        })).collect::<Vec<_>>(),
+        "differ": moved,
+        "effects_only_a": effects_a,
+        "effects_only_b": effects_b,
+        "positions": pos.as_ref().map(|p| serde_json::json!({
+            "points": p.points,
+            "rms_mm": p.frame.rms_mm,
+            "max_mm": p.max_mm,
+            "per_marker_rms_mm": p.frame.per_marker_rms_mm,
+            "frame": {
+                "translation_mm": p.frame.translation_mm,
+                "rotation_mrad": p.frame.rotation_mrad,
+            },
+        })),
+    });
+    if let Some(path) = &a.html {
+        let mut h = String::from(
+            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>robcal compare</title>\
+             <style>body{font-family:sans-serif;max-width:70em;margin:2em auto}table{border-collapse:collapse}\
+             td,th{border:1px solid #ccc;padding:0.2em 0.5em;text-align:right}td:first-child{text-align:left}\
+             .beyond{background:#fde0dc}</style></head><body><h1>Two calibrations compared</h1>",
+        );
+        let _ = write!(
+            h,
+            "<p>A = <code>{}</code>, B = <code>{}</code>. A parameter whose estimates differ by \
+             more than 3 σ (σ = √(σ<sub>A</sub>² + σ<sub>B</sub>²)) is marked; the base frame is \
+             the tracker's placement, not judged.</p><table><tr><th>parameter</th><th>A</th>\
+             <th>σ</th><th>B</th><th>σ</th><th>(B − A)/σ</th><th>unit</th></tr>",
+            crate::html::esc(&a.a.display().to_string()),
+            crate::html::esc(&a.b.display().to_string())
+        );
+        let num = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.4}"));
+        for p in &pairs {
+            let z = p.z();
+            let _ = write!(
+                h,
+                "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                if beyond(z) { " class=\"beyond\"" } else { "" },
+                crate::html::esc(&p.name),
+                num(p.a.map(|x| x.0)),
+                num(p.a.map(|x| x.1)),
+                num(p.b.map(|x| x.0)),
+                num(p.b.map(|x| x.1)),
+                z.map_or("–".into(), |z| format!("{z:.1}")),
+                crate::html::esc(&p.unit)
+            );
+        }
+        h.push_str("</table>");
+        for (what, list) in [
+            ("Effects in A only", &effects_a),
+            ("Effects in B only", &effects_b),
+        ] {
+            if !list.is_empty() {
+                let _ = write!(h, "<p>{what}: {}</p>", crate::html::esc(&list.join(", ")));
+            }
+        }
+        if let Some(p) = &pos {
+            let _ = write!(
+                h,
+                "<p>Marker positions at {} poses: RMS {:.4} mm, max {:.4} mm apart, B's frame \
+                 re-fitted onto A's (moved {:.3} mm, turned {:.3} mrad).</p>",
+                p.points,
+                p.frame.rms_mm,
+                p.max_mm,
+                norm(p.frame.translation_mm),
+                norm(p.frame.rotation_mrad)
+            );
+        }
+        h.push_str("</body></html>\n");
+        emit(&h, Some(path), &[&a.a, &a.b])?;
+    }
+    if a.json {
+        let s = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())? + "\n";
+        emit(&s, None, &[])
+    } else {
+        emit(&text, None, &[])
+    }
 }

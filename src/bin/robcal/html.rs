@@ -38,7 +38,7 @@ pub struct JobInfo<'a> {
 }
 
 /// Text with `& < > "` escaped for HTML.
-fn esc(s: &str) -> String {
+pub(crate) fn esc(s: &str) -> String {
     let mut o = String::with_capacity(s.len());
     for c in s.chars() {
         match c {

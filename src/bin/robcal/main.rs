@@ -74,6 +74,9 @@ enum Command {
     /// new recording: the error after re-registering its frame, a verdict
     /// (exit 1 when it fails), and the joints whose zero moved.
     Check(apply::CheckArgs),
+    /// Two calibrations of one robot side by side: parameters in σ,
+    /// effects in one only, and how far apart they put the markers.
+    Compare(apply::CompareArgs),
     /// Write a commented setup file for a robot, every key with its
     /// default and the CSV header its measurements need.
     Init(apply::InitArgs),
@@ -272,6 +275,7 @@ fn main() -> ExitCode {
         Command::Predict(args) => apply::run_predict(&args),
         Command::Compensate(args) => apply::run_compensate(&args),
         Command::Check(args) => apply::run_check(&args),
+        Command::Compare(args) => apply::run_compare(&args),
         Command::Init(args) => apply::run_init(&args),
         Command::Import(ImportCommand::FigarohMocap { input, output }) => {
             robcal::io::figaroh::import_mocap(&input, &output, None)

@@ -29,7 +29,7 @@
 
 use nalgebra::{DMatrix, DVector, Point3, Vector3};
 
-use crate::calibrate::outputs::predict::{Payload, Predictor};
+use crate::calibrate::outputs::predict::{Pose, Predictor};
 use crate::calibrate::outputs::validate::reregistration;
 use crate::calibrate::report::Reregistration;
 use crate::calibrate::rows::RowKind;
@@ -66,14 +66,8 @@ pub struct CheckSettings {
 /// One measured point of the new recording.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CheckPoint {
-    /// Its line in the file (for errors).
-    pub line: usize,
-    /// Marker id.
-    pub marker: u32,
-    /// Joint values \[rad or m\], chain order.
-    pub q: Vec<f64>,
-    /// The payload, if loaded.
-    pub payload: Option<Payload>,
+    /// The marker and its command.
+    pub pose: Pose,
     /// Where the tracker saw the marker \[m, the file's frame\].
     pub measured_m: Vector3<f64>,
 }
@@ -236,14 +230,8 @@ fn step(robot: &Predictor, points: &[CheckPoint], zeros: &[f64]) -> Result<Step,
     let mut predicted = Vec::with_capacity(points.len());
     let mut columns = Vec::with_capacity(points.len());
     for p in points {
-        let at = |e: String| data(format!("line {}: {e}", p.line));
-        let tool = robot.marker_m(p.marker).map_err(|e| at(e.to_string()))?;
-        let r = robot.for_marker(p.marker).map_err(|e| at(e.to_string()))?;
-        let q: Vec<f64> = p.q.iter().zip(zeros).map(|(q, z)| q + z).collect();
-        let predict = |q: &[f64]| {
-            r.predict(&tool, q, p.payload.as_ref())
-                .map_err(|e| at(format!("cannot predict: {e}")))
-        };
+        let q: Vec<f64> = p.pose.q.iter().zip(zeros).map(|(q, z)| q + z).collect();
+        let predict = |q: &[f64]| robot.predict_pose_at(&p.pose, q);
         predicted.push(predict(&q)?);
         let mut cols = Vec::with_capacity(dof);
         for j in 0..dof {
@@ -257,7 +245,7 @@ fn step(robot: &Predictor, points: &[CheckPoint], zeros: &[f64]) -> Result<Step,
     let pts: Vec<_> = points
         .iter()
         .zip(&predicted)
-        .map(|(p, &q)| (RowKind::Absolute, p.marker, q, p.measured_m))
+        .map(|(p, &q)| (RowKind::Absolute, p.pose.marker, q, p.measured_m))
         .collect();
     let (t, reg) = reregistration(robot.chain(), &pts).ok_or_else(|| {
         data(

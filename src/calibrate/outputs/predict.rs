@@ -47,6 +47,20 @@ pub struct Payload {
     pub com_m: Vector3<f64>,
 }
 
+/// A marker to predict at a command: which marker, the joint values, the
+/// payload; its line in a file, for errors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pose {
+    /// Its line in the file (the header is line 1).
+    pub line: usize,
+    /// Marker id.
+    pub marker: u32,
+    /// Joint values \[rad or m\], chain order.
+    pub q: Vec<f64>,
+    /// The payload, if loaded.
+    pub payload: Option<Payload>,
+}
+
 /// The calibrated robot, ready to predict and compensate (see the
 /// [module docs](self)).
 #[derive(Debug, Clone)]
@@ -285,6 +299,27 @@ impl Predictor {
                     self.marker_ids
                 ))
             })
+    }
+
+    /// Where marker `pose.marker` settles \[m, measurement frame\] when
+    /// the robot is commanded to `q` (not `pose.q`: a column by central
+    /// differences asks for neighbours) with `pose.payload`, on its own link
+    /// ([`Self::predict`]).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] naming `pose.line`: no such marker, or a
+    /// point the model cannot predict.
+    pub fn predict_pose_at(
+        &self,
+        pose: &Pose,
+        q: &[f64],
+    ) -> Result<Vector3<f64>, CalibrationError> {
+        let at = |e: String| CalibrationError::Data(format!("line {}: {e}", pose.line));
+        let tool = self.marker_m(pose.marker).map_err(|e| at(e.to_string()))?;
+        self.for_marker(pose.marker)
+            .map_err(|e| at(e.to_string()))?
+            .predict(&tool, q, pose.payload.as_ref())
+            .map_err(|e| at(format!("cannot predict: {e}")))
     }
 
     /// The fitted shift of the calibration load's centre of mass \[m, tip
