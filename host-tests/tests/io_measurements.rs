@@ -108,6 +108,43 @@ fn loaded_rows_pair_with_unloaded_rows() {
     );
 }
 
+/// `Measurements::without` (`--leave-out-outliers`): a dropped deflection
+/// takes its loaded row with it; a dropped unloaded row takes every
+/// deflection it is the reference of; the rest keep their lines, and the
+/// deflections point at their rows again.
+#[test]
+fn without_drops_rows_and_the_deflections_they_pair() {
+    let job = job();
+    let text = format!(
+        "{HEADER}\n\
+         1,0,1,0,10,20,100,1000,0,500\n\
+         1,0,1,25,10,20,100,1000,-1.5,499\n\
+         1,0,7,0,10,20,100,1020,0,500\n\
+         1,0,1,50,10,20,100,1000,-3,498\n\
+         2,0,1,0,30,20,100,900,0,500\n\
+         2,0,1,25,30,20,100,900,-1,499\n"
+    );
+    let m = read(&job, &text).unwrap();
+    assert_eq!(m.deflections.len(), 3);
+    // The 50 kg deflection of config 1: its loaded row (line 5) goes.
+    let a = m.without(|_| false, |d| d.config == 1 && d.load_kg == 50.0);
+    let lines: Vec<usize> = a.observations.iter().map(|o| o.line).collect();
+    assert_eq!(lines, [2, 3, 4, 6, 7]);
+    assert_eq!(a.deflections.len(), 2);
+    for d in &a.deflections {
+        assert_eq!(d.lines, d.rows.map(|r| a.observations[r].line));
+    }
+    // Config 1's unloaded row of marker 1 (line 2): both its deflections go.
+    let b = m.without(|o| o.line == 2, |_| false);
+    assert_eq!(b.observations.len(), 5);
+    assert_eq!(b.deflections.len(), 1);
+    assert_eq!(b.deflections[0].lines, [7, 6]);
+    assert_eq!(
+        b.deflections[0].lines,
+        b.deflections[0].rows.map(|r| b.observations[r].line)
+    );
+}
+
 #[test]
 fn every_malformed_input_names_file_line_and_column() {
     let job = job();

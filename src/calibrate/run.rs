@@ -35,7 +35,77 @@ pub fn calibrate(
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
     let (rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), &settings.policy)?;
-    calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)
+    let report = calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?;
+    without_outliers(job, data, settings, report, progress)
+}
+
+/// With [`Settings::leave_out_outliers`]: the rows the outlier rule names
+/// (`plausibility::outlying`: an absolute row's configuration and marker,
+/// every repetition; a deflection's loaded row) left out and the job
+/// calibrated again, once; the new report's notes list them with the RMS
+/// before. `report` itself otherwise, or when the rule names none.
+///
+/// # Errors
+/// As [`calibrate`], of the second calibration.
+fn without_outliers(
+    job: &crate::io::job::Job,
+    data: &crate::io::measurements::Measurements,
+    settings: &Settings,
+    report: Report,
+    progress: Progress<'_>,
+) -> Result<Report, CalibrationError> {
+    if !settings.leave_out_outliers {
+        return Ok(report);
+    }
+    let far = plausibility::outlying(&report, &settings.policy);
+    if far.is_empty() {
+        return Ok(report);
+    }
+    let named = |deflection: bool| -> std::collections::BTreeSet<(i64, u32)> {
+        far.iter()
+            .filter(|r| r.deflection == deflection)
+            .map(|r| (r.config, r.marker))
+            .collect()
+    };
+    let (absolute, deflected) = (named(false), named(true));
+    let kept = data.without(
+        |o| o.is_unloaded() && absolute.contains(&(o.config, o.marker)),
+        |d| deflected.contains(&(d.config, d.marker)),
+    );
+    progress(&format!(
+        "fitting again without {} outlying row(s)",
+        absolute.len() + deflected.len()
+    ));
+    let once = Settings {
+        leave_out_outliers: false,
+        ..*settings
+    };
+    let mut again = calibrate(job, &kept, &once, progress)?;
+    let list: Vec<String> = far
+        .iter()
+        .map(|r| {
+            format!(
+                "config {} marker {} ({}, {:.1} um)",
+                r.config,
+                r.marker,
+                if r.deflection {
+                    "deflection"
+                } else {
+                    "position"
+                },
+                r.final_um.norm()
+            )
+        })
+        .collect();
+    again.notes.push(format!(
+        "left out as measurement errors by the outlier rule, and fitted again \
+         (--leave-out-outliers): {} ({} of {} observations kept; RMS {:.1} um with them)",
+        list.join(", "),
+        kept.observations.len(),
+        data.observations.len(),
+        report.rms_um
+    ));
+    Ok(again)
 }
 
 /// [`calibrate`], taking the measurements: they are freed as the rows are
@@ -50,6 +120,10 @@ pub fn calibrate_owned(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
+    if settings.leave_out_outliers {
+        // The file again for the second fit: borrowed, not freed.
+        return calibrate(job, &data, settings, progress);
+    }
     let file = data.file.clone();
     let (rows, names, warnings) = prepare(job, std::borrow::Cow::Owned(data), &settings.policy)?;
     calibrate_rows(job, &file, rows, names, warnings, settings, progress)

@@ -44,6 +44,11 @@ pub struct Settings {
     /// The deflection model of the rows: the exact equilibrium (default)
     /// or the paper's first-order eq. 3.
     pub deflection_model: crate::calibrate::params::linearisation::DeflectionModel,
+    /// Leave out the rows the outlier rule names (a measurement error: a
+    /// tracker point lost or mistaken) and fit again, once; the report's
+    /// notes list them (`calibrate::run`). Off by default: the rule only
+    /// warns.
+    pub leave_out_outliers: bool,
     /// The decision constants.
     pub policy: Policy,
 }
@@ -57,6 +62,7 @@ impl Default for Settings {
             diagnose: true,
             heldout: true,
             deflection_model: crate::calibrate::params::linearisation::DeflectionModel::Exact,
+            leave_out_outliers: false,
             policy: Policy::default(),
         }
     }

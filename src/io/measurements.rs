@@ -356,6 +356,59 @@ impl Measurements {
     pub fn unloaded(&self) -> impl Iterator<Item = &Observation> {
         self.observations.iter().filter(|o| o.is_unloaded())
     }
+
+    /// These measurements without the observations `drop` says, nor any
+    /// deflection one of whose rows is dropped or that `drop_deflection`
+    /// says (its loaded row goes too); the rest as read, in file order,
+    /// lines kept.
+    pub fn without(
+        &self,
+        drop: impl Fn(&Observation) -> bool,
+        drop_deflection: impl Fn(&Deflection) -> bool,
+    ) -> Self {
+        let mut keep: Vec<bool> = self.observations.iter().map(|o| !drop(o)).collect();
+        let deflections: Vec<&Deflection> = self
+            .deflections
+            .iter()
+            .filter(|d| {
+                d.rows
+                    .iter()
+                    .all(|&r| keep.get(r).copied().unwrap_or(false))
+            })
+            .collect();
+        for d in &self.deflections {
+            if drop_deflection(d) {
+                if let Some(k) = keep.get_mut(d.rows[0]) {
+                    *k = false;
+                }
+            }
+        }
+        // Old index → new index of each kept observation.
+        let mut index = vec![usize::MAX; self.observations.len()];
+        let mut observations = Vec::new();
+        for (i, o) in self.observations.iter().enumerate() {
+            if keep[i] {
+                index[i] = observations.len();
+                observations.push(o.clone());
+            }
+        }
+        let deflections = deflections
+            .into_iter()
+            .filter(|d| d.rows.iter().all(|&r| keep[r]))
+            .map(|d| Deflection {
+                rows: d.rows.map(|r| index[r]),
+                ..d.clone()
+            })
+            .collect();
+        Self {
+            file: self.file.clone(),
+            observations,
+            deflections,
+            has_time: self.has_time,
+            warnings: self.warnings.clone(),
+            cells_in_file: self.cells_in_file.clone(),
+        }
+    }
 }
 
 impl Observation {

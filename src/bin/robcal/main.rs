@@ -147,6 +147,11 @@ struct CalibrateArgs {
     /// for a file measured with the tracker set up elsewhere.
     #[arg(long, requires = "validate")]
     reregister: bool,
+    /// Leave out the rows the outlier rule names (a residual above 20 times
+    /// the median row's: a measurement error) and fit again, once; the
+    /// report's notes list them.
+    #[arg(long = "leave-out-outliers")]
+    leave_out_outliers: bool,
     /// With --output: keep each marker's nominal position in robot.urdf
     /// too, as `marker_<id>_nominal` (`marker_<id>` is the calibrated one).
     #[arg(long = "keep-nominal-markers")]
@@ -390,6 +395,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         } else {
             DeflectionModel::Exact
         },
+        leave_out_outliers: a.leave_out_outliers,
         policy: robcal::calibrate::Policy {
             max_held_design_rows: max_held_design_rows()?,
             ..Default::default()

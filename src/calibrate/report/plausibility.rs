@@ -26,7 +26,7 @@
 //! | an effect's size past the bound it was admitted under, in the final model | a gear cyclic error above [`Policy::max_cyclic_mrad`], a gravity compliance above [`Policy::max_gravity_deflection_mrad`], a drift above [`Policy::max_drift_mm_per_h`] ([`crate::calibrate::effects::inadmissible`]: the loop checks them when it adds the effect; later steps refit them) | warning |
 //! | the fit did not converge | IRLS at `--max-iter`, or Gauss–Newton at [`Policy::max_steps`] or back at its best model ([`Policy::max_cost_increase`]) | warning, `converged: false`, and not a calibration ([`failure`]: the report written, exit 1 unless `--accept-unconverged`) |
 //! | the calibrated model fits worse than the nominal robot | the final residuals' root sum of squares, weighted by the fit's weights (eq. 14; unit for OLS), above the nominal robot's (base registered) with the same weights by more than [`Policy::worse_than_nominal`]: the declared model holds the nominal robot (every parameter zero), so Gauss–Newton ended at a wrong stationary point. (The unweighted RMS of a weighted fit may legitimately end above the nominal robot's: the fit minimises the weighted sum) | warning, and not a calibration ([`failure`]) |
-//! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker |
+//! | a row far out of line with the others (a measurement error: a tracker point lost or mistaken, a line of another pose) | its final residual's norm above [`Policy::outlier_ratio`] times the median row's of its kind (positions, deflections) and above [`Policy::outlier_floor_um`], among at least [`Policy::outlier_min_rows`] rows of the kind | warning naming the largest five by configuration and marker; with `Settings::leave_out_outliers` (`--leave-out-outliers`) they are left out and the job fitted again, once ([`outlying`]) |
 //! | `robot.urdf` predicts the measured points worse than the nominal robot | the RMS over the absolute rows of what it holds (the geometric parameters refitted as a rigid robot when the model has parameters a URDF cannot hold, `export::rigid_urdf`; the model's own geometry when that refit fails) above the nominal robot's by more than [`Policy::worse_than_nominal`] | warning |
 //! | validation with no point | `--validate` | error ([`crate::calibrate::outputs::validate`](mod@crate::calibrate::outputs::validate)) |
 //! | a validation file measured in another frame (the tracker set up elsewhere) | its RMS as measured above [`Policy::reregistration_gain`] times that after its frame is re-fitted with the model held fixed, the frame moved beyond [`Policy::frame_sigmas`] σ, and the re-registration not asked for ([`check_validation`]) | warning naming the frame's move and `--reregister` |
@@ -448,29 +448,9 @@ fn outliers<R: std::borrow::Borrow<RowError>>(
 ) -> Option<String> {
     let mut parts = Vec::new();
     for deflection in [false, true] {
-        let of_kind = || {
-            (rows.into_iter())
-                .map(|r| *r.borrow())
-                .filter(move |r| r.deflection == deflection)
+        let Some((count, median, far)) = far_of_kind(rows, deflection, policy) else {
+            continue;
         };
-        // The norms alone (8 MB at 10⁶ rows), for the median: the middle
-        // one, the upper of the two middle ones for an even count.
-        let mut v: Vec<f64> = of_kind().map(|r| r.final_um.norm()).collect();
-        let count = v.len();
-        if count < policy.outlier_min_rows.max(1) {
-            continue;
-        }
-        let median = *v.select_nth_unstable_by(count / 2, f64::total_cmp).1;
-        drop(v);
-        let bound = (policy.outlier_ratio * median).max(policy.outlier_floor_um);
-        let mut far: Vec<(f64, RowError)> = of_kind()
-            .map(|r| (r.final_um.norm(), r))
-            .filter(|(n, _)| *n > bound || n.is_nan())
-            .collect();
-        if far.is_empty() {
-            continue;
-        }
-        far.sort_by(|a, b| b.0.total_cmp(&a.0));
         let kind = if deflection { "deflection" } else { "position" };
         let named: Vec<String> = far
             .iter()
@@ -499,6 +479,52 @@ fn outliers<R: std::borrow::Borrow<RowError>>(
             parts.join("; ")
         )
     })
+}
+
+/// What the outlier rule finds among the rows of one kind: how many rows
+/// of the kind, their median norm \[µm\], and the far ones with their
+/// norms, largest first.
+type Far = (usize, f64, Vec<(f64, RowError)>);
+
+/// The rows of one kind (`deflection` or absolute positions) the outlier
+/// rule names ([`Far`]); `None` when there is none, or too few rows of the
+/// kind.
+fn far_of_kind<R: std::borrow::Borrow<RowError>>(
+    rows: impl IntoIterator<Item = R> + Copy,
+    deflection: bool,
+    policy: &Policy,
+) -> Option<Far> {
+    let of_kind = || {
+        (rows.into_iter())
+            .map(|r| *r.borrow())
+            .filter(move |r| r.deflection == deflection)
+    };
+    // The norms alone (8 MB at 10⁶ rows), for the median: the middle
+    // one, the upper of the two middle ones for an even count.
+    let mut v: Vec<f64> = of_kind().map(|r| r.final_um.norm()).collect();
+    let count = v.len();
+    if count < policy.outlier_min_rows.max(1) {
+        return None;
+    }
+    let median = *v.select_nth_unstable_by(count / 2, f64::total_cmp).1;
+    drop(v);
+    let bound = (policy.outlier_ratio * median).max(policy.outlier_floor_um);
+    let mut far: Vec<(f64, RowError)> = of_kind()
+        .map(|r| (r.final_um.norm(), r))
+        .filter(|(n, _)| *n > bound || n.is_nan())
+        .collect();
+    far.sort_by(|a, b| b.0.total_cmp(&a.0));
+    (!far.is_empty()).then_some((count, median, far))
+}
+
+/// Every row the outlier rule names (module docs), both kinds, largest
+/// first within each: what `Settings::leave_out_outliers` leaves out.
+pub fn outlying(report: &Report, policy: &Policy) -> Vec<RowError> {
+    [false, true]
+        .into_iter()
+        .filter_map(|deflection| far_of_kind(&report.row_errors, deflection, policy))
+        .flat_map(|(_, _, far)| far.into_iter().map(|(_, r)| r))
+        .collect()
 }
 
 /// The warning when the calibrated model fits the rows worse than the
