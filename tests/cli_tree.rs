@@ -747,6 +747,28 @@ fn check_passes_the_unchanged_robot_and_names_a_moved_joint() {
         .filter(|&k| check("same.csv", recording(1000 + k, &frame, None)).0)
         .count();
     assert!(passed >= 198, "{passed} of 200 passed");
+    // The same recording as a measurement CSV of the setup (--setup): the
+    // same verdict.
+    std::fs::write(d.join("contract.csv"), points(&MARKERS, 1000, &frame)).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_robcal"))
+        .current_dir(&d)
+        .args([
+            "check",
+            "--model",
+            "o1/model.json",
+            "--setup",
+            "setup.toml",
+            "--data",
+            "contract.csv",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let by_setup: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (_, by_points) = check("same.csv", recording(1000, &frame, None));
+    assert_eq!(by_setup["rms_mm"], by_points["rms_mm"]);
+    assert_eq!(by_setup["points"], 80);
     let (j1, by) = (1, 0.5e-3);
     let (ok, v) = check("moved.csv", recording(7, &frame, Some((j1, by))));
     assert!(!ok, "{v}");

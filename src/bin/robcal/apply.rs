@@ -59,9 +59,14 @@ pub struct CheckArgs {
     model: PathBuf,
     /// The new recording: `x_m, y_m, z_m` (where the tracker saw the
     /// marker, any frame), `marker`, `load_kg`, `com_x_m..`, `<joint>_rad`
-    /// per joint (the points layout of `compensate`'s targets).
+    /// per joint (the points layout of `compensate`'s targets); with
+    /// --setup, a measurement CSV of that setup instead.
     #[arg(long)]
     data: PathBuf,
+    /// Read --data as a measurement CSV of this setup (its units, markers
+    /// and load; the calibration's own layout).
+    #[arg(long)]
+    setup: Option<PathBuf>,
     /// Pass at most this RMS after re-registration [mm] (default: 1.5 times
     /// the calibration's held-out RMS).
     #[arg(long = "max-rms-mm", allow_negative_numbers = true, value_parser = crate::finite_positive)]
@@ -376,8 +381,7 @@ fn relative_to(target: &Path, dir: &Path) -> String {
 /// `robcal check`: the verdict on stdout (text, or JSON with `--json`);
 /// a failed check exits 1 after it, with one line on stderr.
 pub fn run_check(a: &CheckArgs) -> Result<(), String> {
-    use robcal::calibrate::outputs::check::{check, CheckPoint, CHECK_FACTOR};
-    use robcal::calibrate::outputs::predict::Pose;
+    use robcal::calibrate::outputs::check::CHECK_FACTOR;
     let (robot, file) = load_model_file(&a.model)?;
     // What the calibration claims for poses it did not see.
     let (own_um, which) = match (file["heldout_rms_um"].as_f64(), file["rms_um"].as_f64()) {
@@ -395,27 +399,10 @@ pub fn run_check(a: &CheckArgs) -> Result<(), String> {
             ))
         }
     };
-    let rows = read_points(&robot, &a.data, true)?;
-    let mut points = Vec::with_capacity(rows.len());
-    for row in &rows {
-        let (id, _, payload, _) = tool_and_payload(&robot, row, &a.data)?;
-        let measured = row.target_m.ok_or_else(|| {
-            format!(
-                "{}:{}: no x_m, y_m, z_m: the measured position",
-                a.data.display(),
-                row.line
-            )
-        })?;
-        points.push(CheckPoint {
-            pose: Pose {
-                line: row.line,
-                marker: id,
-                q: row.q.clone(),
-                payload,
-            },
-            measured_m: Vector3::from(measured),
-        });
-    }
+    let points = match &a.setup {
+        Some(setup) => measured_points(&robot, setup, &a.data)?,
+        None => points_of(&robot, &a.data)?,
+    };
     // The calibration's σ of each joint's zero (`<joint>.offset`, mrad or
     // mm), in rad or m.
     let zero_std: Vec<f64> = robot
@@ -429,11 +416,93 @@ pub fn run_check(a: &CheckArgs) -> Result<(), String> {
                 .map_or(0.0, |s| s * 1e-3)
         })
         .collect();
+    check_and_report(a, &robot, points, zero_std, threshold_mm, own_um, which)
+}
+
+/// The points of a measurement CSV of `setup` (its units, markers and
+/// load): every row, a loaded one with the setup's load at `[load] com`.
+fn measured_points(
+    robot: &Predictor,
+    setup: &Path,
+    data: &Path,
+) -> Result<Vec<robcal::calibrate::outputs::check::CheckPoint>, String> {
+    use robcal::calibrate::outputs::check::CheckPoint;
+    use robcal::calibrate::outputs::predict::Pose;
+    let job = robcal::io::Job::load(setup).map_err(|e| e.to_string())?;
+    if job.robot.joint_names != robot.joint_names() {
+        return Err(format!(
+            "{}: its robot's joints {:?} are not the model's {:?}",
+            setup.display(),
+            job.robot.joint_names,
+            robot.joint_names()
+        ));
+    }
+    let m = job.read_measurements(data).map_err(|e| e.to_string())?;
+    let com = job.setup.load.map_or([0.0; 3], |l| l.com);
+    Ok(m.observations
+        .iter()
+        .map(|o| CheckPoint {
+            pose: Pose {
+                line: o.line,
+                marker: o.marker,
+                q: o.q.to_vec(),
+                payload: (o.load_kg > 0.0).then(|| Payload {
+                    mass_kg: o.load_kg,
+                    com_m: Vector3::from(com),
+                }),
+            },
+            measured_m: Vector3::from(o.p_m),
+        })
+        .collect())
+}
+
+/// The points of a points CSV (`x_m, y_m, z_m` the measured position).
+fn points_of(
+    robot: &Predictor,
+    data: &Path,
+) -> Result<Vec<robcal::calibrate::outputs::check::CheckPoint>, String> {
+    use robcal::calibrate::outputs::check::CheckPoint;
+    use robcal::calibrate::outputs::predict::Pose;
+    let rows = read_points(robot, data, true)?;
+    let mut points = Vec::with_capacity(rows.len());
+    for row in &rows {
+        let (id, _, payload, _) = tool_and_payload(robot, row, data)?;
+        let measured = row.target_m.ok_or_else(|| {
+            format!(
+                "{}:{}: no x_m, y_m, z_m: the measured position",
+                data.display(),
+                row.line
+            )
+        })?;
+        points.push(CheckPoint {
+            pose: Pose {
+                line: row.line,
+                marker: id,
+                q: row.q.clone(),
+                payload,
+            },
+            measured_m: Vector3::from(measured),
+        });
+    }
+    Ok(points)
+}
+
+/// The check of `points` and its verdict printed (see [`run_check`]).
+fn check_and_report(
+    a: &CheckArgs,
+    robot: &Predictor,
+    points: Vec<robcal::calibrate::outputs::check::CheckPoint>,
+    zero_std: Vec<f64>,
+    threshold_mm: f64,
+    own_um: f64,
+    which: &str,
+) -> Result<(), String> {
+    use robcal::calibrate::outputs::check::{check, CHECK_FACTOR};
     let settings = robcal::calibrate::outputs::check::CheckSettings {
         threshold_mm,
         zero_std,
     };
-    let v = check(&robot, &points, &settings).map_err(|e| format!("{}: {e}", a.data.display()))?;
+    let v = check(robot, &points, &settings).map_err(|e| format!("{}: {e}", a.data.display()))?;
     let g = &v.reregistration;
     let norm = |x: [f64; 3]| Vector3::from(x).norm();
     if a.json {
