@@ -960,3 +960,92 @@ fn an_outlying_point_is_left_out_when_asked() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// What `check`, `compare` and `--reregister` cannot judge is one line on
+/// stderr and a non-zero exit, never a verdict: two robots compared,
+/// fewer than three points checked, a value that is not a number,
+/// `--reregister` without a file to validate.
+#[test]
+fn check_and_compare_refuse_what_they_cannot_judge() {
+    let d = job("refuse", &MARKERS);
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let kr270 = root.join("data/kr270");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_robcal"))
+            .current_dir(&d)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let ok = |o: &Output| assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok(&run(&[
+        "calibrate",
+        "-q",
+        "--setup",
+        "setup.toml",
+        "--data",
+        "data.csv",
+        "--no-diagnose",
+        "--output",
+        "tree",
+    ]));
+    ok(&run(&[
+        "calibrate",
+        "-q",
+        "--setup",
+        kr270.join("setup.toml").to_str().unwrap(),
+        "--data",
+        kr270.join("measurements.csv").to_str().unwrap(),
+        "--no-diagnose",
+        "--output",
+        "kr270",
+    ]));
+    let one_line = |o: &Output, code: i32, expect: &str| {
+        assert_eq!(
+            o.status.code(),
+            Some(code),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(expect), "{err}");
+    };
+    one_line(
+        &run(&["compare", "tree/model.json", "kr270/model.json"]),
+        1,
+        "not the same robot",
+    );
+    let names: Vec<String> = MOVABLE.iter().map(|m| format!("{}_rad", m.0)).collect();
+    let header = format!("marker,load_kg,{},x_m,y_m,z_m\n", names.join(","));
+    let row = "1,0,0.1,0.2,0.3,0.4,0.5,0.6,1.0,0.5,0.2\n";
+    std::fs::write(d.join("two.csv"), format!("{header}{row}{row}")).unwrap();
+    one_line(
+        &run(&["check", "--model", "tree/model.json", "--data", "two.csv"]),
+        1,
+        "needs three or more",
+    );
+    std::fs::write(
+        d.join("nan.csv"),
+        format!("{header}{row}{row}1,0,0.1,nan,0.3,0.4,0.5,0.6,1.0,0.5,0.2\n"),
+    )
+    .unwrap();
+    one_line(
+        &run(&["check", "--model", "tree/model.json", "--data", "nan.csv"]),
+        1,
+        "nan.csv:4",
+    );
+    one_line(
+        &run(&[
+            "calibrate",
+            "--setup",
+            "setup.toml",
+            "--data",
+            "data.csv",
+            "--reregister",
+        ]),
+        2,
+        "--validate",
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
