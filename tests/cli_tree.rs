@@ -267,9 +267,25 @@ fn points_changed(
     frame: &(M3, [f64; 3]),
     change: Option<(usize, f64)>,
 ) -> String {
-    let mut rng = Rng(seed);
     let names: Vec<&str> = MOVABLE.iter().map(|m| m.0).collect();
     let mut csv = format!("config,rep,marker,load_kg,{},x,y,z\n", names.join(","));
+    for (c, qs, id, p) in draws(markers, seed, frame, change) {
+        csv += &format!("{c},1,{id},0,{qs},{:.17},{:.17},{:.17}\n", p[0], p[1], p[2]);
+    }
+    csv
+}
+
+/// The points of [`points_changed`]: each configuration's index, its
+/// commanded joint values as written, the marker id and where the tracker
+/// sees it.
+fn draws(
+    markers: &[(u32, &str, [f64; 3])],
+    seed: u64,
+    frame: &(M3, [f64; 3]),
+    change: Option<(usize, f64)>,
+) -> Vec<(usize, String, u32, [f64; 3])> {
+    let mut rng = Rng(seed);
+    let mut out = Vec::new();
     for c in 0..40 {
         let q: Vec<f64> = (0..MOVABLE.len()).map(|_| 2.4 * rng.next() - 1.2).collect();
         let qs: Vec<String> = q.iter().map(|v| format!("{v:.17}")).collect();
@@ -284,16 +300,10 @@ fn points_changed(
                     + frame.1[i]
                     + SIGMA_M * rng.normal()
             });
-            csv += &format!(
-                "{c},1,{id},0,{},{:.17},{:.17},{:.17}\n",
-                qs.join(","),
-                p[0],
-                p[1],
-                p[2]
-            );
+            out.push((c, qs.join(","), *id, p));
         }
     }
-    csv
+    out
 }
 
 fn calibrate(d: &Path) -> (Output, Value) {
@@ -660,31 +670,10 @@ fn a_validation_in_another_frame_is_reregistered() {
 /// of both markers seen from `frame`, 20 µm of noise per axis, the joint
 /// `change.0` (CSV order) turned `change.1` rad past its commanded value.
 fn recording(seed: u64, frame: &(M3, [f64; 3]), change: Option<(usize, f64)>) -> String {
-    let mut rng = Rng(seed);
     let names: Vec<String> = MOVABLE.iter().map(|m| format!("{}_rad", m.0)).collect();
     let mut csv = format!("marker,load_kg,{},x_m,y_m,z_m\n", names.join(","));
-    for _ in 0..40 {
-        let q: Vec<f64> = (0..MOVABLE.len()).map(|_| 2.4 * rng.next() - 1.2).collect();
-        let mut actual = q.clone();
-        if let Some((j, by)) = change {
-            actual[j] += by;
-        }
-        let qs: Vec<String> = q.iter().map(|v| format!("{v:.17}")).collect();
-        for (id, link, xyz) in MARKERS {
-            let p = fk(link, &actual, &xyz);
-            let p: [f64; 3] = std::array::from_fn(|i| {
-                (0..3).map(|k| frame.0[i][k] * p[k]).sum::<f64>()
-                    + frame.1[i]
-                    + SIGMA_M * rng.normal()
-            });
-            csv += &format!(
-                "{id},0,{},{:.17},{:.17},{:.17}\n",
-                qs.join(","),
-                p[0],
-                p[1],
-                p[2]
-            );
-        }
+    for (_, qs, id, p) in draws(&MARKERS, seed, frame, change) {
+        csv += &format!("{id},0,{qs},{:.17},{:.17},{:.17}\n", p[0], p[1], p[2]);
     }
     csv
 }

@@ -192,6 +192,16 @@ pub struct Reregistration {
 }
 
 impl Reregistration {
+    /// How far the frame moved the points' centroid \[mm\].
+    pub fn shift_mm(&self) -> f64 {
+        nalgebra::Vector3::from(self.translation_mm).norm()
+    }
+
+    /// The frame's turn \[mrad\].
+    pub fn turn_mrad(&self) -> f64 {
+        nalgebra::Vector3::from(self.rotation_mrad).norm()
+    }
+
     /// Whether the frame moved beyond `sigmas` σ in some component.
     pub fn moved(&self, sigmas: f64) -> bool {
         (0..3).any(|k| {
@@ -677,15 +687,14 @@ impl fmt::Display for Report {
             }
             writeln!(f)?;
             if let Some(g) = &v.reregistration {
-                let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
                 writeln!(
                     f,
                     "validation: as measured RMS {:.4} mm; re-registered RMS {:.4} mm, the frame \
                      moved {:.3} mm and turned {:.3} mrad",
                     v.as_measured_rms_mm,
                     g.rms_mm,
-                    n(g.translation_mm),
-                    n(g.rotation_mrad)
+                    g.shift_mm(),
+                    g.turn_mrad()
                 )?;
             }
             if v.interpolated_points > 0 {

@@ -504,7 +504,6 @@ fn check_and_report(
     };
     let v = check(robot, &points, &settings).map_err(|e| format!("{}: {e}", a.data.display()))?;
     let g = &v.reregistration;
-    let norm = |x: [f64; 3]| Vector3::from(x).norm();
     if a.json {
         let changed: Vec<serde_json::Value> = v
             .changed
@@ -539,8 +538,8 @@ fn check_and_report(
             a.data.display(),
             g.rms_mm,
             v.as_measured_rms_mm,
-            norm(g.translation_mm),
-            norm(g.rotation_mrad)
+            g.shift_mm(),
+            g.turn_mrad()
         );
         let why = match a.max_rms_mm {
             Some(_) => "--max-rms-mm".to_string(),
@@ -663,7 +662,6 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
             Some(positions(&ra, &rb, &poses).map_err(|e| format!("{}: {e}", path.display()))?)
         }
     };
-    let norm = |x: [f64; 3]| Vector3::from(x).norm();
     let beyond = |z: Option<f64>| z.is_some_and(|z| z.abs() > 3.0);
     let mut text = format!(
         "compare: A = {} (RMS {:.1} um), B = {} (RMS {:.1} um)\n",
@@ -732,8 +730,8 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
             p.points,
             p.frame.rms_mm,
             p.max_mm,
-            norm(p.frame.translation_mm),
-            norm(p.frame.rotation_mrad)
+            p.frame.shift_mm(),
+            p.frame.turn_mrad()
         );
     }
     let json = serde_json::json!({
@@ -811,8 +809,8 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
                 p.points,
                 p.frame.rms_mm,
                 p.max_mm,
-                norm(p.frame.translation_mm),
-                norm(p.frame.rotation_mrad)
+                p.frame.shift_mm(),
+                p.frame.turn_mrad()
             );
         }
         h.push_str("</body></html>\n");

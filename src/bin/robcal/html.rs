@@ -424,7 +424,6 @@ fn validation(h: &mut String, r: &Report, info: &JobInfo<'_>) {
             }
             h.push_str("</table>");
             if let Some(g) = &v.reregistration {
-                let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
                 let _ = write!(
                     h,
                     "<p>{}As measured, RMS {:.4} mm; with the file's measurement frame re-fitted \
@@ -437,8 +436,8 @@ fn validation(h: &mut String, r: &Report, info: &JobInfo<'_>) {
                     },
                     v.as_measured_rms_mm,
                     g.rms_mm,
-                    n(g.translation_mm),
-                    n(g.rotation_mrad)
+                    g.shift_mm(),
+                    g.turn_mrad()
                 );
             }
             if v.interpolated_points > 0 {

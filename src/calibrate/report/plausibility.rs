@@ -347,7 +347,6 @@ pub fn check_validation(v: &Validation, policy: &Policy) -> Option<String> {
     if v.reregistered || !far || !g.moved(policy.frame_sigmas) {
         return None;
     }
-    let n = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
     Some(format!(
         "validation: RMS {:.4} mm as measured, {:.4} mm once the file's measurement frame is \
          re-fitted with the calibrated model held fixed (it moved {:.3} mm and turned {:.3} \
@@ -355,8 +354,8 @@ pub fn check_validation(v: &Validation, policy: &Policy) -> Option<String> {
          --reregister reports the error after re-registration",
         v.as_measured_rms_mm,
         g.rms_mm,
-        n(g.translation_mm),
-        n(g.rotation_mrad)
+        g.shift_mm(),
+        g.turn_mrad()
     ))
 }
 
