@@ -236,7 +236,7 @@ impl Engine<'_> {
 
     /// Every row's left-hand side \[m\] at the rows' linearisation
     /// ([`Rows::lhs`]): the last design's own when it was built there and
-    /// holds them unscaled (rows of one kind), else from the frames.
+    /// holds them unscaled ([`Rows::scaled`]), else from the frames.
     ///
     /// # Errors
     /// As [`Rows::frames`].
@@ -246,7 +246,7 @@ impl Engine<'_> {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         if let (Some((_, at, d)), Some(now)) = (last.as_ref(), self.rows.at.as_ref()) {
-            if at == now && !self.rows.mixed() && d.y.len() == 3 * self.rows.rows.len() {
+            if at == now && !self.rows.scaled() && d.y.len() == 3 * self.rows.rows.len() {
                 return Ok(d.y.as_chunks::<3>().0.iter().map(|&y| y.into()).collect());
             }
         }

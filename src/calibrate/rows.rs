@@ -28,7 +28,7 @@ mod noise;
 mod points;
 mod runs;
 mod values;
-pub use noise::{noise_scale, scaled_y};
+pub use noise::{noise_scale, row_scale, scaled_y};
 pub(crate) use points::{lhs, marker_m};
 pub use runs::run_length;
 use values::Values;
@@ -124,6 +124,10 @@ pub struct RowExtra {
     /// which its frames alone do not give; `None` for the first-order
     /// model's.
     pub y: Option<Vector3<f64>>,
+    /// The factor `√w` the row enters the design with, from a robust loss
+    /// ([`crate::calibrate::robust`]; `w` its weight in `(0, 1]`), on top
+    /// of the kind's ([`noise_scale`]); none: 1.
+    pub robust: Option<f64>,
 }
 
 /// A run of rows in [`Rows::relinearise_with`], with its state and its
@@ -156,6 +160,11 @@ impl Row {
     /// [`RowExtra::sigma`].
     pub fn sigma(&self) -> Option<Vector3<f64>> {
         self.extra.as_ref().and_then(|e| e.sigma)
+    }
+
+    /// [`RowExtra::robust`] (1 without it).
+    pub fn robust(&self) -> f64 {
+        self.extra.as_ref().and_then(|e| e.robust).unwrap_or(1.0)
     }
 
     /// [`RowExtra::load`].

@@ -14,6 +14,7 @@ use crate::calibrate::params::names::Names;
 use crate::calibrate::report::plausibility;
 use crate::calibrate::report::Nominal;
 use crate::calibrate::report::Report;
+use crate::calibrate::robust;
 use crate::calibrate::rows::RowKind;
 use crate::calibrate::rows::Rows;
 use crate::calibrate::settings::Method;
@@ -34,9 +35,104 @@ pub fn calibrate(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
-    let (rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), &settings.policy)?;
-    let report = calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?;
+    let report = if settings.robust {
+        robustly(job, data, settings, progress)?
+    } else {
+        let (rows, names, warnings) =
+            prepare(job, std::borrow::Cow::Borrowed(data), &settings.policy)?;
+        calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?
+    };
     without_outliers(job, data, settings, report, progress)
+}
+
+/// With [`Settings::robust`]: the job fitted with each row weighted by
+/// Huber's loss on its standardised residual of the fit before
+/// ([`robust::huber`]; the first fit at unit weights), again until no
+/// weight moves by more than [`Policy::robust_tolerance`], in
+/// [`Policy::robust_iterations`] fits at most. The report is the last
+/// fit's; its notes name the rows weighted down most, and a warning says
+/// when the weights did not settle.
+///
+/// # Errors
+/// As [`calibrate`], of any of the fits.
+fn robustly(
+    job: &crate::io::job::Job,
+    data: &crate::io::measurements::Measurements,
+    settings: &Settings,
+    progress: Progress<'_>,
+) -> Result<Report, CalibrationError> {
+    let policy = &settings.policy;
+    let mut used: Option<Vec<f64>> = None;
+    let mut fits = 0;
+    loop {
+        let (mut rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), policy)?;
+        let noise = robust::noise_of(&rows);
+        if let Some(w) = &used {
+            let scales: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
+            (rows.set_robust(&scales)).map_err(|e| CalibrationError::Core("robust weights", e))?;
+        }
+        let mut report =
+            calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?;
+        fits += 1;
+        let next = robust::huber(
+            &noise,
+            &report.row_errors,
+            policy.huber_k,
+            policy.robust_group_rows,
+        );
+        let change = match &used {
+            Some(w) => (w.iter().zip(&next)).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs())),
+            None => next.iter().fold(0.0_f64, |m, b| m.max(1.0 - b)),
+        };
+        if change > policy.robust_tolerance && fits < policy.robust_iterations.max(1) {
+            progress(&format!(
+                "robust loss: fitting again, {} row(s) weighted down",
+                next.iter().filter(|&&w| w < 1.0).count()
+            ));
+            used = Some(next);
+            continue;
+        }
+        let w = used.unwrap_or_else(|| vec![1.0; next.len()]);
+        let mut down: Vec<(usize, f64)> = (w.iter().copied().enumerate())
+            .filter(|&(_, w)| w < 1.0)
+            .collect();
+        down.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let list: Vec<String> = (down.iter().take(5))
+            .filter_map(|&(i, w)| report.row_errors.get(i).map(|r| (r, w)))
+            .map(|(r, w)| {
+                format!(
+                    "config {} marker {} ({}, weight {w:.3}, {:.1} um)",
+                    r.config,
+                    r.marker,
+                    if r.deflection {
+                        "deflection"
+                    } else {
+                        "position"
+                    },
+                    r.final_um.norm()
+                )
+            })
+            .collect();
+        report.notes.push(format!(
+            "robust loss (Huber, k = {}, --robust): {} fit(s); {} of {} row(s) weighted down{}",
+            policy.huber_k,
+            fits,
+            down.len(),
+            w.len(),
+            if list.is_empty() {
+                String::new()
+            } else {
+                format!(", most: {}", list.join(", "))
+            }
+        ));
+        if change > policy.robust_tolerance {
+            report.warnings.push(format!(
+                "robust loss: the rows' weights did not settle in {fits} fits (the last moved \
+                 one by {change:.3}); the report is the last fit's"
+            ));
+        }
+        return Ok(report);
+    }
 }
 
 /// With [`Settings::leave_out_outliers`]: the rows the outlier rule names
@@ -120,8 +216,8 @@ pub fn calibrate_owned(
     settings: &Settings,
     progress: Progress<'_>,
 ) -> Result<Report, CalibrationError> {
-    if settings.leave_out_outliers {
-        // The file again for the second fit: borrowed, not freed.
+    if settings.leave_out_outliers || settings.robust {
+        // The file again for the next fit: borrowed, not freed.
         return calibrate(job, &data, settings, progress);
     }
     let file = data.file.clone();

@@ -49,6 +49,11 @@ pub struct Settings {
     /// notes list them (`calibrate::run`). Off by default: the rule only
     /// warns.
     pub leave_out_outliers: bool,
+    /// Fit with a robust loss (Huber, on the standardised residual of each
+    /// row, on top of the paper's weights): the job fitted again with each
+    /// row weighted by it until the weights settle
+    /// ([`crate::calibrate::robust`]). Off by default.
+    pub robust: bool,
     /// The decision constants.
     pub policy: Policy,
 }
@@ -63,6 +68,7 @@ impl Default for Settings {
             heldout: true,
             deflection_model: crate::calibrate::params::linearisation::DeflectionModel::Exact,
             leave_out_outliers: false,
+            robust: false,
             policy: Policy::default(),
         }
     }
@@ -258,6 +264,24 @@ pub struct Policy {
     /// … among at least this many rows of the kind (a median of fewer
     /// says little about the noise). 10.
     pub outlier_min_rows: usize,
+    /// The robust loss's threshold ([`crate::calibrate::robust`], `--robust`):
+    /// a row whose standardised residual (per axis over the instrument's σ
+    /// of the row, the σ of the other rows of its configuration, or the
+    /// rows' own robust scale, `1.4826 · MAD`) has a norm `d` beyond this
+    /// is weighted `k/d` (Huber). 3.37: the 99 %
+    /// point of a norm of three unit normal components (√χ²₃), so that a
+    /// clean row is down-weighted in 1 % of cases, and then barely.
+    pub huber_k: f64,
+    /// A row's residual is standardised for the robust loss by the σ of
+    /// the other rows of its configuration and kind when there are at
+    /// least this many of them (else by the rows' robust scale). 4: each
+    /// axis's σ then has 4 degrees of freedom at least.
+    pub robust_group_rows: usize,
+    /// Fits at most for the robust loss's weights to settle. 20.
+    pub robust_iterations: usize,
+    /// The robust loss's weights have settled when none moves by more than
+    /// this between two fits. 0.01.
+    pub robust_tolerance: f64,
 }
 
 impl Default for Policy {
@@ -300,6 +324,10 @@ impl Default for Policy {
             outlier_ratio: 20.0,
             outlier_floor_um: 1.0,
             outlier_min_rows: 10,
+            huber_k: 3.37,
+            robust_group_rows: 4,
+            robust_iterations: 20,
+            robust_tolerance: 0.01,
         }
     }
 }

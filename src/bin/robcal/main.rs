@@ -152,6 +152,12 @@ struct CalibrateArgs {
     /// report's notes list them.
     #[arg(long = "leave-out-outliers")]
     leave_out_outliers: bool,
+    /// Fit with a robust loss: each row weighted by Huber's loss on its
+    /// standardised residual (beyond 3.37, over the instrument's sigma or
+    /// the rows' own robust scale), fitted again until the weights settle;
+    /// the report's notes name the rows weighted down.
+    #[arg(long)]
+    robust: bool,
     /// With --output: keep each marker's nominal position in robot.urdf
     /// too, as `marker_<id>_nominal` (`marker_<id>` is the calibrated one).
     #[arg(long = "keep-nominal-markers")]
@@ -396,6 +402,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
             DeflectionModel::Exact
         },
         leave_out_outliers: a.leave_out_outliers,
+        robust: a.robust,
         policy: robcal::calibrate::Policy {
             max_held_design_rows: max_held_design_rows()?,
             ..Default::default()

@@ -386,7 +386,11 @@ impl Design {
             let mut ss = vec![Vector3::<f64>::zeros(); groups];
             let mut n = vec![0.0_f64; groups];
             for r in rows {
-                let sigma = r.sigma().map(|s| s * all.noise_scale(r));
+                // (The kind's scale alone: a robust loss's weight is the
+                // row's, not its instrument's.)
+                let sigma = r
+                    .sigma()
+                    .map(|s| s * crate::calibrate::rows::noise_scale(all.mixed(), r.kind));
                 if let (Some(s), Some(g)) = (sigma, ss.get_mut(r.group())) {
                     *g += s.component_mul(&s);
                     n[r.group()] += 1.0;

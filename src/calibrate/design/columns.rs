@@ -79,7 +79,7 @@ impl<'a> Columns<'a> {
         };
         let point = frames.point_m(&crate::calibrate::rows::marker_m(self.markers, row));
         let sample = row.sample(frames, point, &compliance, gravity_unit);
-        let scale = crate::calibrate::rows::noise_scale(self.mixed, row.kind);
+        let scale = crate::calibrate::rows::row_scale(self.mixed, row);
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
             let mut col = p.column_si(&sample)? * si;
             if scale != 1.0 {

@@ -192,15 +192,16 @@ pub fn revive(
     // stands, with its warnings.
     let predicted = chosen.iter().map(|(_, t)| t.delta_rss).sum::<f64>()
         / chosen[0].1.rss_before.max(f64::MIN_POSITIVE);
-    // (With rows of both kinds, on the design's scale: the deflections'
-    // residuals by `Rows::noise_scale`, as the tests summed them.)
+    // (With rows of both kinds or a robust loss's weights, on the design's
+    // scale: the residuals by `Rows::noise_scale`, as the tests summed
+    // them.)
     let scaled_rss = |f: &Fitted| -> f64 {
         (e.rows.rows.iter().zip(&f.residuals))
             .map(|(row, r)| (r * e.rows.noise_scale(row)).norm_squared())
             .sum()
     };
     let realised = |f: &Fitted| {
-        if e.rows.mixed() {
+        if e.rows.scaled() {
             1.0 - scaled_rss(f) / scaled_rss(&first).max(f64::MIN_POSITIVE)
         } else {
             1.0 - (f.rms_um / first.rms_um).powi(2)

@@ -3,6 +3,12 @@
 //! `√2` times it. When the rows mix both kinds the design holds every
 //! deflection scaled by `1/√2` ([`noise_scale`]) and the residuals are
 //! reported in metres again ([`Rows::unscaled`]).
+//!
+//! A robust loss ([`crate::calibrate::robust`]) scales a row further, by
+//! `√w` of its weight `w` ([`row_scale`]): the same as weighting it by `w`
+//! in every sum of squares, while eq. 14's σ of its configuration stays
+//! estimated from the rows as the fit sees them and the instrument's σ of
+//! its configuration stays the instrument's.
 
 use nalgebra::Vector3;
 
@@ -20,11 +26,21 @@ pub fn noise_scale(mixed: bool, kind: RowKind) -> f64 {
     }
 }
 
+/// The factor `row` enters the design with (`y` and columns): its kind's
+/// [`noise_scale`] times its robust loss's `√w` ([`Row::robust`]).
+pub fn row_scale(mixed: bool, row: &Row) -> f64 {
+    let s = noise_scale(mixed, row.kind);
+    match row.extra.as_ref().and_then(|e| e.robust) {
+        Some(r) => s * r,
+        None => s,
+    }
+}
+
 /// A row's left-hand side `y` ([`Rows::y`]) as the design holds it: times
-/// [`noise_scale`] (not multiplied where the scale is 1): the same values
+/// [`row_scale`] (not multiplied where the scale is 1): the same values
 /// wherever a pass needs them ([`crate::calibrate::design::Design`]).
 pub fn scaled_y(mixed: bool, row: &Row, y: Vector3<f64>) -> Vector3<f64> {
-    let s = noise_scale(mixed, row.kind);
+    let s = row_scale(mixed, row);
     if s == 1.0 {
         y
     } else {
@@ -38,10 +54,39 @@ impl Rows {
         self.kinds.absolute && self.kinds.deflections
     }
 
-    /// [`noise_scale`] of `row`; residuals are reported unscaled
-    /// ([`Rows::unscaled`]).
+    /// Whether any row enters the design scaled ([`row_scale`] other
+    /// than 1): rows of both kinds, or a robust loss's weights.
+    pub fn scaled(&self) -> bool {
+        self.mixed() || self.rows.iter().any(|r| r.robust() != 1.0)
+    }
+
+    /// [`row_scale`] of `row`: the factor it enters the design with;
+    /// residuals are reported unscaled ([`Rows::unscaled`]).
     pub fn noise_scale(&self, row: &Row) -> f64 {
-        noise_scale(self.mixed(), row.kind)
+        row_scale(self.mixed(), row)
+    }
+
+    /// Sets each row's robust factor `√w` ([`Row::robust`]) from `scales`,
+    /// one per row in row order; a factor of 1 is none.
+    ///
+    /// # Errors
+    /// When `scales` is not one per row, or a factor is not in `(0, 1]`.
+    pub fn set_robust(&mut self, scales: &[f64]) -> Result<(), crate::error::Error> {
+        if scales.len() != self.rows.len() || !scales.iter().all(|&s| s > 0.0 && s <= 1.0) {
+            return Err(crate::error::Error::Mismatch {
+                what: "robust factors: one per row, each in (0, 1]",
+            });
+        }
+        for (row, &s) in self.rows.iter_mut().zip(scales) {
+            if s == 1.0 {
+                if let Some(e) = &mut row.extra {
+                    e.robust = None;
+                }
+            } else {
+                row.extra_mut().robust = Some(s);
+            }
+        }
+        Ok(())
     }
 
     /// Row `i`'s residual `r` from the design (scaled by

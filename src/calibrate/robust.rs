@@ -1,0 +1,196 @@
+//! A robust loss: rows far out of line with the others (a tracker point
+//! lost or mistaken, a line of another pose) weighted down by Huber's
+//! loss on their standardised residual, so that they do not steer the
+//! fit (`--robust`, [`crate::calibrate::Settings::robust`]).
+//!
+//! Each row `i`'s residual `rᵢ` (per axis `a`, of the last fit) is
+//! standardised by a scale `sᵢₐ` that it does not move itself:
+//!
+//! 1. the instrument's σ of the row, when it has one (data contract 7.2);
+//! 2. else the σ of its configuration as eq. 14 estimates it, from the
+//!    *other* rows of its configuration and kind (the root mean square of
+//!    their residuals on the axis), when there are at least
+//!    [`crate::calibrate::Policy::robust_group_rows`] of them: the paper's
+//!    premise, noise that varies over the workspace, is kept, and a row
+//!    does not hide behind the σ it inflates;
+//! 3. else the robust scale of the rows of its kind on that axis,
+//!    `sₐ = 1.4826 · median |rₐ − median rₐ|` (the median absolute
+//!    deviation: half the rows may be outliers before it moves).
+//!
+//! With `zᵢ = (rᵢₐ / sᵢₐ)ₐ` and `dᵢ = ‖zᵢ‖`, Huber's weight is
+//!
+//! ```text
+//!   wᵢ = 1          when dᵢ ≤ k
+//!   wᵢ = k / dᵢ     beyond,        k = Policy::huber_k (3.37, √χ²₃ at 99 %)
+//! ```
+//!
+//! and the row enters the design times `√wᵢ` ([`Rows::set_robust`]) —
+//! on top of the paper's weights per configuration and axis (eq. 14),
+//! which the fit estimates from the rows as it sees them. The whole job
+//! (declared fit and closed loop) is fitted again with the new weights
+//! until none moves by more than [`crate::calibrate::Policy::robust_tolerance`]
+//! (`crate::calibrate::run`): iteratively reweighted least squares of
+//! Huber's loss, whose minimum is unique for a given model.
+//!
+//! The σ the report gives are the sandwich's of the weighted fit (eq. 8,
+//! 11) with these weights held: the rows weighted down count for less.
+
+use nalgebra::Vector3;
+
+use crate::calibrate::report::RowErrors;
+use crate::calibrate::rows::{RowKind, Rows};
+
+/// The consistency factor of the median absolute deviation for a normal
+/// distribution: `1 / Φ⁻¹(3/4)`.
+const MAD_NORMAL: f64 = 1.482_602_218_505_602;
+
+/// What the robust loss needs of a row: its kind and its instrument's σ
+/// \[m\] (taken before the rows go to the fit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowNoise {
+    /// Whether the row is a deflection.
+    pub deflection: bool,
+    /// The instrument's σ per axis \[m\], when the row has one.
+    pub sigma_m: Option<Vector3<f64>>,
+}
+
+/// [`RowNoise`] of every row of `rows`, in row order.
+pub fn noise_of(rows: &Rows) -> Vec<RowNoise> {
+    rows.rows
+        .iter()
+        .map(|r| RowNoise {
+            deflection: r.kind == RowKind::Deflection,
+            sigma_m: r.sigma(),
+        })
+        .collect()
+}
+
+/// The median of `v` (sorted in place); 0 when empty.
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The robust scale per axis \[µm\] of the residuals `r` (µm) of one kind:
+/// `1.4826 · MAD`.
+fn scale(r: &[Vector3<f64>]) -> Vector3<f64> {
+    Vector3::from_fn(|a, _| {
+        let mut v: Vec<f64> = r.iter().map(|x| x[a]).collect();
+        let m = median(&mut v);
+        let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+        MAD_NORMAL * median(&mut dev)
+    })
+}
+
+/// Huber's weight of every row (in `(0, 1]`, row order) from the final
+/// residuals of `errors` (one per row of `noise`, the same order), with
+/// threshold `k`, each standardised as the module says (`group_rows`: the
+/// fewest other rows of a configuration and kind whose σ standardises a
+/// row). A row whose standardised residual cannot be formed (a scale of
+/// zero on an axis: a fit that reproduces the rows) keeps weight 1.
+pub fn huber(noise: &[RowNoise], errors: &RowErrors, k: f64, group_rows: usize) -> Vec<f64> {
+    let rows: Vec<(i64, Vector3<f64>)> = errors.iter().map(|e| (e.config, e.final_um)).collect();
+    let kind_scale = |deflection: bool| {
+        let r: Vec<Vector3<f64>> = (noise.iter().zip(&rows))
+            .filter(|(n, _)| n.deflection == deflection)
+            .map(|(_, r)| r.1)
+            .collect();
+        scale(&r)
+    };
+    let scales = [kind_scale(false), kind_scale(true)];
+    // Per configuration and kind: the sum of squares per axis and the rows.
+    let mut sums: std::collections::HashMap<(i64, bool), (Vector3<f64>, usize)> =
+        std::collections::HashMap::new();
+    for (n, (config, r)) in noise.iter().zip(&rows) {
+        let e = sums
+            .entry((*config, n.deflection))
+            .or_insert((Vector3::zeros(), 0));
+        e.0 += r.component_mul(r);
+        e.1 += 1;
+    }
+    noise
+        .iter()
+        .zip(&rows)
+        .map(|(n, (config, r))| {
+            let s = match (n.sigma_m, sums.get(&(*config, n.deflection))) {
+                (Some(s), _) => s * 1e6,
+                (None, Some((ss, m))) if *m > group_rows.max(1) => {
+                    ((ss - r.component_mul(r)) / (m - 1) as f64).map(|v| v.max(0.0).sqrt())
+                }
+                _ => scales[usize::from(n.deflection)],
+            };
+            if !s.iter().all(|&x| x > 0.0 && x.is_finite()) {
+                return 1.0;
+            }
+            let d = r.component_div(&s).norm();
+            if d.is_finite() && d > k {
+                (k / d).max(f64::MIN_POSITIVE)
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_scale_of_normal_residuals_is_their_sigma_and_ignores_a_few_far_ones() {
+        // A normal sample of σ 3: Box–Muller on a fixed lattice.
+        let n = 2000;
+        let mut r: Vec<Vector3<f64>> = (0..n)
+            .map(|i| {
+                let u1 = (i as f64 + 0.5) / n as f64;
+                let u2 = ((i * 7919) % n) as f64 / n as f64;
+                let rad = (-2.0 * u1.ln()).sqrt();
+                let t = 2.0 * std::f64::consts::PI * u2;
+                Vector3::new(
+                    3.0 * rad * t.cos(),
+                    3.0 * rad * t.sin(),
+                    3.0 * rad * t.cos(),
+                )
+            })
+            .collect();
+        let s = scale(&r);
+        for a in 0..3 {
+            assert!((s[a] - 3.0).abs() < 0.15, "axis {a}: {}", s[a]);
+        }
+        for x in r.iter_mut().take(40) {
+            *x = Vector3::repeat(5e4);
+        }
+        let t = scale(&r);
+        for a in 0..3 {
+            assert!((t[a] - 3.0).abs() < 0.3, "axis {a}: {}", t[a]);
+        }
+    }
+
+    #[test]
+    fn huber_weights_a_far_row_by_k_over_its_distance() {
+        let configs: std::sync::Arc<[i64]> = (0..12).collect::<Vec<_>>().into();
+        let mut res: Vec<Vector3<f64>> = (0..12)
+            .map(|i| Vector3::new(1e-6 * (i as f64 - 5.5), 0.0, 0.0))
+            .collect();
+        res[3] = Vector3::new(0.0, 4e-3, 0.0);
+        let noise = vec![
+            RowNoise {
+                deflection: false,
+                sigma_m: Some(Vector3::repeat(10e-6)),
+            };
+            12
+        ];
+        let errors = RowErrors::new(configs, vec![1], (0..12).map(|i| (i, 0u8, false)), res);
+        let w = huber(&noise, &errors, 3.37, 4);
+        assert!((w[3] - 3.37 / 400.0).abs() < 1e-12, "{}", w[3]);
+        assert!(w.iter().enumerate().all(|(i, &x)| i == 3 || x == 1.0));
+    }
+}
