@@ -6,7 +6,12 @@
 //! Each row `i`'s residual `rᵢ` (per axis `a`, of the last fit) is
 //! standardised by a scale `sᵢₐ` that it does not move itself:
 //!
-//! 1. the instrument's σ of the row, when it has one (data contract 7.2);
+//! 1. the instrument's σ of the row, when it has one (data contract 7.2),
+//!    times the robust scale (3. below) of every row's residual over its
+//!    instrument's σ on the axis: the instrument says how the rows'
+//!    noise compares, the residuals say its level (on a real robot the
+//!    model's own error may be ten times the tracker's σ: standardised by
+//!    the σ alone, nearly every row would be weighted down);
 //! 2. else the σ of its configuration as eq. 14 estimates it, from the
 //!    *other* rows of its configuration and kind (the root mean square of
 //!    their residuals on the axis), when there are at least
@@ -106,6 +111,15 @@ pub fn huber(noise: &[RowNoise], errors: &RowErrors, k: f64, group_rows: usize) 
         scale(&r)
     };
     let scales = [kind_scale(false), kind_scale(true)];
+    // Per kind, the robust scale of the residuals over the instrument's σ.
+    let over_sigma = |deflection: bool| {
+        let z: Vec<Vector3<f64>> = (noise.iter().zip(&rows))
+            .filter(|(n, _)| n.deflection == deflection)
+            .filter_map(|(n, r)| n.sigma_m.map(|s| r.1.component_div(&(s * 1e6))))
+            .collect();
+        scale(&z)
+    };
+    let levels = [over_sigma(false), over_sigma(true)];
     // Per configuration and kind: the sum of squares per axis and the rows.
     let mut sums: std::collections::HashMap<(i64, bool), (Vector3<f64>, usize)> =
         std::collections::HashMap::new();
@@ -121,7 +135,7 @@ pub fn huber(noise: &[RowNoise], errors: &RowErrors, k: f64, group_rows: usize) 
         .zip(&rows)
         .map(|(n, (config, r))| {
             let s = match (n.sigma_m, sums.get(&(*config, n.deflection))) {
-                (Some(s), _) => s * 1e6,
+                (Some(s), _) => (s * 1e6).component_mul(&levels[usize::from(n.deflection)]),
                 (None, Some((ss, m))) if *m > group_rows.max(1) => {
                     ((ss - r.component_mul(r)) / (m - 1) as f64).map(|v| v.max(0.0).sqrt())
                 }
@@ -176,11 +190,14 @@ mod tests {
 
     #[test]
     fn huber_weights_a_far_row_by_k_over_its_distance() {
+        // ±1 µm on every axis, alternating: median 0, MAD 1 µm. The
+        // instrument says 10 µm, so its level is 0.148 and every row is
+        // standardised by 1.4826 µm; row 3 is 4 mm off on y.
         let configs: std::sync::Arc<[i64]> = (0..12).collect::<Vec<_>>().into();
         let mut res: Vec<Vector3<f64>> = (0..12)
-            .map(|i| Vector3::new(1e-6 * (i as f64 - 5.5), 0.0, 0.0))
+            .map(|i| Vector3::repeat(if i % 2 == 0 { -1e-6 } else { 1e-6 }))
             .collect();
-        res[3] = Vector3::new(0.0, 4e-3, 0.0);
+        res[3].y = 4e-3;
         let noise = vec![
             RowNoise {
                 deflection: false,
@@ -190,7 +207,13 @@ mod tests {
         ];
         let errors = RowErrors::new(configs, vec![1], (0..12).map(|i| (i, 0u8, false)), res);
         let w = huber(&noise, &errors, 3.37, 4);
-        assert!((w[3] - 3.37 / 400.0).abs() < 1e-12, "{}", w[3]);
+        let d: f64 = Vector3::new(1.0_f64, 4000.0, 1.0).norm() / MAD_NORMAL;
+        assert!(
+            (w[3] - 3.37 / d).abs() < 1e-9 * w[3],
+            "{} {}",
+            w[3],
+            3.37 / d
+        );
         assert!(w.iter().enumerate().all(|(i, &x)| i == 3 || x == 1.0));
     }
 }

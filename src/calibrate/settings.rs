@@ -266,7 +266,7 @@ pub struct Policy {
     pub outlier_min_rows: usize,
     /// The robust loss's threshold ([`crate::calibrate::robust`], `--robust`):
     /// a row whose standardised residual (per axis over the instrument's σ
-    /// of the row, the σ of the other rows of its configuration, or the
+    /// of the row at the rows' level, the σ of the other rows of its configuration, or the
     /// rows' own robust scale, `1.4826 · MAD`) has a norm `d` beyond this
     /// is weighted `k/d` (Huber). 3.37: the 99 %
     /// point of a norm of three unit normal components (√χ²₃), so that a

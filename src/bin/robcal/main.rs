@@ -153,8 +153,9 @@ struct CalibrateArgs {
     #[arg(long = "leave-out-outliers")]
     leave_out_outliers: bool,
     /// Fit with a robust loss: each row weighted by Huber's loss on its
-    /// standardised residual (beyond 3.37, over the instrument's sigma or
-    /// the rows' own robust scale), fitted again until the weights settle;
+    /// standardised residual (beyond 3.37; over the instrument's sigma at
+    /// the rows' level, the other rows of its configuration, or the rows'
+    /// robust scale), fitted again until the weights settle;
     /// the report's notes name the rows weighted down.
     #[arg(long)]
     robust: bool,
