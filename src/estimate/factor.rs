@@ -236,6 +236,31 @@ where
         inv
     }
 
+    /// `L⁻¹ S b` on the active parameters (zero elsewhere): a row `b` of
+    /// `B` whitened by `Λ`, so that `b Λ⁻¹ cᵀ` is the dot product of the
+    /// two whitened rows (the determinant lemma of [`super::plan`]).
+    #[must_use]
+    pub fn whiten(&self, b: &OVector<T, D>) -> OVector<T, D> {
+        let mut x = b.component_mul(&self.scale);
+        self.mask(&mut x);
+        solve_lower_in_place(&self.l, &mut x);
+        self.mask(&mut x);
+        x
+    }
+
+    /// `ln det Λ` over the active parameters: `Σ ln Lⱼⱼ² − 2 Σ ln Sⱼ`.
+    #[must_use]
+    pub fn log_det(&self) -> T {
+        let mut v = T::zero();
+        for j in 0..self.parameters() {
+            if self.active[j] {
+                let d = self.l[(j, j)];
+                v += (d * d).ln() - (self.scale[j] * self.scale[j]).ln();
+            }
+        }
+        v
+    }
+
     fn mask(&self, x: &mut OVector<T, D>) {
         for (v, &a) in x.as_mut_slice().iter_mut().zip(self.active.as_slice()) {
             if !a {

@@ -32,6 +32,7 @@
 //! | `grouped_fit` | [`GroupedStats`]' own fits: `Λ`, `η` once from the cells, the sandwich's `M` alone |
 //! | [`weights`] | [`RobustWeight`]: eq. 12 and 14 |
 //! | [`irls`] | [`Reweightable`], [`Fit`]: OLS, WLS, iterative WLS (section 5) |
+//! | [`plan`] | [`plan::next_best`]: the candidate pose whose rows raise `ln det Λ` most (the determinant lemma), to choose the next measurement |
 //! | [`rank`] | [`identifiability`]: the one column-independence test |
 //! | [`nested`] | [`nested_test`]: the F test of a candidate effect from cross-products |
 //! | [`screen`] | [`screen::Augmented`]: the in-stream diagnosis, `[B | C]` of every candidate in one pass, the host's rule |
@@ -67,6 +68,7 @@ mod grouped_fit;
 pub mod irls;
 mod linalg;
 pub mod nested;
+pub mod plan;
 pub mod rank;
 pub mod screen;
 pub mod weights;
