@@ -50,6 +50,7 @@ mod model_layout;
 mod model_urdf;
 mod paper_batch;
 mod paper_estimates;
+mod plan;
 mod reported_error;
 mod solve_covariance;
 mod solve_errors;

@@ -9,7 +9,7 @@
 //! [`crate::io`] and [`crate::parallel`]):
 //!
 //! ```text
-//!   params ─► settings ─► rows ─► effects ─► design ─► fit ─► report ─► engine ─► outputs ─► diagnosis ─► varied ─► robust ─► run
+//!   params ─► settings ─► rows ─► effects ─► design ─► fit ─► report ─► engine ─► outputs ─► diagnosis ─► varied ─► plan ─► robust ─► run
 //! ```
 //!
 //! | module | one concept |
@@ -25,6 +25,7 @@
 //! | [`outputs`] | the calibrated robot handed on: URDF (`export`), `model.json` (`model_file`), prediction and compensation (`predict`), validation on another file |
 //! | [`diagnosis`] | the closed loop: the declared model's first fit and re-tests (`retest`), every candidate tested and tried (`trial`), added while the data ask |
 //! | [`varied`] | the declared geometric parameters on varied poses within the joint limits: which of those the data leave out are the data's dependence, not the model's |
+//! | [`plan`] | choosing the poses before measuring: a pool of candidate configurations and payloads, the declared model's rows at each, the `K` that maximise a criterion of the information (D-optimal by default) |
 //! | [`robust`] | a robust loss: each row's Huber weight from its standardised residual, so that outlying rows do not steer the fit |
 //! | [`run`] | a job calibrated: rows prepared, the loop run, the report judged |
 //!
@@ -46,6 +47,7 @@ pub mod engine;
 pub mod fit;
 pub mod outputs;
 pub mod params;
+pub mod plan;
 pub mod report;
 pub mod robust;
 pub mod rows;

@@ -27,6 +27,7 @@ use robcal::io::Job;
 mod apply;
 mod html;
 mod json;
+mod plan;
 mod plots;
 
 #[derive(Parser)]
@@ -77,6 +78,10 @@ enum Command {
     /// Two calibrations of one robot side by side: parameters in σ,
     /// effects in one only, and how far apart they put the markers.
     Compare(apply::CompareArgs),
+    /// Choose the configurations to measure before measuring: the K of a
+    /// pool of candidates (random within the joint limits, or yours) that
+    /// determine the declared model best (D-optimal by default).
+    Plan(plan::PlanArgs),
     /// Write a commented setup file for a robot, every key with its
     /// default and the CSV header its measurements need.
     Init(apply::InitArgs),
@@ -289,6 +294,7 @@ fn main() -> ExitCode {
         Command::Check(args) => apply::run_check(&args),
         Command::Compare(args) => apply::run_compare(&args),
         Command::Init(args) => apply::run_init(&args),
+        Command::Plan(args) => plan::run_plan(&args),
         Command::Import(ImportCommand::FigarohMocap { input, output }) => {
             robcal::io::figaroh::import_mocap(&input, &output, None)
                 .map(|n| {
