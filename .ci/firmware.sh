@@ -54,7 +54,7 @@ trap 'rm -f "$log" "$marks"' EXIT
 # one codegen unit, one core a target, so the two go side by side.
 target_flags=()
 for target in "${targets[@]}"; do target_flags+=(--target "$target"); done
-cargo build --quiet --profile firmware "${target_flags[@]}" --example firmware
+cargo build --quiet --profile firmware "${target_flags[@]}" --example firmware --example firmware_plan
 cargo build --quiet --profile firmware-diagnose "${target_flags[@]}" --example firmware_diagnose
 
 for target in "${targets[@]}"; do
@@ -162,6 +162,40 @@ firmware_diagnose() {
 }
 firmware_diagnose thumbv7em-none-eabihf mps2-an386 cortex-m4
 firmware_diagnose thumbv7m-none-eabi lm3s6965evb cortex-m3
+
+# The next best pose on the device (issue 54, examples/firmware_plan): both
+# targets; its exit status (the device's eight choices are the host's
+# greedy plan), a wrong sequence must fail, and the budget: 64 KiB flash,
+# 16 KiB RAM including the stack.
+firmware_plan() {
+    local target=$1 machine=$2 cpu=$3 elf flash ram stack
+    elf=${CARGO_TARGET_DIR:-target}/$target/firmware/examples/firmware_plan
+    if tools/qemu-run.sh "$machine" "$cpu" "$elf" 2>&1 | tee "$log"; then
+        pass "$target: firmware_plan chooses the host's configurations"
+    else
+        fail "$target: firmware_plan checks"
+    fi
+    read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
+        { s[$1] = $2 }
+        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
+                    s[".data"] + s[".bss"] + s[".uninit"] }')
+    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    echo "firmware_plan: $target: flash $flash B, RAM $ram B + stack ${stack:-?} B"
+    if [ "$flash" -le "$flash_budget" ] && [ -n "$stack" ] &&
+        [ $((ram + stack)) -le "$ram_budget" ]; then
+        pass "$target: firmware_plan within 64 KiB flash, 16 KiB RAM"
+    else
+        fail "$target: firmware_plan over budget (64 KiB flash, 16 KiB RAM incl. stack)"
+    fi
+    if tools/qemu-run.sh "$machine" "$cpu" "$elf" mismatch >"$log" 2>&1; then
+        cat "$log"
+        fail "$target: firmware_plan self-test 'mismatch' exited 0"
+    else
+        pass "$target: firmware_plan self-test 'mismatch' fails as it must"
+    fi
+}
+firmware_plan thumbv7em-none-eabihf mps2-an386 cortex-m4
+firmware_plan thumbv7m-none-eabi lm3s6965evb cortex-m3
 
 echo "firmware: $passed passed, $failed failed"
 [ "$failed" -eq 0 ]

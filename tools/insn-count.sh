@@ -3,6 +3,7 @@
 # under QEMU (see BENCHMARKS.md).
 #
 #   tools/insn-count.sh [PROFILE [TARGET...]]
+#   ROBCAL_EXAMPLE=firmware_plan tools/insn-count.sh   # another firmware example
 #
 # PROFILE: cargo profile, `firmware` (default: release + opt-level "s") or
 # `release` (opt-level 3). TARGET: thumbv7em-none-eabihf (Cortex-M4F on
@@ -22,6 +23,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 profile=${1:-firmware}
 shift || true
+example=${ROBCAL_EXAMPLE:-firmware}
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
     targets=(thumbv7em-none-eabihf thumbv7m-none-eabi)
@@ -46,24 +48,24 @@ for target in "${targets[@]}"; do
         thumbv7m-none-eabi) machine=lm3s6965evb cpu=cortex-m3 ;;
         *) echo "unknown target $target" >&2; exit 2 ;;
     esac
-    cargo build --quiet --profile "$profile" --target "$target" --example firmware
-    elf=$target_dir/$target/$profile/examples/firmware
+    cargo build --quiet --profile "$profile" --target "$target" --example "$example"
+    elf=$target_dir/$target/$profile/examples/$example
     mark=$("$llvm_bin/llvm-nm" "$elf" | awk '$3 == "bench_mark" { print $1 }')
     if [ -z "$mark" ]; then
         echo "bench_mark not found in $elf" >&2
         exit 1
     fi
-    marks=$out/$target-$profile.marks
-    log=$out/$target-$profile.log
+    marks=$out/$target-$profile-$example.marks
+    log=$out/$target-$profile-$example.log
     rm -f "$marks"
     QEMU_EXTRA="-plugin $plugin,mark=0x$mark -d plugin -D $marks" \
         tools/qemu-run.sh "$machine" "$cpu" "$elf" >"$log" 2>&1 || {
         cat "$log" >&2
-        echo "firmware failed on $target" >&2
+        echo "$example failed on $target" >&2
         exit 1
     }
 
-    echo "## $target ($cpu on QEMU $machine), profile $profile"
+    echo "## $example: $target ($cpu on QEMU $machine), profile $profile"
     echo
     echo "| phase | instructions |"
     echo "| --- | ---: |"

@@ -14,6 +14,8 @@ mod closed_loop;
 #[allow(dead_code)]
 #[path = "../../examples/firmware/kr270.rs"]
 mod kr270;
+#[path = "../../examples/firmware_plan/sequence.rs"]
+mod plan_sequence;
 #[allow(dead_code)]
 #[path = "../../examples/firmware_diagnose/table.rs"]
 mod table;

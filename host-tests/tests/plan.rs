@@ -355,3 +355,46 @@ fn planned_payload_poses_determine_the_kr270_compliances_as_well_as_twice_as_man
         );
     }
 }
+
+/// The controller's choices (`examples/firmware_plan`: the core's
+/// `next_best` one configuration at a time, in f32 and f64) are the host's
+/// (`robcal plan`'s greedy `choose` on the same 15 configurations of the
+/// KR-270 under their payloads, the setup's model with A2's compliance by
+/// angle), and the sequence the firmware checks against is theirs.
+#[test]
+fn the_controllers_choices_are_the_hosts() {
+    use crate::kr270::{q_rad, Kr270, G, LOAD_DKG};
+    use crate::plan_sequence::{sequence, table, PICKS};
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let job = Job::load(root.join("data/kr270/setup.toml")).expect("setup");
+    let candidates: Vec<robcal::calibrate::plan::Candidate> = (0..G)
+        .map(|g| robcal::calibrate::plan::Candidate {
+            q: q_rad::<f64>(g).to_vec(),
+            load_kg: f64::from(LOAD_DKG[g]) * 0.1,
+        })
+        .collect();
+    let p = pool(&job, candidates, &Default::default()).unwrap();
+    assert_eq!(p.parameters(), 9, "{:?} {:?}", p.params, p.notes);
+    let host = choose(&p, PICKS, Criterion::D, 0).unwrap().chosen;
+    let (c64, _) = sequence(&table(&Kr270::<f64>::new().unwrap()).unwrap()).unwrap();
+    let (c32, _) = sequence(&table(&Kr270::<f32>::new().unwrap()).unwrap()).unwrap();
+    println!("host {host:?}, device f64 {c64:?}, f32 {c32:?}");
+    assert_eq!(host, c64.to_vec());
+    assert_eq!(host, c32.to_vec());
+    assert_eq!(
+        host,
+        firmware_plan_sequence().to_vec(),
+        "examples/firmware_plan/main.rs: HOST_SEQUENCE"
+    );
+}
+
+/// `HOST_SEQUENCE` as written in `examples/firmware_plan/main.rs`.
+fn firmware_plan_sequence() -> Vec<usize> {
+    let text = include_str!("../../examples/firmware_plan/main.rs");
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("pub const HOST_SEQUENCE"))
+        .expect("HOST_SEQUENCE");
+    let list = &line[line.rfind('[').unwrap() + 1..line.rfind(']').unwrap()];
+    list.split(',').map(|v| v.trim().parse().unwrap()).collect()
+}

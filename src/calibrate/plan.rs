@@ -28,14 +28,17 @@
 //! not chosen while that improves the criterion, for at most
 //! [`PlanSettings::exchange_passes`] passes. Before the chosen rows
 //! identify every parameter a prior keeps `Λ` invertible: `10⁻⁶` of one
-//! candidate's mean diagonal (scaled) per candidate chosen; the scores
-//! reported are without it.
+//! candidate's mean information per parameter
+//! ([`crate::estimate::plan::prior`]), times the candidates chosen so far;
+//! the scores reported are without it. A controller choosing as it
+//! measures takes the same steps ([`crate::estimate::plan::next_best`]).
 //!
 //! A parameter that no candidate of the pool determines (the independence
 //! test on the whole pool, [`crate::estimate::rank`]) is left out and named:
 //! no choice of these poses identifies it. A compliance by angle
-//! (`compliance_by_angle`) is planned as one compliance per joint: its bins
-//! are the measured angles, which a plan does not know.
+//! (`compliance_by_angle`) keeps its bins when the candidates' angles make
+//! them (a pool at the compensator's angles); random candidates take too
+//! many angles, and it is then planned as one compliance per joint.
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -315,23 +318,41 @@ pub fn pool(
     }
     let mut notes = Vec::new();
     let mut job = job.clone();
-    if !job.setup.model.compliance_by_angle.is_empty() {
-        notes.push(format!(
-            "compliance_by_angle ({}) planned as one compliance per joint: its bins are the \
-             angles measured",
-            job.setup.model.compliance_by_angle.join(", ")
-        ));
-        for name in std::mem::take(&mut job.setup.model.compliance_by_angle) {
-            if !job.setup.model.compliance.contains(&name) {
-                job.setup.model.compliance.push(name);
-            }
-        }
-    }
     let absolute = declared::needs_absolute(&job);
     let compliance = !job.setup.model.compliance.is_empty();
     if compliance && !candidates.iter().any(|c| c.load_kg > 0.0) {
         return Err(CalibrationError::Data(
             "the model has compliances and no candidate carries a payload: give its mass (--load-kg)"
+                .into(),
+        ));
+    }
+    // Candidates that repeat one another, or give no row (unloaded, for a
+    // model of compliances alone), are not candidates.
+    let given = candidates.len();
+    let mut candidates = candidates;
+    let mut seen = std::collections::HashSet::new();
+    candidates.retain(|c| {
+        let key: Vec<u64> = (c.q.iter().chain([&c.load_kg]))
+            .map(|v| v.to_bits())
+            .collect();
+        seen.insert(key)
+    });
+    let repeated = given - candidates.len();
+    if !absolute {
+        candidates.retain(|c| c.load_kg > 0.0);
+    }
+    let unloaded = given - repeated - candidates.len();
+    if repeated > 0 || unloaded > 0 {
+        notes.push(format!(
+            "{} of {given} candidates: {repeated} repeated another, {unloaded} unloaded (the \
+             model needs deflections)",
+            candidates.len()
+        ));
+    }
+    if candidates.is_empty() {
+        return Err(CalibrationError::Data(
+            "no candidate gives a row for the declared model (a model of compliances alone \
+             needs candidates with a payload)"
                 .into(),
         ));
     }
@@ -344,12 +365,6 @@ pub fn pool(
                 "candidate {}: {} joint values for {dof} joints",
                 c + 1,
                 cand.q.len()
-            )));
-        }
-        if !absolute && cand.load_kg <= 0.0 {
-            return Err(CalibrationError::Data(format!(
-                "candidate {}: unloaded, and the model needs deflections only: it gives no row",
-                c + 1
             )));
         }
         let q: JointValues = cand.q.iter().copied().collect();
@@ -397,7 +412,33 @@ pub fn pool(
             .collect(),
         bins: Default::default(),
     };
-    let rows = Rows::build(&job, Cow::Owned(poses), absolute, &mut names, policy)?;
+    let rows = Rows::build(&job, Cow::Borrowed(&poses), absolute, &mut names, policy)?;
+    // A compliance by angle keeps its bins when the candidates' angles
+    // make them (a pool of the user's at a compensator's angles); else it
+    // is planned as one compliance per joint.
+    let binned = |rows: &Rows| {
+        (job.setup.model.compliance_by_angle.iter()).all(|name| {
+            job.robot
+                .joint_index(name)
+                .is_some_and(|j| rows.bins.get(j).is_some_and(|b| !b.is_empty()))
+        })
+    };
+    let rows = if binned(&rows) {
+        rows
+    } else {
+        notes.push(format!(
+            "compliance_by_angle ({}) planned as one compliance per joint: the candidates take \
+             too many angles for its bins (give a pool at the compensator's angles to plan them)",
+            job.setup.model.compliance_by_angle.join(", ")
+        ));
+        for name in std::mem::take(&mut job.setup.model.compliance_by_angle) {
+            if !job.setup.model.compliance.contains(&name) {
+                job.setup.model.compliance.push(name);
+            }
+        }
+        names.bins.clear();
+        Rows::build(&job, Cow::Owned(poses), absolute, &mut names, policy)?
+    };
     let model = declared::declared(&job, std::path::Path::new("candidate poses"), &rows, &names)?;
     let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut quiet = |_: &str| {};
@@ -565,20 +606,15 @@ impl Pool {
         self.blocks.get(c).map_or(&[], Vec::as_slice)
     }
 
-    /// The prior `Λ₀` of the first choice (module docs): 10⁻⁶ of the mean
-    /// diagonal of one candidate's information.
+    /// The prior `Λ₀` of the first choice (module docs): the core's
+    /// ([`crate::estimate::plan::prior`]), 10⁻⁶ of one candidate's mean
+    /// information per parameter.
     pub fn prior(&self) -> DVector<f64> {
-        let n = self.parameters();
-        let mut d = 0.0;
-        for c in 0..self.blocks.len() {
-            for b in &self.blocks[c] {
-                for a in 0..b.rows {
-                    d += b.w[a] * b.w[a] * b.b.row(a).norm_squared();
-                }
-            }
+        let mut p = DVector::zeros(self.parameters());
+        if crate::estimate::plan::prior(&self.blocks, &mut p).is_err() {
+            p.fill(1e-6);
         }
-        let mean = d / (self.blocks.len().max(1) * n.max(1)) as f64;
-        DVector::repeat(n, 1e-6 * mean.max(f64::MIN_POSITIVE))
+        p
     }
 
     /// The criterion's value of the information `lambda` (larger is

@@ -154,6 +154,77 @@ where
     Factor::new(&l, active)
 }
 
+/// The prior of a plan's first choices ([`with_prior`]), from the
+/// candidates of `table`, into `out`: `priorⱼ = 10⁻⁶ · m · sⱼ²`, where
+/// `sⱼ² = mean over blocks of Σ bₐⱼ²` (the rows a block uses, unweighted)
+/// and `m` the mean over candidates of `Σ wₐ² Σⱼ (bₐⱼ/sⱼ)² / n`: a
+/// millionth of one candidate's information per parameter, in each
+/// parameter's own unit (the same prior whatever the units: the host's
+/// scaled columns give `sⱼ = 1`). A parameter no block moves gets 1.
+///
+/// # Errors
+/// [`Error::Mismatch`] for a block of another number of parameters than
+/// `out`; a block's [`Block::validate`] error. `out` is then unchanged.
+pub fn prior<T: RealField + Copy, D: Dim, C: AsRef<[Block<T, D>]>>(
+    table: &[C],
+    out: &mut OVector<T, D>,
+) -> Result<(), Error>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let n = out.len();
+    for c in table {
+        for b in c.as_ref() {
+            if b.b.ncols() != n {
+                return Err(Error::Mismatch {
+                    what: "a candidate's parameters and the prior's",
+                });
+            }
+            b.validate()?;
+        }
+    }
+    let mut s2 = out.clone();
+    s2.fill(T::zero());
+    let mut blocks = 0usize;
+    for c in table {
+        for b in c.as_ref() {
+            for a in 0..b.rows {
+                for j in 0..n {
+                    s2[j] += b.b[(a, j)] * b.b[(a, j)];
+                }
+            }
+            blocks += 1;
+        }
+    }
+    let count = |k: usize| -> T { nalgebra::convert(k.max(1) as f64) };
+    for v in s2.iter_mut() {
+        *v /= count(blocks);
+        if *v <= T::zero() || !v.is_finite() {
+            *v = T::one();
+        }
+    }
+    let mut m = T::zero();
+    for c in table {
+        for b in c.as_ref() {
+            for a in 0..b.rows {
+                let w2 = b.w[a] * b.w[a];
+                for j in 0..n {
+                    m += w2 * b.b[(a, j)] * b.b[(a, j)] / s2[j];
+                }
+            }
+        }
+    }
+    m /= count(table.len() * n);
+    if m <= T::zero() || !m.is_finite() {
+        m = T::one();
+    }
+    let scale: T = nalgebra::convert(1e-6);
+    for j in 0..n {
+        out[j] = scale * m * s2[j];
+    }
+    Ok(())
+}
+
 /// The candidate of `table` not yet `taken` whose blocks raise
 /// `ln det(Λ + diag(prior))` most, and by how much ([`gain`]; the first of
 /// equal gains); `None` when every candidate is taken. `lambda` is the
@@ -268,5 +339,31 @@ mod tests {
             with_prior(&lambda, &Vector4::repeat(-1.0), &[true; 4]),
             Err(Error::NotPositive { .. })
         ));
+    }
+
+    /// The prior is a millionth of one candidate's information, in each
+    /// parameter's unit: scaling a column by `c` scales its prior by `c²`.
+    #[test]
+    fn the_prior_follows_each_parameters_unit() {
+        let b = Matrix3x4::new(1.0, 2.0, 0.0, 1.0, 0.0, 1.0, 3.0, 0.5, 2.0, 0.0, 1.0, 1.0);
+        let table = [[block(b)], [block(b * 2.0)]];
+        let mut p = Vector4::zeros();
+        prior(&table, &mut p).unwrap();
+        // s² per column: mean over the two blocks of the column's squares.
+        let s2 = Vector4::new(5.0, 5.0, 10.0, 2.25) * 2.5;
+        // m: Σ (b/s)² over both candidates (4 columns each of unit mean
+        // over blocks: 2 × 4 in total), over 2 candidates × 4 parameters.
+        let m = 8.0 / 8.0;
+        for j in 0..4 {
+            assert!((p[j] - 1e-6 * m * s2[j]).abs() < 1e-18, "{j}: {}", p[j]);
+        }
+        let mut q = Vector4::zeros();
+        let mut t = table;
+        for c in &mut t {
+            c[0].b.column_mut(1).scale_mut(10.0);
+        }
+        prior(&t, &mut q).unwrap();
+        assert!((q[1] / p[1] - 100.0).abs() < 1e-9);
+        assert!((q[0] - p[0]).abs() < 1e-18);
     }
 }
