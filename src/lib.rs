@@ -19,25 +19,28 @@
 //!           Factor → Solution  X̂ = Λ⁻¹η, covariances            (eq. 6–8, 11, 13)
 //!           Reweightable: OLS, WLS, iterative WLS, weights from σ    (eq. 12, 14)
 //!           rank (what is identifiable), nested (F test of a candidate effect)
+//!           plan (the next best pose: the determinant lemma)
 //!                              │
 //!  calibrate  the closed loop: fit the declared model (Gauss–Newton),           (std)
 //!             diagnose the residuals, add the effect that explains them,
 //!             refit, report before/after; validate on another file;
 //!             predict: the calibrated robot applied — a point for joints
-//!             and payload, the compensated command (robot::compensate)
+//!             and payload, the compensated command (robot::compensate);
+//!             plan: the poses to measure, chosen before measuring
 //!                              │
-//!  bin/robcal  `robcal calibrate`, `import`, `predict`, `compensate`             (cli)
+//!  bin/robcal  `robcal calibrate`, `import`, `predict`, `compensate`,            (cli)
+//!              `check`, `compare`, `plan`, `init`
 //! ```
 //!
 //! | module | what | needs |
 //! |---|---|---|
 //! | [`robot`] | the serial chain (or a tree, markers on several links), forward kinematics, loads and joint torques, the deflected equilibrium, compensation | — (trees: `tree`, on with `std`) |
 //! | [`model`] | [`model::Param`] (every parameter and effect, with units), [`model::Sample`], the columns, the device's [`model::Layout`] | — |
-//! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests | — |
+//! | [`estimate`] | the streaming estimator: accumulator, factorisation, grouped statistics, iterative reweighting, identifiability, nested tests, the next best pose | — |
 //! | [`Error`] | the core's one error type | — |
 //! | `parallel` | independent work on worker threads, the serial loop's answers bit for bit (`ROBCAL_THREADS`) | `std` |
 //! | `io` | the data contract's files: URDF, setup TOML, measurement CSV, importers | `std` |
-//! | `calibrate` | the one calibration engine, `calibrate::calibrate`: eleven modules in the order a calibration flows through them (its own map) | `std` |
+//! | `calibrate` | the one calibration engine, `calibrate::calibrate`: fourteen modules in the order a calibration flows through them (its own map) | `std` |
 //!
 //! The `tree` feature (no_std too; `std` turns it on) lets a chain branch:
 //! a controller of a serial arm leaves it off and saves ~600 bytes of flash.
