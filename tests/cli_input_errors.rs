@@ -485,7 +485,7 @@ fn a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line() {
         ),
         (
             &[][..],
-            "a command is needed: calibrate, import, predict, compensate, check, compare, init",
+            "a command is needed: calibrate, import, predict, compensate, check, compare, plan, init",
         ),
         (&["import"][..], "a command is needed: figaroh-mocap, poses"),
         (
