@@ -1,7 +1,9 @@
 //! The engine's leave-one-configuration-out prediction error
 //! ([`Engine::heldout`]): OLS in closed form ([`crate::calibrate::fit::heldout`]),
-//! weighted fits from the moments per configuration and axis, refits where
-//! those cannot.
+//! a fit with weights fixed in advance (the instrument's σ) by a downdate of
+//! its sums per configuration ([`crate::calibrate::fit::moments::FixedFolds`]),
+//! weighted fits whose weights are re-estimated from the moments per
+//! configuration and axis, refits where those cannot.
 
 use nalgebra::Vector3;
 
@@ -9,9 +11,11 @@ use crate::calibrate::engine::{Engine, Fitted};
 use crate::calibrate::fit::heldout::{ols_heldout, HeldOut, OlsHeldOut, WINDOW_ROWS};
 use crate::calibrate::fit::moments::DesignMoments;
 use crate::calibrate::fit::residuals::SquareSum;
+use crate::calibrate::fit::Weighting;
 use crate::calibrate::fit::{fit, fit_moments, Method};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
+use crate::estimate::robust_weights;
 
 impl Engine<'_> {
     /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
@@ -58,8 +62,35 @@ impl Engine<'_> {
         let settings = self.fit_settings;
         // Residuals in metres again ([`Rows::unscaled`]).
         let rows = &self.rows;
-        let folds: Vec<Option<Vec<Vector3<f64>>>> = match &moments {
-            Some(m) => {
+        // Weights fixed in advance (the instrument's σ, one weighted fit):
+        // each fold by a downdate of the sums (`FixedFolds`), not a fit.
+        let instrument = d.instrument_sigma.as_deref();
+        let fixed_weights: Option<Vec<Vector3<f64>>> = instrument
+            .filter(|_| settings.weighting == Weighting::Instrument)
+            .and_then(|sigma| {
+                let mut w = vec![Vector3::zeros(); sigma.len()];
+                robust_weights(sigma, &settings.weight, &mut w).ok()?;
+                Some(w)
+            });
+        let fixed = match (&moments, &fixed_weights) {
+            (Some(m), Some(w)) => m.fixed_folds(w).ok(),
+            _ => None,
+        };
+        let folds: Vec<Option<Vec<Vector3<f64>>>> = match (&moments, &fixed) {
+            (Some(_), Some(f)) => {
+                let small = groups * cols.len() * cols.len() * cols.len() < 200_000;
+                let threads = if small { 1 } else { crate::parallel::threads() };
+                crate::parallel::map(groups, threads, |g| {
+                    let x = f.estimate(g).ok()?;
+                    Some(
+                        by.of(g)
+                            .iter()
+                            .map(|&i| rows.unscaled(i, d.residual(&cols, x.as_slice(), i)))
+                            .collect(),
+                    )
+                })
+            }
+            (Some(m), None) => {
                 let small = groups * groups * cols.len() * cols.len() < 20_000;
                 let threads = if small { 1 } else { crate::parallel::threads() };
                 crate::parallel::map(groups, threads, |g| {
@@ -75,7 +106,7 @@ impl Engine<'_> {
                     )
                 })
             }
-            None => Vec::new(),
+            (None, _) => Vec::new(),
         };
         for g in 0..groups {
             if let Some(f) = &fast {
