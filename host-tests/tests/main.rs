@@ -39,6 +39,7 @@ mod fuzz_regressions;
 mod gauss_newton;
 mod grouped;
 mod grouped_fit;
+mod heldout_held_weights;
 mod identifiability;
 mod io_measurements;
 mod io_setup;

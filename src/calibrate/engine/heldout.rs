@@ -1,9 +1,11 @@
 //! The engine's leave-one-configuration-out prediction error
 //! ([`Engine::heldout`]): OLS in closed form ([`crate::calibrate::fit::heldout`]),
-//! a fit with weights fixed in advance (the instrument's σ) by a downdate of
-//! its sums per configuration ([`crate::calibrate::fit::moments::FixedFolds`]),
-//! weighted fits whose weights are re-estimated from the moments per
-//! configuration and axis, refits where those cannot.
+//! a fit with weights fixed in advance (the instrument's σ) — or re-estimated
+//! on more configurations than `Policy::heldout_refit_groups`, held — by a
+//! downdate of its sums per configuration
+//! ([`crate::calibrate::fit::moments::FixedFolds`]), other weighted fits
+//! from the moments per configuration and axis (their weights refitted),
+//! refits where those cannot.
 
 use nalgebra::Vector3;
 
@@ -65,13 +67,22 @@ impl Engine<'_> {
         // Weights fixed in advance (the instrument's σ, one weighted fit):
         // each fold by a downdate of the sums (`FixedFolds`), not a fit.
         let instrument = d.instrument_sigma.as_deref();
+        // Weights re-estimated (IRLS, eq. 14) on more configurations than
+        // `Policy::heldout_refit_groups`: each fold at the whole fit's
+        // weights, held (the configuration left out moves the others' σ
+        // only through the estimate: a second-order change).
+        let held = (self.fit_settings.method != Method::Ols
+            && groups > self.policy.heldout_refit_groups
+            && fitted.fit.weights.len() == groups)
+            .then(|| fitted.fit.weights.clone());
         let fixed_weights: Option<Vec<Vector3<f64>>> = instrument
             .filter(|_| settings.weighting == Weighting::Instrument)
             .and_then(|sigma| {
                 let mut w = vec![Vector3::zeros(); sigma.len()];
                 robust_weights(sigma, &settings.weight, &mut w).ok()?;
                 Some(w)
-            });
+            })
+            .or(held);
         let fixed = match (&moments, &fixed_weights) {
             (Some(m), Some(w)) => m.fixed_folds(w).ok(),
             _ => None,
