@@ -179,7 +179,7 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
     let out = d.join("plan.csv");
     let o = out.to_str().unwrap();
     // (Exit 2: an argument out of range, as clap says it.)
-    let cases: [(&[&str], i32, &str); 5] = [
+    let cases: [(&[&str], i32, &str); 6] = [
         (&["--poses", "5"], 1, "--load-kg"),
         (
             &["--poses", "50", "--candidates", "20", "--load-kg", "250"],
@@ -197,6 +197,7 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
             "--limit a2=-9:9",
         ),
         (&["--poses", "5", "--load-kg", "-3"], 2, "a mass from 0"),
+        (&["--poses", "5", "--candidates", "100001"], 2, "100001"),
     ];
     for (args, code, expect) in cases {
         let mut all = vec!["plan", "--setup", "data/kr270/setup.toml"];

@@ -58,6 +58,11 @@ use crate::io::measurements::{Deflection, JointValues, Measurements, Observation
 use crate::model::Param;
 use crate::robot::JointKind;
 
+/// Candidates a pool holds at most: 100 000 (a greedy step weighs every
+/// candidate: at 10⁵ candidates, K = 60 and 25 parameters a plan takes
+/// about 23 s on two cores).
+pub const MAX_CANDIDATES: usize = 100_000;
+
 /// What [`choose`] maximises (the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Criterion {
@@ -302,8 +307,9 @@ pub fn random_candidates(job: &Job, s: &PlanSettings) -> Result<Vec<Candidate>, 
 /// The rows of `candidates` for `job`'s declared model, as a [`Pool`].
 ///
 /// # Errors
-/// [`CalibrationError::Data`] when a candidate gives no row (an unloaded
-/// one for a model of compliances alone), when the model has a compliance
+/// [`CalibrationError::Data`] for more than [`MAX_CANDIDATES`]
+/// candidates, when none gives a row (unloaded ones for a model of
+/// compliances alone), when the model has a compliance
 /// and no candidate a payload, or when no parameter is determinable;
 /// as [`Rows::from_measurements`] and [`Engine::design`].
 pub fn pool(
@@ -315,6 +321,12 @@ pub fn pool(
         return Err(CalibrationError::Data(
             "no candidate pose to choose from".into(),
         ));
+    }
+    if candidates.len() > MAX_CANDIDATES {
+        return Err(CalibrationError::Data(format!(
+            "{} candidate poses: at most {MAX_CANDIDATES} are planned from",
+            candidates.len()
+        )));
     }
     let mut notes = Vec::new();
     let mut job = job.clone();

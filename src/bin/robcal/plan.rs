@@ -35,7 +35,7 @@ pub struct PlanArgs {
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=100_000))]
     poses: u64,
     /// Random candidates to choose from, within the joint limits.
-    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=plan::MAX_CANDIDATES as u64))]
     candidates: u64,
     /// Candidates of your own instead (the points CSV of `robcal predict`:
     /// `<joint>_rad`/`<joint>_m`, optional `load_kg` with `com_*_m`;
@@ -58,8 +58,8 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = 0x706c_616e)]
     seed: u64,
     /// Exchange passes at most after the greedy choice (0: greedy only).
-    #[arg(long = "exchange-passes", default_value_t = 10)]
-    exchange_passes: usize,
+    #[arg(long = "exchange-passes", default_value_t = 10, value_parser = clap::value_parser!(u64).range(0..=100))]
+    exchange_passes: u64,
     /// Write the chosen configurations here (the points CSV: id, load_kg,
     /// the setup's payload centre of mass, one column per joint in rad or
     /// m; all or nothing).
@@ -128,7 +128,7 @@ pub fn run_plan(a: &PlanArgs) -> Result<(), String> {
         seed: a.seed,
         loads_kg: a.load_kg.clone(),
         limits: a.limit.clone(),
-        exchange_passes: a.exchange_passes,
+        exchange_passes: a.exchange_passes as usize,
     };
     let random = a.pool.is_none();
     let candidates = match &a.pool {
@@ -155,8 +155,13 @@ pub fn run_plan(a: &PlanArgs) -> Result<(), String> {
     };
     let policy = robcal::calibrate::Policy::default();
     let pool: Pool = plan::pool(&job, candidates, &policy).map_err(|e| e.to_string())?;
-    let planned = plan::choose(&pool, settings.poses, settings.criterion, a.exchange_passes)
-        .map_err(|e| e.to_string())?;
+    let planned = plan::choose(
+        &pool,
+        settings.poses,
+        settings.criterion,
+        settings.exchange_passes,
+    )
+    .map_err(|e| e.to_string())?;
     // K candidates of the random pool as drawn: what measuring without a
     // plan gives.
     let baseline = random.then(|| {
