@@ -212,5 +212,28 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
         assert!(err.contains(expect), "{err} (expected '{expect}')");
         assert!(!out.exists(), "{args:?} wrote {o}");
     }
+    // A pool that is not one: its line and column, nothing written.
+    let pool = d.join("pool.csv");
+    std::fs::write(
+        &pool,
+        "load_kg,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad\n250,0,0,0,0,nan,0\n",
+    )
+    .unwrap();
+    let r = robcal(&[
+        "plan",
+        "--setup",
+        "data/kr270/setup.toml",
+        "--poses",
+        "1",
+        "--pool",
+        pool.to_str().unwrap(),
+        "--output",
+        o,
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("pool.csv:2"), "{err}");
+    assert!(!out.exists());
     let _ = std::fs::remove_dir_all(&d);
 }
