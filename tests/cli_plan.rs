@@ -237,3 +237,47 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
     assert!(!out.exists());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Compliances and the full geometry together: a loaded candidate gives
+/// six blocks (three markers' positions and deflections), more than the
+/// core's gain takes at once; the host plans it the same way, and better
+/// than random poses.
+#[test]
+fn positions_and_deflections_together_are_planned() {
+    let d = dir("mixed");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let setup = std::fs::read_to_string(root.join("data/kr270/setup.toml"))
+        .unwrap()
+        .replace("geometry = \"none\"", "geometry = \"full\"")
+        .replace(
+            "robot = \"kr270.urdf\"",
+            &format!("robot = {:?}", root.join("data/kr270/kr270.urdf")),
+        );
+    std::fs::write(d.join("setup.toml"), setup).unwrap();
+    let o = robcal(&[
+        "plan",
+        "--setup",
+        d.join("setup.toml").to_str().unwrap(),
+        "--poses",
+        "30",
+        "--load-kg",
+        "250",
+        "--load-kg",
+        "0",
+        "--output",
+        d.join("plan.csv").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let names: Vec<&str> = (v["parameters"].as_array().unwrap().iter())
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(
+        names.contains(&"k_a3") && names.iter().any(|n| n.ends_with(".tx")),
+        "{names:?}"
+    );
+    let t = |s: &Value| s["trace_scaled"].as_f64().unwrap();
+    assert!(t(&v["plan"]) < t(&v["random"]), "{v}");
+    let _ = std::fs::remove_dir_all(&d);
+}

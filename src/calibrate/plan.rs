@@ -512,12 +512,14 @@ pub fn pool(
         let b = OMatrix::<f64, nalgebra::U3, Dyn>::from_fn_generic(nalgebra::U3, Dyn(n), |a, k| {
             buf[a * n + k]
         });
-        // (With rows of both kinds the design holds a deflection over √2
-        // already: `Rows::noise_scale`.)
-        let sigma = if row.kind == RowKind::Deflection && !mixed {
-            sigma0 * std::f64::consts::SQRT_2
-        } else {
-            sigma0
+        // A deflection is two points: √2 σ0. (With rows of both kinds the
+        // design holds it over √2: its columns back to the deflection's,
+        // for the predictions.)
+        let root2 = std::f64::consts::SQRT_2;
+        let (b, sigma) = match row.kind {
+            RowKind::Deflection if mixed => (b * root2, sigma0 * root2),
+            RowKind::Deflection => (b, sigma0 * root2),
+            RowKind::Absolute => (b, sigma0),
         };
         per_row.push((row.group(), b, 1.0 / sigma));
     }
@@ -549,16 +551,6 @@ pub fn pool(
         return Err(CalibrationError::Data(format!(
             "candidate {}: gives no row for the declared model",
             c + 1
-        )));
-    }
-    if blocks
-        .iter()
-        .any(|b| b.len() > crate::estimate::plan::MAX_BLOCKS)
-    {
-        return Err(CalibrationError::Data(format!(
-            "a candidate gives {} rows (markers × kinds): at most {} are planned",
-            blocks.iter().map(Vec::len).max().unwrap_or(0),
-            crate::estimate::plan::MAX_BLOCKS
         )));
     }
     let mut w = DMatrix::zeros(n, n);
@@ -683,8 +675,10 @@ impl Pool {
                 let g = crate::parallel::map(self.blocks.len(), threads, |c| {
                     if skip[c] {
                         Ok(f64::NEG_INFINITY)
-                    } else {
+                    } else if self.blocks[c].len() <= crate::estimate::plan::MAX_BLOCKS {
                         crate::estimate::plan::gain(&f, &self.blocks[c])
+                    } else {
+                        Ok(many_blocks_gain(&f, &self.blocks[c]))
                     }
                 });
                 g.into_iter().collect::<Result<Vec<_>, _>>().map_err(core)
@@ -788,6 +782,22 @@ impl Pool {
             std,
             predicted_um,
         }
+    }
+}
+
+/// [`crate::estimate::plan::gain`] of a candidate with more blocks than
+/// the core takes (markers × kinds beyond four): the same
+/// `ln det(I + XᵀX)`, `X` the rows whitened by the factor, at the host's
+/// size.
+fn many_blocks_gain(f: &crate::estimate::Factor<f64, Dyn>, blocks: &[Block<f64, Dyn>]) -> f64 {
+    let x: Vec<DVector<f64>> = (blocks.iter())
+        .flat_map(|b| (0..b.rows).map(move |a| f.whiten(&(b.b.row(a).transpose() * b.w[a]))))
+        .collect();
+    let r = x.len();
+    let s = DMatrix::from_fn(r, r, |i, j| f64::from(u8::from(i == j)) + x[i].dot(&x[j]));
+    match s.cholesky() {
+        Some(c) => 2.0 * c.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>(),
+        None => f64::NEG_INFINITY,
     }
 }
 
