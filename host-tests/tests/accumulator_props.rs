@@ -97,8 +97,15 @@ fn check_f64<const N: usize>(seed: u64, blocks: usize, wdec: f64) -> Result<(), 
     // Loosened to 1e-9: the sandwich has Λ⁻¹ twice, and M weights rows by
     // w⁴σ² (6 decades here) where Λ weights them by w² — its diagonal can
     // be far smaller than Λ⁻¹'s, and the element errors are judged
-    // against it. Worst measured in 20 000 cases: 2.9e-10 (m = n = 3).
-    prop_assert!(es <= 1e-9, "sandwich: {es:e}");
+    // against it. Worst measured in 20 000 cases: 2.9e-10 (m = n = 3); and
+    // it grows with the conditioning: 1.55e-9 at κ = 83 (m = 18, n = 6, a
+    // case `.ci/props.sh` drew, pinned in `f64_equals_batch_n6_drawn_case`),
+    // hence 1e-9 per ten of κ.
+    let kappa_s = equilibrated_cond(&batch);
+    prop_assert!(
+        es <= 1e-9 * (1.0 + kappa_s / 10.0),
+        "sandwich: {es:e} (κ {kappa_s:e})"
+    );
     // Eq. 7, with the cancellation bound of σ̂² (module docs): the RSS is
     // `Σ Δpᵀ W² Δp − X̂ᵀ η`, and an estimate error of order κ·ε (κ the
     // equilibrated condition number) enters `X̂ᵀ η ≈ yy` as κ·ε·yy. (Without
@@ -337,6 +344,14 @@ fn check_const_equals_dyn<T: ToF64, const N: usize>(
         "merged solve differs"
     );
     Ok(())
+}
+
+/// A case `.ci/props.sh` drew (2 000 cases of the batch properties,
+/// 2026-12-07) where the sandwich's relative error reached 1.55e-9, over
+/// the bound of 1e-9 it had then (κ = 83): pinned.
+#[test]
+fn f64_equals_batch_n6_drawn_case() {
+    check_f64::<6>(1_729_237_308_343_678_365, 6, 0.933_573_188_381_966_2).unwrap();
 }
 
 proptest! {
