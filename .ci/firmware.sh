@@ -47,6 +47,19 @@ failed=0
 pass() { echo "firmware: ok: $*"; passed=$((passed + 1)); }
 fail() { echo "firmware: FAILED: $*" >&2; failed=$((failed + 1)); }
 
+# An ELF's flash (.vector_table + .text + .rodata + .data) and static RAM
+# (.data + .bss + .uninit) in bytes, and the stack high-water mark the run
+# logged in $log (empty when it logged none).
+memory() {
+    local sizes stack
+    sizes=$("$llvm_bin/llvm-size" -A "$1" | awk '
+        { s[$1] = $2 }
+        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
+                    s[".data"] + s[".bss"] + s[".uninit"] }')
+    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    echo "$sizes $stack"
+}
+
 log=$(mktemp)
 marks=$(mktemp)
 trap 'rm -f "$log" "$marks"' EXIT
@@ -92,11 +105,7 @@ for target in "${targets[@]}"; do
         fi
     fi
 
-    read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
-        { s[$1] = $2 }
-        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
-                    s[".data"] + s[".bss"] + s[".uninit"] }')
-    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    read -r flash ram stack < <(memory "$elf")
     echo "firmware: $target: flash $flash B, RAM $ram B + stack ${stack:-?} B"
     if [ "$flash" -le "$flash_budget" ] && [ -n "$stack" ] &&
         [ $((ram + stack)) -le "$ram_budget" ]; then
@@ -143,11 +152,7 @@ firmware_diagnose() {
     else
         fail "$target: diagnosis lines missing"
     fi
-    read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
-        { s[$1] = $2 }
-        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
-                    s[".data"] + s[".bss"] + s[".uninit"] }')
-    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    read -r flash ram stack < <(memory "$elf")
     echo "firmware_diagnose: $target: flash $flash B, RAM $ram B + stack ${stack:-?} B"
     if [ "$flash" -le "$flash_budget" ]; then
         pass "$target: firmware_diagnose within 64 KiB flash"
@@ -175,11 +180,7 @@ firmware_plan() {
     else
         fail "$target: firmware_plan checks"
     fi
-    read -r flash ram < <("$llvm_bin/llvm-size" -A "$elf" | awk '
-        { s[$1] = $2 }
-        END { print s[".vector_table"] + s[".text"] + s[".rodata"] + s[".data"],
-                    s[".data"] + s[".bss"] + s[".uninit"] }')
-    stack=$(sed -n 's/.*stack high-water mark: \([0-9]*\) bytes.*/\1/p' "$log")
+    read -r flash ram stack < <(memory "$elf")
     echo "firmware_plan: $target: flash $flash B, RAM $ram B + stack ${stack:-?} B"
     if [ "$flash" -le "$flash_budget" ] && [ -n "$stack" ] &&
         [ $((ram + stack)) -le "$ram_budget" ]; then

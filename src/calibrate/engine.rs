@@ -141,6 +141,40 @@ fn rows_mut<'r>(rows: &'r mut Arc<Rows>, last: &mut Mutex<Option<LastDesign>>) -
     Arc::make_mut(rows)
 }
 
+impl<'a> Engine<'a> {
+    /// An engine on rows of poses to be measured, not of measurements
+    /// ([`crate::calibrate::varied`]'s poses, [`crate::calibrate::plan`]'s
+    /// candidates): at `job`'s nominal robot, no held-out error.
+    pub fn for_poses(
+        job: &crate::io::job::Job,
+        rows: Rows,
+        names: Names,
+        lin: Linearisation,
+        fit_settings: FitSettings,
+        policy: Policy,
+        progress: Progress<'a>,
+    ) -> Self {
+        let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
+        Engine {
+            cancel: None,
+            geometry: Geometry::nominal_tree(
+                &job.robot.chain,
+                &job.robot.ends,
+                &markers,
+                &job.marker_ends(),
+            ),
+            rows: Arc::new(rows),
+            names,
+            lin,
+            fit_settings,
+            policy,
+            heldout: false,
+            progress,
+            last_design: Default::default(),
+        }
+    }
+}
+
 impl Engine<'_> {
     /// The design of `params` at the rows' current linearisation (the
     /// last one built again when nothing changed since).

@@ -41,13 +41,11 @@
 //! many angles, and it is then planned as one compliance per joint.
 
 use std::borrow::Cow;
-use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Vector3};
 
 use crate::calibrate::effects::declared;
 use crate::calibrate::engine::Engine;
-use crate::calibrate::params::geometry::Geometry;
 use crate::calibrate::params::linearisation::{DeflectionModel, Linearisation};
 use crate::calibrate::params::names::Names;
 use crate::calibrate::rows::{RowKind, Rows};
@@ -386,13 +384,8 @@ pub fn pool(
                 config: c as i64,
                 rep: 1,
                 marker: m.id,
-                load_kg: 0.0,
                 q: q.clone(),
-                q_written: Default::default(),
-                p_m: [0.0; 3],
-                t_s: None,
-                sigma_m: None,
-                line: 0,
+                ..Observation::default()
             });
             if cand.load_kg > 0.0 {
                 deflections.push(Deflection {
@@ -452,20 +445,13 @@ pub fn pool(
         Rows::build(&job, Cow::Owned(poses), absolute, &mut names, policy)?
     };
     let model = declared::declared(&job, std::path::Path::new("candidate poses"), &rows, &names)?;
-    let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut quiet = |_: &str| {};
-    let mut e = Engine {
-        cancel: None,
-        geometry: Geometry::nominal_tree(
-            &job.robot.chain,
-            &job.robot.ends,
-            &markers,
-            &job.marker_ends(),
-        ),
-        rows: Arc::new(rows),
+    let mut e = Engine::for_poses(
+        &job,
+        rows,
         names,
-        lin: Linearisation::nominal(DeflectionModel::Exact),
-        fit_settings: crate::calibrate::fit::FitSettings {
+        Linearisation::nominal(DeflectionModel::Exact),
+        crate::calibrate::fit::FitSettings {
             method: crate::calibrate::settings::Method::Ols,
             weight: crate::estimate::RobustWeight::new(1.0, 0.0)
                 .map_err(|e| CalibrationError::Core("noise settings", e))?,
@@ -473,11 +459,9 @@ pub fn pool(
             tolerance: policy.irls_tolerance,
             weighting: crate::calibrate::fit::Weighting::Estimated,
         },
-        policy: *policy,
-        heldout: false,
-        progress: &mut quiet,
-        last_design: Default::default(),
-    };
+        *policy,
+        &mut quiet,
+    );
     e.relinearise_for(&model)?;
     let design = e.design(&model)?;
     let all: Vec<usize> = (0..model.len()).collect();

@@ -104,11 +104,7 @@ fn robustly(
                     "config {} marker {} ({}, weight {w:.3}, {:.1} um)",
                     r.config,
                     r.marker,
-                    if r.deflection {
-                        "deflection"
-                    } else {
-                        "position"
-                    },
+                    r.kind_name(),
                     r.final_um.norm()
                 )
             })
@@ -184,11 +180,7 @@ fn without_outliers(
                 "config {} marker {} ({}, {:.1} um)",
                 r.config,
                 r.marker,
-                if r.deflection {
-                    "deflection"
-                } else {
-                    "position"
-                },
+                r.kind_name(),
                 r.final_um.norm()
             )
         })

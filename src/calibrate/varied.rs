@@ -29,7 +29,6 @@ use std::sync::Arc;
 
 use crate::calibrate::design::Design;
 use crate::calibrate::engine::Engine;
-use crate::calibrate::params::geometry::Geometry;
 use crate::calibrate::params::linearisation::Linearisation;
 use crate::calibrate::report::LeftOut;
 use crate::calibrate::rows::Rows;
@@ -136,13 +135,8 @@ pub fn varied(
                 config: config as i64,
                 rep: 1,
                 marker: m.id,
-                load_kg: 0.0,
                 q: q.clone(),
-                q_written: Default::default(),
-                p_m: [0.0; 3],
-                t_s: None,
-                sigma_m: None,
-                line: 0,
+                ..Observation::default()
             });
         }
     }
@@ -156,20 +150,16 @@ pub fn varied(
     };
     let mut names = names.clone();
     let rows = Rows::build(job, Cow::Owned(poses), true, &mut names, policy)?;
-    let markers: Vec<nalgebra::Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
     let mut quiet = |_: &str| {};
-    let mut e = Engine {
-        cancel: None,
-        geometry: Geometry::nominal_tree(chain, &job.robot.ends, &markers, &job.marker_ends()),
-        rows: Arc::new(rows),
+    let mut e = Engine::for_poses(
+        job,
+        rows,
         names,
-        lin: Linearisation::nominal(data.lin.model),
-        fit_settings: data.fit_settings,
-        policy: *policy,
-        heldout: false,
-        progress: &mut quiet,
-        last_design: Default::default(),
-    };
+        Linearisation::nominal(data.lin.model),
+        data.fit_settings,
+        *policy,
+        &mut quiet,
+    );
     e.relinearise_for(&params)?;
     let design = e.design(&params)?;
     let all: Vec<usize> = (0..params.len()).collect();

@@ -38,6 +38,17 @@ pub struct RowError {
     pub final_um: Vector3<f64>,
 }
 
+impl RowError {
+    /// Its kind as the report's notes name it: `deflection` or `position`.
+    pub fn kind_name(&self) -> &'static str {
+        if self.deflection {
+            "deflection"
+        } else {
+            "position"
+        }
+    }
+}
+
 /// Every row's error before and after ([`RowError`]), by column.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RowErrors {
