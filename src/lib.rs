@@ -67,6 +67,8 @@ pub mod io;
 pub mod model;
 #[cfg(feature = "std")]
 pub mod parallel;
+#[cfg(feature = "render")]
+pub mod render;
 pub mod robot;
 
 pub use error::Error;

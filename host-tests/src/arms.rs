@@ -225,6 +225,7 @@ impl Chain {
             setup_path: "arm.toml".into(),
             setup,
             robot,
+            urdf_text: Some(self.urdf()),
         };
         Ok((job, m))
     }

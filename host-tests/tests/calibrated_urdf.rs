@@ -119,6 +119,7 @@ fn ur10_calibrated_urdf_reproduces_the_model_and_reads_back_without_correction()
         )
         .expect("calibrated URDF reads"),
         setup,
+        urdf_text: None,
     };
     let m = read_measurements(&data, &again.robot, &again.setup).expect("data");
     let r2 = calibrate::calibrate(&again, &m, &quick(), &mut |_| {}).expect("recalibrate");

@@ -20,6 +20,10 @@ pub struct Job {
     pub setup: Setup,
     /// The robot, read from [`Setup::robot_path`] with the setup's base and tip.
     pub robot: Robot,
+    /// The URDF's text, for a job made from text ([`Job::parse`]); `None`:
+    /// the file at [`Setup::robot_path`], read again where its text is
+    /// needed (the calibrated URDF).
+    pub urdf_text: Option<String>,
 }
 
 impl Job {
@@ -30,20 +34,58 @@ impl Job {
     pub fn load(setup_path: impl AsRef<Path>) -> Result<Self, InputError> {
         let setup_path = setup_path.as_ref();
         let setup = Setup::load(setup_path)?;
-        let mut robot = Robot::load_tree(
+        let robot = Robot::load_tree(
             setup.robot_path(setup_path),
             setup.base_link.as_deref(),
             setup.tip(),
             &setup.marker_links(),
         )?;
+        Self::of(setup_path.to_owned(), setup, robot, None)
+    }
+
+    /// A job from text, no file read: the setup's TOML and the robot's
+    /// URDF; `setup_file` and `urdf_file` name them in errors (they need
+    /// not exist). The setup's `robot` path is not read: the URDF is
+    /// `urdf_text`, kept in [`Job::urdf_text`].
+    ///
+    /// # Errors
+    /// Any [`Setup::parse`], [`Robot::parse_tree`] or
+    /// [`Setup::check_robot`] error.
+    pub fn parse(
+        setup_text: &str,
+        setup_file: impl Into<PathBuf>,
+        urdf_text: &str,
+        urdf_file: impl Into<PathBuf>,
+    ) -> Result<Self, InputError> {
+        let setup_path = setup_file.into();
+        let setup = Setup::parse(setup_text, &setup_path)?;
+        let robot = Robot::parse_tree(
+            urdf_text,
+            urdf_file,
+            setup.base_link.as_deref(),
+            setup.tip(),
+            &setup.marker_links(),
+        )?;
+        Self::of(setup_path, setup, robot, Some(urdf_text.to_owned()))
+    }
+
+    /// The job of a setup and its robot as read: the setup's assumed link
+    /// masses given to the robot, and one checked against the other.
+    fn of(
+        setup_path: PathBuf,
+        setup: Setup,
+        mut robot: Robot,
+        urdf_text: Option<String>,
+    ) -> Result<Self, InputError> {
         if let Some(m) = setup.assumed_link_mass_kg {
             robot.assume_link_mass(m);
         }
-        setup.check_robot(&robot, setup_path)?;
+        setup.check_robot(&robot, &setup_path)?;
         Ok(Self {
-            setup_path: setup_path.to_owned(),
+            setup_path,
             setup,
             robot,
+            urdf_text,
         })
     }
 

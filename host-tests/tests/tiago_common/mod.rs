@@ -84,6 +84,7 @@ pub fn job(data: &Path, setup: &str) -> Job {
         setup_path,
         setup,
         robot,
+        urdf_text: None,
     }
 }
 

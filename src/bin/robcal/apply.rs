@@ -9,7 +9,6 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use robcal::calibrate::ModelFile;
 use robcal::calibrate::{Payload, Predictor};
 use robcal::io::points::{joint_column, parse_points, PointRow};
 use robcal::robot::CompensateSettings;
@@ -107,18 +106,7 @@ fn load_model(path: &Path) -> Result<Predictor, String> {
 fn load_model_file(path: &Path) -> Result<(Predictor, serde_json::Value), String> {
     let text = robcal::io::input::read_text(path, "the model file", MAX_MODEL_BYTES)
         .map_err(|e| e.to_string())?;
-    let at = |m: String| format!("{}: {m}", path.display());
-    let value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| at(format!("not JSON: {e}")))?;
-    let section = value.get("predictor").ok_or_else(|| {
-        at("no 'predictor' section (written by robcal calibrate --output DIR)".into())
-    })?;
-    let file: ModelFile =
-        serde_json::from_value(section.clone()).map_err(|e| at(format!("predictor: {e}")))?;
-    let p = file
-        .predictor()
-        .map_err(|e| at(format!("predictor: {e}")))?;
-    Ok((p, value))
+    robcal::render::json::read_model(&text).map_err(|m| format!("{}: {m}", path.display()))
 }
 
 fn read_points(robot: &Predictor, path: &Path, target: bool) -> Result<Vec<PointRow>, String> {
@@ -150,25 +138,14 @@ fn tool_and_payload(
     row: &PointRow,
     file: &Path,
 ) -> Result<(u32, Vector3<f64>, Option<Payload>, Predictor), String> {
-    let ids: Vec<u32> = robot.markers().map(|m| m.0).collect();
-    let id = match (row.marker, ids.as_slice()) {
-        (Some(id), _) => id,
-        (None, [one]) => *one,
-        (None, _) => {
-            return Err(format!(
-                "{}:{}: which marker? the model has markers {ids:?}: add a 'marker' column",
-                file.display(),
-                row.line
-            ))
-        }
-    };
-    let tool = robot
-        .marker_m(id)
-        .map_err(|e| format!("{}:{}: {e}", file.display(), row.line))?;
-    // The marker's own link (a tree's other branch, data contract 7.1).
-    let robot = robot
-        .for_marker(id)
-        .map_err(|e| format!("{}:{}: {e}", file.display(), row.line))?;
+    let (id, tool, robot) = robot.at_marker(row.marker).map_err(|e| {
+        let add = if row.marker.is_none() {
+            ": add a 'marker' column"
+        } else {
+            ""
+        };
+        format!("{}:{}: {e}{add}", file.display(), row.line)
+    })?;
     let payload = (row.load_kg > 0.0).then(|| Payload {
         mass_kg: row.load_kg,
         com_m: Vector3::from(row.com_m.unwrap_or_default()),
@@ -773,8 +750,8 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
              more than 3 σ (σ = √(σ<sub>A</sub>² + σ<sub>B</sub>²)) is marked; the base frame is \
              the tracker's placement, not judged.</p><table><tr><th>parameter</th><th>A</th>\
              <th>σ</th><th>B</th><th>σ</th><th>(B − A)/σ</th><th>unit</th></tr>",
-            crate::html::esc(&a.a.display().to_string()),
-            crate::html::esc(&a.b.display().to_string())
+            robcal::render::html::esc(&a.a.display().to_string()),
+            robcal::render::html::esc(&a.b.display().to_string())
         );
         let num = |x: Option<f64>| x.map_or("–".to_string(), |v| format!("{v:.4}"));
         for p in &pairs {
@@ -783,13 +760,13 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
                 h,
                 "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 if beyond(z) { " class=\"beyond\"" } else { "" },
-                crate::html::esc(&p.name),
+                robcal::render::html::esc(&p.name),
                 num(p.a.map(|x| x.0)),
                 num(p.a.map(|x| x.1)),
                 num(p.b.map(|x| x.0)),
                 num(p.b.map(|x| x.1)),
                 z.map_or("–".into(), |z| format!("{z:.1}")),
-                crate::html::esc(&p.unit)
+                robcal::render::html::esc(&p.unit)
             );
         }
         h.push_str("</table>");
@@ -798,7 +775,11 @@ pub fn run_compare(a: &CompareArgs) -> Result<(), String> {
             ("Effects in B only", &effects_b),
         ] {
             if !list.is_empty() {
-                let _ = write!(h, "<p>{what}: {}</p>", crate::html::esc(&list.join(", ")));
+                let _ = write!(
+                    h,
+                    "<p>{what}: {}</p>",
+                    robcal::render::html::esc(&list.join(", "))
+                );
             }
         }
         if let Some(p) = &pos {

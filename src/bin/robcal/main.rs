@@ -23,12 +23,11 @@ use indicatif::{ProgressDrawTarget, ProgressStyle};
 
 use robcal::calibrate::{self, DeflectionModel, Method, Settings};
 use robcal::io::Job;
+use robcal::render::files;
+use robcal::render::html::JobInfo;
 
 mod apply;
-mod html;
-mod json;
 mod plan;
-mod plots;
 
 #[derive(Parser)]
 #[command(
@@ -456,48 +455,28 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     let mut dirs: Vec<(&Path, Files)> = Vec::new();
     if let Some(dir) = &a.plots {
         // The report's figures (`--output` has them too).
-        let files = plots::figures(&report, html::t975(&report).1)?
+        let files = files::figures(&report)?
             .into_iter()
             .map(|f| (dir.join(f.file), f.svg.into_bytes()))
             .collect();
         dirs.push((dir, files));
     }
     if let Some(dir) = &a.output {
+        let info = JobInfo {
+            job: &job,
+            data: &a.data,
+            validate: a.validate.as_deref(),
+            lambda: a.lambda.unwrap_or(job.setup.noise.lambda),
+        };
         let options = calibrate::export::UrdfOptions {
             keep_nominal_markers: a.keep_nominal_markers,
         };
-        let urdf = calibrate::export::calibrated_urdf_with(report.urdf_model(), &job, options)
-            .map_err(|e| e.to_string())?;
-        let robot = calibrate::Predictor::new(&report.model, &job);
-        let model = json::ModelJson::of(&report, calibrate::ModelFile::of(&robot));
-        let model = serde_json::to_string_pretty(&model).map_err(|e| e.to_string())? + "\n";
-        let figures = plots::figures(&report, html::t975(&report).1)?;
-        let page = html::page(
-            &report,
-            &html::JobInfo {
-                job: &job,
-                data: &a.data,
-                validate: a.validate.as_deref(),
-                lambda: a.lambda.unwrap_or(job.setup.noise.lambda),
-            },
-            &figures,
-        );
-        let mut files = vec![
-            (dir.join("robot.urdf"), urdf.into_bytes()),
-            (dir.join("model.json"), model.into_bytes()),
-            (dir.join("report.html"), page.into_bytes()),
-        ];
-        files.extend(
-            figures
-                .into_iter()
-                .map(|f| (dir.join(f.file), f.svg.into_bytes())),
-        );
+        let files = files::OutputFiles::of(&report, &info, options)?.into_files(dir);
         dirs.push((dir, files));
     }
     write_dirs(dirs, &inputs)?;
     let out = if a.json {
-        serde_json::to_string_pretty(&json::ReportJson::of(&report)).map_err(|e| e.to_string())?
-            + "\n"
+        files::report_json(&report)?
     } else {
         report.to_string()
     };

@@ -248,8 +248,11 @@ pub fn calibrated_urdf_with(
 ) -> Result<String, CalibrationError> {
     let path = job.setup.robot_path(&job.setup_path);
     let data = |m: String| CalibrationError::Data(format!("{}: {m}", path.display()));
-    let text = crate::io::input::read_text(&path, "the URDF", crate::io::input::MAX_URDF_BYTES)
-        .map_err(|e| CalibrationError::Data(e.to_string()))?;
+    let text = match &job.urdf_text {
+        Some(text) => text.clone(),
+        None => crate::io::input::read_text(&path, "the URDF", crate::io::input::MAX_URDF_BYTES)
+            .map_err(|e| CalibrationError::Data(e.to_string()))?,
+    };
     let urdf = crate::io::urdf::read_urdf(&text).map_err(data)?;
     let g = final_geometry(model);
     let robot = &job.robot;

@@ -242,6 +242,29 @@ impl Predictor {
         })
     }
 
+    /// Marker `id`, or the model's one marker when `id` is `None`: its id,
+    /// its calibrated position \[m, tip frame\] and this predictor on its
+    /// link ([`Self::for_marker`]).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`]: no marker `id`, or `None` when the model
+    /// has several ("which marker? the model has markers [..]").
+    pub fn at_marker(
+        &self,
+        id: Option<u32>,
+    ) -> Result<(u32, Vector3<f64>, Self), CalibrationError> {
+        let id = match (id, self.marker_ids.as_slice()) {
+            (Some(id), _) => id,
+            (None, [one]) => *one,
+            (None, ids) => {
+                return Err(CalibrationError::Data(format!(
+                    "which marker? the model has markers {ids:?}"
+                )))
+            }
+        };
+        Ok((id, self.marker_m(id)?, self.for_marker(id)?))
+    }
+
     /// The chain's ends besides the tip's (placed) and each marker's end, as
     /// [`Predictor::with_ends`] takes them.
     pub fn ends(&self) -> (Vec<crate::robot::End<f64>>, &[usize]) {

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use robcal::calibrate::{PlotSeries, Report};
+use crate::calibrate::report::{PlotSeries, Report};
 
 /// One figure of the report: its file name (in `--plots DIR` and
 /// `--output DIR`), the SVG and what it shows.
@@ -371,7 +371,7 @@ pub fn per_pose(r: &Report) -> Result<String> {
 /// The empirical distribution of the error per point (the norm of each
 /// row's 3-D error) before and after calibration \[µm, log scale\].
 pub fn ecdf(r: &Report) -> Result<String> {
-    let sorted = |f: &dyn Fn(&robcal::calibrate::RowError) -> f64| {
+    let sorted = |f: &dyn Fn(&crate::calibrate::report::RowError) -> f64| {
         let mut v: Vec<f64> = r.row_errors.iter().map(|e| f(&e)).collect();
         v.sort_by(f64::total_cmp);
         v

@@ -1,6 +1,7 @@
 //! The data contract's JSON (§5, §7.5) and `model.json` (§7.4) as serde
 //! types: `--json` prints a [`ReportJson`], `--output DIR` writes a
-//! [`ModelJson`] (the same keys, the full covariance and the predictor).
+//! [`ModelJson`] (the same keys, the full covariance and the predictor),
+//! read back by [`read_model`].
 //!
 //! Units are in the keys (`_um`, `_mm`) or beside the value (`unit`).
 //! Non-finite numbers are written as `null` (serde_json's rule for `f64`).
@@ -9,8 +10,11 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use robcal::calibrate::ModelFile;
-use robcal::calibrate::{EffectStep, LeftOut, NearDependent, Report, Unexplained, Validation};
+use crate::calibrate::outputs::model_file::ModelFile;
+use crate::calibrate::outputs::predict::Predictor;
+use crate::calibrate::report::{
+    EffectStep, LeftOut, NearDependent, Report, Unexplained, Validation,
+};
 
 /// `--json`: the report (contract §5).
 #[derive(Serialize)]
@@ -269,4 +273,22 @@ impl<'a> NearDependentJson<'a> {
             with: &n.with,
         }
     }
+}
+
+/// The predictor of a `model.json`'s text (its `predictor` section), and
+/// the whole document.
+///
+/// # Errors
+/// Not JSON, no `predictor` section, or one that is not a predictor
+/// ([`ModelFile::predictor`]): one line, without the file's name.
+pub fn read_model(text: &str) -> Result<(Predictor, serde_json::Value), String> {
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
+    let section = value
+        .get("predictor")
+        .ok_or("no 'predictor' section (written by robcal calibrate --output DIR)")?;
+    let file: ModelFile =
+        serde_json::from_value(section.clone()).map_err(|e| format!("predictor: {e}"))?;
+    let p = file.predictor().map_err(|e| format!("predictor: {e}"))?;
+    Ok((p, value))
 }

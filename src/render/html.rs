@@ -16,10 +16,10 @@ use std::path::Path;
 
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
-use robcal::calibrate::Report;
-use robcal::io::Job;
+use crate::calibrate::report::Report;
+use crate::io::job::Job;
 
-use crate::plots;
+use crate::render::plots;
 
 /// Pairs of parameters whose estimates correlate at least this much are
 /// listed under "correlations" (their values trade against each other).
@@ -38,7 +38,7 @@ pub struct JobInfo<'a> {
 }
 
 /// Text with `& < > "` escaped for HTML.
-pub(crate) fn esc(s: &str) -> String {
+pub fn esc(s: &str) -> String {
     let mut o = String::with_capacity(s.len());
     for c in s.chars() {
         match c {
@@ -151,7 +151,7 @@ fn job(h: &mut String, r: &Report, info: &JobInfo<'_>) {
         h,
         "<tr><td>weights</td><td>{}: {}</td></tr>",
         r.weights,
-        esc(robcal::calibrate::weights_line(r.weights))
+        esc(crate::calibrate::report::weights_line(r.weights))
     );
     h.push_str("</table></section>\n");
 }
