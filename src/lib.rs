@@ -28,8 +28,11 @@
 //!             and payload, the compensated command (robot::compensate);
 //!             plan: the poses to measure, chosen before measuring
 //!                              │
+//!  render     the JSON, model.json, report.html and its figures               (render)
+//!                              │
 //!  bin/robcal  `robcal calibrate`, `import`, `predict`, `compensate`,            (cli)
 //!              `check`, `compare`, `plan`, `init`
+//!  python/     the Python package `robcal` (PyO3): the same calls from numpy    (python)
 //! ```
 //!
 //! | module | what | needs |
@@ -41,6 +44,7 @@
 //! | `parallel` | independent work on worker threads, the serial loop's answers bit for bit (`ROBCAL_THREADS`) | `std` |
 //! | `io` | the data contract's files: URDF, setup TOML, measurement CSV, importers | `std` |
 //! | `calibrate` | the one calibration engine, `calibrate::calibrate`: fourteen modules in the order a calibration flows through them (its own map) | `std` |
+//! | `render` | what a calibration hands on, written out: the contract's JSON, `model.json` (and read back), `report.html` and its figures, `--output DIR`'s files; the command and the Python package (`python/`) write through it | `render` (on with `cli`) |
 //!
 //! The `tree` feature (no_std too; `std` turns it on) lets a chain branch:
 //! a controller of a serial arm leaves it off and saves ~600 bytes of flash.

@@ -140,6 +140,63 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     write_all_atomic(&[(path.to_owned(), bytes.to_vec())], &[])
 }
 
+/// Files to write: each path with its bytes.
+pub type Files = Vec<(PathBuf, Vec<u8>)>;
+
+/// The files of every `(dir, files)` by one [`write_all_atomic`]
+/// (all or nothing); each `dir` is created when missing and removed again
+/// when the writing fails. The command's `--plots` and `--output`, the
+/// Python package's `write`.
+///
+/// # Errors
+/// A directory that cannot be made or is not one, or a file that cannot be
+/// written ([`write_all_atomic`]): one line naming the directories.
+pub fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String> {
+    let names: Vec<String> = dirs.iter().map(|d| d.0.display().to_string()).collect();
+    // The directories this run creates, shallowest first: removed again,
+    // deepest first and only while empty, when the writing fails.
+    let mut created: Vec<PathBuf> = Vec::new();
+    let mut all: Files = Vec::new();
+    // One directory named two ways (`o`, `./o`, a link to it): each of its
+    // files once, by the directory's canonical path.
+    let mut seen = std::collections::HashSet::new();
+    let mut result = Ok(());
+    for (dir, files) in dirs {
+        let missing: Vec<PathBuf> = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .map(Path::to_path_buf)
+            .collect();
+        if !missing.is_empty() {
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                result = Err(format!("{}: {e}", dir.display()));
+                break;
+            }
+            created.extend(missing.into_iter().rev());
+        } else if !dir.is_dir() {
+            result = Err(format!("{}: exists and is not a directory", dir.display()));
+            break;
+        }
+        let canonical = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+        for (path, bytes) in files {
+            let key = path.file_name().map(|n| canonical.join(n));
+            if key.is_none_or(|k| seen.insert(k)) {
+                all.push((path, bytes));
+            }
+        }
+    }
+    if result.is_ok() {
+        result = write_all_atomic(&all, inputs)
+            .map_err(|e| format!("{}: cannot write: {e}", names.join(", ")));
+    }
+    if result.is_err() {
+        for dir in created.iter().rev() {
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
+    result
+}
+
 #[cfg(test)]
 mod tests {
     use crate::io::atomic::*;

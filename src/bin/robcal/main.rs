@@ -452,7 +452,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
     let robot_path = job.setup.robot_path(&job.setup_path);
     let mut inputs = vec![a.setup.as_path(), a.data.as_path(), robot_path.as_path()];
     inputs.extend(a.validate.as_deref());
-    let mut dirs: Vec<(&Path, Files)> = Vec::new();
+    let mut dirs: Vec<(&Path, robcal::io::atomic::Files)> = Vec::new();
     if let Some(dir) = &a.plots {
         // The report's figures (`--output` has them too).
         let files = files::figures(&report)?
@@ -474,7 +474,7 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         let files = files::OutputFiles::of(&report, &info, options)?.into_files(dir);
         dirs.push((dir, files));
     }
-    write_dirs(dirs, &inputs)?;
+    robcal::io::atomic::write_dirs(dirs, &inputs)?;
     let out = if a.json {
         files::report_json(&report)?
     } else {
@@ -490,58 +490,6 @@ fn run_calibrate(a: &CalibrateArgs, verbosity: Verbosity) -> Result<(), String> 
         )),
         _ => Ok(()),
     }
-}
-
-/// The files of every `(dir, files)` by one [`robcal::io::write_all_atomic`]
-/// (all or nothing); each `dir` is created when missing and removed again
-/// when the writing fails.
-/// Files to write: each path with its bytes.
-type Files = Vec<(PathBuf, Vec<u8>)>;
-
-fn write_dirs(dirs: Vec<(&Path, Files)>, inputs: &[&Path]) -> Result<(), String> {
-    let names: Vec<String> = dirs.iter().map(|d| d.0.display().to_string()).collect();
-    // The directories this run creates, shallowest first: removed again,
-    // deepest first and only while empty, when the writing fails.
-    let mut created: Vec<PathBuf> = Vec::new();
-    let mut all: Files = Vec::new();
-    // One directory named two ways (`o`, `./o`, a link to it): each of its
-    // files once, by the directory's canonical path.
-    let mut seen = std::collections::HashSet::new();
-    let mut result = Ok(());
-    for (dir, files) in dirs {
-        let missing: Vec<PathBuf> = dir
-            .ancestors()
-            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
-            .map(Path::to_path_buf)
-            .collect();
-        if !missing.is_empty() {
-            if let Err(e) = std::fs::create_dir_all(dir) {
-                result = Err(format!("{}: {e}", dir.display()));
-                break;
-            }
-            created.extend(missing.into_iter().rev());
-        } else if !dir.is_dir() {
-            result = Err(format!("{}: exists and is not a directory", dir.display()));
-            break;
-        }
-        let canonical = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
-        for (path, bytes) in files {
-            let key = path.file_name().map(|n| canonical.join(n));
-            if key.is_none_or(|k| seen.insert(k)) {
-                all.push((path, bytes));
-            }
-        }
-    }
-    if result.is_ok() {
-        result = robcal::io::write_all_atomic(&all, inputs)
-            .map_err(|e| format!("{}: cannot write: {e}", names.join(", ")));
-    }
-    if result.is_err() {
-        for dir in created.iter().rev() {
-            let _ = std::fs::remove_dir(dir);
-        }
-    }
-    result
 }
 
 /// `ROBCAL_MAX_HELD_DESIGN_ROWS`: a design of more rows does not hold its

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# The venv .ci/python.sh builds and tests the Python package in, with
+# python/requirements-ci.txt's packages (from PyPI).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m venv --clear target/python-venv
+target/python-venv/bin/pip install --quiet --disable-pip-version-check -r python/requirements-ci.txt

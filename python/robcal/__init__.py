@@ -1,0 +1,609 @@
+"""robcal from Python: calibration of robot manipulators from measurements.
+
+The engine is robcal's own (the Rust library the ``robcal`` command runs):
+this package turns numpy arrays and pandas DataFrames into what it takes
+and its results into numpy arrays, with the same numbers, files and
+one-line error messages as the command. See ``docs/python.md``.
+
+>>> import robcal
+>>> result = robcal.calibrate("data/kr270/setup.toml", "data/kr270/measurements.csv")
+>>> result.parameters_frame()          # doctest: +SKIP
+>>> result.model.predict(q, load_kg=250.0, com_m=[0.25, 0, 0.3])  # doctest: +SKIP
+
+Units are the data contract's: the measurement table's columns in the
+setup's ``[units]``; parameters in the units ``units`` names; the model's
+joint values in rad (or m), points in m, errors in µm (``_um``).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings as _warnings
+from collections.abc import Mapping
+from typing import Any, NamedTuple, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _robcal
+from ._robcal import CalibrationError, Error, InputError
+
+__version__ = _robcal.__version__
+
+__all__ = [
+    "Calibration",
+    "CalibrationError",
+    "Compensation",
+    "Error",
+    "InputError",
+    "Job",
+    "Measurements",
+    "Model",
+    "NotACalibrationError",
+    "RobcalWarning",
+    "calibrate",
+    "import_figaroh_mocap",
+    "import_poses",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class NotACalibrationError(Error):
+    """The fit did not converge, or its model fits its own data worse than
+    the nominal robot: not a calibration (the command exits 1). The result
+    is kept for inspection in ``.result``; ``accept_unconverged=True``
+    returns it instead."""
+
+    def __init__(self, message: str, result: "Calibration"):
+        super().__init__(message)
+        self.result = result
+
+
+class RobcalWarning(UserWarning):
+    """A warning of robcal's readers or of the model's payload rule (the
+    command prints these on stderr)."""
+
+
+# --------------------------------------------------------------------------
+# numpy in
+
+
+def _real(x: Any, name: str) -> np.ndarray:
+    """`x` as a C-contiguous float64 array; integers are taken exactly,
+    anything else that is not a real number is a TypeError."""
+    try:
+        a = np.asarray(x)
+    except ValueError as e:  # ragged rows
+        raise ValueError(f"{name}: not an array of numbers: {e}") from None
+    if a.dtype.kind not in "fiu":
+        raise TypeError(f"{name}: expected real numbers, got an array of dtype {a.dtype}")
+    return np.asarray(a, dtype=np.float64, order="C")
+
+
+def _rows(x: Any, width: int, name: str, what: str) -> tuple[np.ndarray, bool]:
+    """`x` as (n, width) rows, and whether it was one row of shape (width,)."""
+    a = _real(x, name)
+    if a.ndim == 1 and a.shape[0] == width:
+        return a.reshape(1, width), True
+    if a.ndim == 2 and a.shape[1] == width and a.shape[0] > 0:
+        return a, False
+    raise ValueError(f"{name}: shape {a.shape}: expected ({width},) or (n, {width}) {what}")
+
+
+def _per_row(x: Any, n: int, width: int, name: str) -> list[float]:
+    """One value (width 1) or vector for all rows, or one per row, flat."""
+    a = _real(x, name)
+    if width == 1 and a.ndim == 0:
+        return [float(a)]
+    if a.shape == (width,) and width > 1:
+        return a.tolist()
+    if (width == 1 and a.shape == (n,)) or a.shape == (n, width):
+        return a.reshape(-1).tolist()
+    want = "()" if width == 1 else f"({width},)"
+    raise ValueError(f"{name}: shape {a.shape}: expected {want} or ({n}{'' if width == 1 else f', {width}'})")
+
+
+# --------------------------------------------------------------------------
+# The job and its measurements
+
+
+class Measurements:
+    """A measurement file or table read for a job (the contract's CSV,
+    ``docs/formats.md``): every check and message of the command's reader."""
+
+    def __init__(self, native: "_robcal.Measurements"):
+        self._native = native
+        for w in native.warnings:
+            _warnings.warn(w, RobcalWarning, stacklevel=3)
+
+    @property
+    def file(self) -> str:
+        """The file, or the name the table was given."""
+        return self._native.file
+
+    @property
+    def warnings(self) -> list[str]:
+        """The reader's warnings."""
+        return self._native.warnings
+
+    def __len__(self) -> int:
+        return len(self._native)
+
+
+def _toml(value: Any, path: str = "") -> str:
+    """A setup given as a dict, as TOML text (tables, arrays of tables,
+    strings, numbers, booleans, arrays)."""
+
+    def scalar(v: Any, at: str) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, np.integer)):
+            return str(int(v))
+        if isinstance(v, (float, np.floating)):
+            return repr(float(v))
+        if isinstance(v, (str, os.PathLike)):
+            s = os.fspath(v)
+            return '"' + s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return "[" + ", ".join(scalar(x, at) for x in v) + "]"
+        raise TypeError(f"setup {at}: a {type(v).__name__} has no TOML form")
+
+    lines: list[str] = []
+    tables: list[tuple[str, Any]] = []
+    for k, v in value.items():
+        key = f"{path}.{k}" if path else str(k)
+        if isinstance(v, Mapping):
+            tables.append((key, v))
+        elif isinstance(v, (list, tuple)) and v and all(isinstance(x, Mapping) for x in v):
+            tables.extend((f"[{key}]", x) for x in v)
+        else:
+            lines.append(f"{k} = {scalar(v, key)}")
+    for key, v in tables:
+        head = f"[{key}]" if not key.startswith("[") else f"[{key}]"
+        lines.append("")
+        lines.append(head)
+        body = _toml(v, key.strip("[]"))
+        lines.extend(line for line in body.splitlines())
+    return "\n".join(lines) + "\n"
+
+
+class Job:
+    """A calibration job: the setup and the robot it names.
+
+    ``Job.load("setup.toml")`` reads the files; ``Job.from_text(setup,
+    urdf)`` takes the setup as a dict or TOML text and the URDF's text."""
+
+    def __init__(self, native: "_robcal.Job"):
+        self._native = native
+
+    @classmethod
+    def load(cls, setup: PathLike) -> "Job":
+        """Reads the setup file and the URDF it names."""
+        return cls(_robcal.Job.load(os.fspath(setup)))
+
+    @classmethod
+    def from_text(
+        cls,
+        setup: Union[str, Mapping[str, Any]],
+        urdf: str,
+        setup_name: str = "<setup>",
+        urdf_name: str = "<urdf>",
+    ) -> "Job":
+        """A job from memory: ``setup`` a dict (the setup file's keys) or
+        TOML text, ``urdf`` the URDF's text. Without a ``robot`` key the
+        URDF's name stands in for it."""
+        if isinstance(setup, Mapping):
+            setup = dict(setup)
+            setup.setdefault("robot", urdf_name)
+            setup = _toml(setup)
+        elif not isinstance(setup, str):
+            raise TypeError("setup: expected a dict or TOML text")
+        return cls(_robcal.Job.parse(setup, urdf, setup_name, urdf_name))
+
+    @property
+    def robot_name(self) -> str:
+        return self._native.robot_name
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The movable joints, chain order: the table's joint columns."""
+        return self._native.joint_names
+
+    @property
+    def units(self) -> tuple[str, str]:
+        """The table's ``(angle, length)`` units, e.g. ``("deg", "mm")``."""
+        return self._native.units
+
+    @property
+    def markers(self) -> list[int]:
+        return self._native.markers
+
+    def setup_toml(self) -> str:
+        """The setup as TOML text."""
+        return self._native.setup_toml()
+
+    def measurements(self, data: Any, name: Optional[str] = None) -> Measurements:
+        """Measurements of this job: a CSV file's path, a pandas DataFrame,
+        or a mapping of column name to values (the contract's columns:
+        ``config``, ``marker``, ``load_kg``, one per joint, ``x, y, z``,
+        optional ``rep``, ``t``, ``sx, sy, sz``), in the setup's units. A
+        table is read by the file reader, its checks and messages; its line
+        ``k`` is row ``k − 2``."""
+        if isinstance(data, Measurements):
+            return data
+        if isinstance(data, (str, os.PathLike)):
+            return Measurements(self._native.read_measurements(os.fspath(data)))
+        if hasattr(data, "columns") and hasattr(data, "__getitem__") and hasattr(data, "shape"):
+            columns = {str(c): data[c].to_numpy() for c in data.columns}
+            default = "<DataFrame>"
+        elif isinstance(data, Mapping):
+            columns = {str(k): np.asarray(v) for k, v in data.items()}
+            default = "<table>"
+        else:
+            raise TypeError(
+                f"data: expected a path, a pandas DataFrame or a mapping of columns, "
+                f"got {type(data).__name__}"
+            )
+        cols = []
+        rows = None
+        for k, v in columns.items():
+            v = np.asarray(v)
+            if v.ndim != 1:
+                raise ValueError(f"column {k!r}: shape {v.shape}: expected one value per row")
+            if rows is None:
+                rows = v.shape[0]
+            elif v.shape[0] != rows:
+                raise ValueError(f"column {k!r} has {v.shape[0]} values, column {next(iter(columns))!r} {rows}")
+            if v.dtype.kind in "mM":
+                raise TypeError(
+                    f"column {k!r}: {v.dtype} values: give numbers in the contract's units "
+                    "(a time in seconds)"
+                )
+            if v.dtype.kind == "f":
+                cols.append((k, np.ascontiguousarray(v, dtype=np.float64).tobytes()))
+            else:
+                cols.append((k, [str(x) for x in v.tolist()]))
+        return Measurements(self._native.table_measurements(cols, rows or 0, name or default))
+
+    def calibrate(
+        self,
+        data: Any,
+        *,
+        method: str = "irls",
+        lambda_: Optional[float] = None,
+        max_iter: int = 100,
+        diagnose: bool = True,
+        linear: bool = False,
+        leave_out_outliers: bool = False,
+        robust: bool = False,
+        validate: Any = None,
+        reregister: bool = False,
+        accept_unconverged: bool = False,
+    ) -> "Calibration":
+        """``robcal calibrate`` of ``data`` (a path, DataFrame, mapping or
+        Measurements): the same settings by the same names (``lambda_`` for
+        ``--lambda``, ``diagnose=False`` for ``--no-diagnose``). Raises
+        NotACalibrationError where the command exits 1, unless
+        ``accept_unconverged``. The GIL is released while it runs."""
+        m = self.measurements(data)
+        v = None if validate is None else self.measurements(validate)
+        native = self._native.calibrate(
+            m._native,
+            method=method,
+            lambda_=lambda_,
+            max_iter=max_iter,
+            diagnose=diagnose,
+            linear=linear,
+            leave_out_outliers=leave_out_outliers,
+            robust=robust,
+            validate=None if v is None else v._native,
+            reregister=reregister,
+        )
+        result = Calibration(native)
+        if result.failure is not None and not accept_unconverged:
+            raise NotACalibrationError(
+                f"not a calibration: {result.failure}; the result is kept in .result "
+                "(accept_unconverged=True accepts it)",
+                result,
+            )
+        return result
+
+
+def calibrate(
+    setup: Union[PathLike, Mapping[str, Any], Job],
+    data: Any,
+    *,
+    urdf: Optional[str] = None,
+    **settings: Any,
+) -> "Calibration":
+    """``robcal calibrate --setup SETUP --data DATA``: ``setup`` a path (the
+    URDF it names is read), a Job, or with ``urdf`` (the URDF's text) a
+    dict or TOML text; ``data`` a path, DataFrame or mapping of columns.
+    ``settings`` as :meth:`Job.calibrate`."""
+    if isinstance(setup, Job):
+        job = setup
+    elif urdf is not None:
+        job = Job.from_text(setup, urdf)  # type: ignore[arg-type]
+    elif isinstance(setup, (str, os.PathLike)):
+        job = Job.load(setup)
+    else:
+        raise TypeError("setup: a dict or TOML text needs urdf= (the URDF's text)")
+    return job.calibrate(data, **settings)
+
+
+def import_figaroh_mocap(input: PathLike, output: PathLike, job: Optional[Job] = None) -> tuple[int, int]:
+    """``robcal import figaroh-mocap INPUT OUTPUT``: a FIGAROH motion-capture
+    CSV into the contract's CSV (rad, m), the joints in ``job``'s chain
+    order when given; ``output`` untouched on error. Returns
+    ``(postures, rows)``."""
+    return _robcal.import_figaroh_mocap(
+        os.fspath(input), os.fspath(output), None if job is None else job._native
+    )
+
+
+def import_poses(input: PathLike, output: PathLike, split: Optional[str] = None) -> tuple[int, int]:
+    """``robcal import poses INPUT OUTPUT [--split NAME]``: the real data
+    sets' wide pose CSV into the contract's CSV (rad, m). Returns
+    ``(poses, rows)``."""
+    return _robcal.import_poses(os.fspath(input), os.fspath(output), split)
+
+
+# --------------------------------------------------------------------------
+# Results
+
+
+class Calibration:
+    """A calibration's result: the report's numbers, its files and the
+    calibrated robot. ``json()`` is the command's ``--json`` text, to the
+    byte; the arrays are the same numbers."""
+
+    def __init__(self, native: "_robcal.Calibration"):
+        self._native = native
+        self._dict: Optional[dict] = None
+        self._files: Optional[dict] = None
+        params = native.parameters
+        self.names: list[str] = [p[0] for p in params]
+        """The parameters' names (the contract's)."""
+        self.values: np.ndarray = np.array([p[1] for p in params], dtype=np.float64)
+        """The estimates, in ``units``."""
+        self.std: np.ndarray = np.array([p[2] for p in params], dtype=np.float64)
+        """Their standard deviations (the sandwich, eq. 8, 11)."""
+        self.units: list[str] = [p[3] for p in params]
+        self.determined: np.ndarray = np.array([p[4] for p in params], dtype=bool)
+        """False where the estimate is within 2σ of 0."""
+        n = len(params)
+        self.covariance: np.ndarray = np.frombuffer(native.covariance, dtype=np.float64).reshape(n, n).copy()
+        """The covariance, in the product of the two parameters' units."""
+
+    def json(self) -> str:
+        """The contract's JSON (``robcal calibrate --json``), the same text."""
+        return self._native.json()
+
+    def to_dict(self) -> dict:
+        """The JSON as a dict."""
+        if self._dict is None:
+            import json
+
+            self._dict = json.loads(self.json())
+        return self._dict
+
+    def text(self) -> str:
+        """The text report (``robcal calibrate``)."""
+        return self._native.text()
+
+    def __str__(self) -> str:
+        return self.text()
+
+    def __repr__(self) -> str:
+        d = self.to_dict()
+        return (
+            f"<robcal.Calibration: {len(self.names)} parameters, rms {d['rms_um']:.3g} µm, "
+            f"held-out {d['heldout_rms_um']} µm, {len(d['effects'])} effects added>"
+        )
+
+    @property
+    def failure(self) -> Optional[str]:
+        """Why the result is not a calibration, or None."""
+        return self._native.failure
+
+    @property
+    def converged(self) -> bool:
+        return self.to_dict()["converged"]
+
+    @property
+    def rms_um(self) -> float:
+        """The residuals' RMS [µm]."""
+        return self.to_dict()["rms_um"]
+
+    @property
+    def heldout_rms_um(self) -> Optional[float]:
+        """Leave-one-configuration-out RMS [µm]."""
+        return self.to_dict()["heldout_rms_um"]
+
+    @property
+    def nominal(self) -> dict:
+        """The nominal robot's error: ``rms_um``, ``mean_um``, ``max_um``."""
+        return self.to_dict()["nominal"]
+
+    @property
+    def effects(self) -> list[dict]:
+        """The closed loop's steps: each effect added, its p-value and the
+        RMS before and after [µm]."""
+        return self.to_dict()["effects"]
+
+    @property
+    def identifiability(self) -> list[dict]:
+        """Parameters the data cannot tell apart: each left out, and what
+        absorbs it."""
+        return self.to_dict()["identifiability"]
+
+    @property
+    def validation(self) -> Optional[dict]:
+        return self.to_dict()["validation"]
+
+    @property
+    def warnings(self) -> list[str]:
+        return self.to_dict()["warnings"]
+
+    @property
+    def notes(self) -> list[str]:
+        return self.to_dict().get("notes", [])
+
+    def parameters_frame(self):
+        """The parameters as a pandas DataFrame (index: name; columns:
+        value, std, unit, determined)."""
+        import pandas as pd
+
+        return pd.DataFrame(
+            {"value": self.values, "std": self.std, "unit": self.units, "determined": self.determined},
+            index=pd.Index(self.names, name="name"),
+        )
+
+    def output_files(self, keep_nominal_markers: bool = False) -> dict[str, str]:
+        """``robcal calibrate --output DIR``'s files by name, as text:
+        ``robot.urdf``, ``model.json``, ``report.html`` and the figures."""
+        if keep_nominal_markers:
+            return self._native.output_files(True)
+        if self._files is None:
+            self._files = self._native.output_files(False)
+        return self._files
+
+    @property
+    def urdf(self) -> str:
+        """The calibrated URDF (``robot.urdf``)."""
+        return self.output_files()["robot.urdf"]
+
+    @property
+    def model_json(self) -> str:
+        """``model.json``: the report, its covariance and the predictor."""
+        return self.output_files()["model.json"]
+
+    @property
+    def report_html(self) -> str:
+        """``report.html``: one self-contained page."""
+        return self.output_files()["report.html"]
+
+    @property
+    def figures(self) -> dict[str, str]:
+        """The report's figures (SVG text) by file name."""
+        return {k: v for k, v in self.output_files().items() if k.endswith(".svg")}
+
+    def write(self, directory: PathLike, keep_nominal_markers: bool = False) -> None:
+        """Writes ``--output DIR``'s files into ``directory``, all or nothing."""
+        self._native.write(os.fspath(directory), keep_nominal_markers)
+
+    @property
+    def model(self) -> "Model":
+        """The calibrated robot (what ``model.json`` holds)."""
+        return Model(self._native.model())
+
+
+class Compensation(NamedTuple):
+    """The compensated joint commands of :meth:`Model.compensate`."""
+
+    q: np.ndarray
+    """The commands, (n, dof) [rad or m]."""
+    error_um: np.ndarray
+    """The error the model leaves at each target [µm]."""
+    error_urad: Optional[np.ndarray]
+    """The orientation's [µrad], for pose targets."""
+    iterations: np.ndarray
+    """Newton's steps per target."""
+
+
+class Model:
+    """A calibrated robot: where a marker settles for joint values and a
+    payload (``robcal predict``), and the joint commands that reach
+    targets (``robcal compensate``). SI units: rad (m for prismatic
+    joints), m, kg."""
+
+    def __init__(self, native: "_robcal.Model"):
+        self._native = native
+
+    @classmethod
+    def load(cls, path: PathLike) -> "Model":
+        """Reads ``model.json``."""
+        return cls(_robcal.Model.load(os.fspath(path)))
+
+    @classmethod
+    def from_json(cls, text: str) -> "Model":
+        """A model from ``model.json``'s text."""
+        return cls(_robcal.Model.from_json(text))
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self._native.joint_names
+
+    @property
+    def dof(self) -> int:
+        return len(self._native.joint_names)
+
+    @property
+    def markers(self) -> dict[int, np.ndarray]:
+        """The calibrated markers [m, tip frame] by id."""
+        return {i: np.array(p) for i, p in self._native.markers}
+
+    def _warn_payload(self, load: list[float]) -> None:
+        w = self._native.payload_warning(load)
+        if w is not None:
+            _warnings.warn(w.replace("(line ", "(row "), RobcalWarning, stacklevel=3)
+
+    def predict(
+        self,
+        q: Any,
+        load_kg: Any = 0.0,
+        com_m: Any = (0.0, 0.0, 0.0),
+        marker: Optional[int] = None,
+    ) -> np.ndarray:
+        """Where the marker settles [m, measurement frame] at joint values
+        ``q`` ((dof,) or (n, dof)) with the payload ``load_kg`` (one, or one
+        per row) at ``com_m`` [m, tip frame] ((3,) or (n, 3)): (3,) or
+        (n, 3). ``marker`` may be left out when the model has one."""
+        rows, one = _rows(q, self.dof, "q", "joint values")
+        n = rows.shape[0]
+        load = _per_row(load_kg, n, 1, "load_kg")
+        com = _per_row(com_m, n, 3, "com_m")
+        out = self._native.predict(rows.tobytes(), load, com, marker)
+        self._warn_payload(load if len(load) == n else load * n)
+        p = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
+        return p[0] if one else p
+
+    def compensate(
+        self,
+        targets_m: Any,
+        q_start: Any,
+        load_kg: Any = 0.0,
+        com_m: Any = (0.0, 0.0, 0.0),
+        marker: Optional[int] = None,
+        rotation_rad: Any = None,
+        tolerance_um: float = 0.1,
+        max_iter: int = 20,
+    ) -> Compensation:
+        """The joint commands whose loaded, deflected robot puts the marker
+        on ``targets_m`` [m, measurement frame] ((3,) or (n, 3)), Newton from
+        ``q_start`` (e.g. the nominal inverse kinematics); with
+        ``rotation_rad`` (rotation vectors of the tip frame) pose targets."""
+        q, one = _rows(q_start, self.dof, "q_start", "joint values")
+        n = q.shape[0]
+        t, _ = _rows(targets_m, 3, "targets_m", "points")
+        if t.shape[0] != n:
+            raise ValueError(f"targets_m: {t.shape[0]} targets for {n} rows of q_start")
+        rot = None
+        if rotation_rad is not None:
+            r, _ = _rows(rotation_rad, 3, "rotation_rad", "rotation vectors")
+            if r.shape[0] != n:
+                raise ValueError(f"rotation_rad: {r.shape[0]} rotations for {n} rows of q_start")
+            rot = r.tobytes()
+        load = _per_row(load_kg, n, 1, "load_kg")
+        com = _per_row(com_m, n, 3, "com_m")
+        qs, err, err_rot, its = self._native.compensate(
+            t.tobytes(), q.tobytes(), load, com, marker, rot, float(tolerance_um), int(max_iter)
+        )
+        self._warn_payload(load if len(load) == n else load * n)
+        qs = np.frombuffer(qs, dtype=np.float64).reshape(n, self.dof).copy()
+        err = np.array(err)
+        err_rot = None if err_rot is None else np.array(err_rot)
+        its = np.array(its)
+        if one:
+            return Compensation(qs[0], err[0], None if err_rot is None else err_rot[0], its[0])
+        return Compensation(qs, err, err_rot, its)
