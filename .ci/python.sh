@@ -15,8 +15,9 @@ if [ ! -x "$venv/bin/maturin" ]; then
 fi
 # shellcheck disable=SC1091
 source "$venv/bin/activate"
-# The test step's profile: the Rust dependencies are already built.
-maturin develop --quiet --manifest-path python/Cargo.toml
+# The command first (.ci/report.sh built it already): the package's build
+# reuses its library (python/Cargo.toml), only PyO3 and the module are new.
 cargo build --quiet --features cli --bin robcal
+maturin develop --quiet --manifest-path python/Cargo.toml
 export ROBCAL_CLI="$PWD/target/debug/robcal" MPLBACKEND=Agg
 python -m pytest -q python/tests
