@@ -6,12 +6,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cases="${1:-20000}"
-# Same features as the README test command, so the build is reused.
-features=(--features robcal/cli)
-cargo test -p host-tests "${features[@]}" --no-run --quiet
-PROPTEST_CASES="$cases" timeout 60 cargo test -p host-tests "${features[@]}" --quiet --test host -- fuzz_props:: fuzz_regressions::
+# The README test command's packages and features: its build, reused (the
+# features of shared dependencies are resolved over the packages a command
+# builds: `-p host-tests` alone would build the library again).
+features=(--workspace --features cli)
+cargo test "${features[@]}" --no-run --quiet
+PROPTEST_CASES="$cases" timeout 60 cargo test "${features[@]}" --quiet --test host -- fuzz_props:: fuzz_regressions::
 # The parser fuzz findings and a replay of the kept parser corpora
 # (fuzz/corpus/{csv_measurements,setup_toml,urdf}) on stable: a few seconds.
-timeout 30 cargo test -p host-tests "${features[@]}" --quiet --test host -- fuzz_io_regressions::
+timeout 30 cargo test "${features[@]}" --quiet --test host -- fuzz_io_regressions::
 # The batch-equality properties: a tenth of the cases (each solves an SVD).
-PROPTEST_CASES="$((cases / 10))" timeout 60 cargo test -p host-tests "${features[@]}" --quiet --test host -- accumulator_props::
+PROPTEST_CASES="$((cases / 10))" timeout 60 cargo test "${features[@]}" --quiet --test host -- accumulator_props::

@@ -15,9 +15,9 @@ if [ ! -x "$venv/bin/maturin" ]; then
 fi
 # shellcheck disable=SC1091
 source "$venv/bin/activate"
-# The command first (.ci/report.sh built it already): the package's build
-# reuses its library (python/Cargo.toml), only PyO3 and the module are new.
-cargo build --quiet --features cli --bin robcal
+# The command the tests compare with: the test step's build (the README
+# test command's packages and features).
+cargo test --workspace --features cli --no-run --quiet
 maturin develop --quiet --manifest-path python/Cargo.toml
 export ROBCAL_CLI="$PWD/target/debug/robcal" MPLBACKEND=Agg
 python -m pytest -q python/tests

@@ -23,7 +23,9 @@ rm -rf "$out"
 # The test step's build of the command (debug, `--features cli`): the same
 # report, bit for bit, as a release build's (no floating-point optimisation
 # differs between the profiles), without a second, LTO build.
-cargo build --quiet --features cli --bin robcal
+# The test step's build (the README test command's packages and features:
+# `cargo build --bin robcal` alone would build the library again).
+cargo test --workspace --features cli --no-run --quiet
 ./target/debug/robcal calibrate -q \
     --setup data/kr270/setup-naive.toml --data data/kr270/measurements.csv \
     --validate data/kr270/measurements.csv --output "$out" >/dev/null
