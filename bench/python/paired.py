@@ -1,7 +1,7 @@
 """The Python package's call beside the command, paired and interleaved in
 one run (issue 55's goal: the call costs at most 5 % more).
 
-    python bench/python/paired.py [-n PAIRS] -- ROBCAL_CALIBRATE_ARGS...
+    python bench/python/paired.py [-n PAIRS] [--frame] -- ROBCAL_CALIBRATE_ARGS...
 
 e.g. `-- --setup data/kr270/setup-naive.toml --data /tmp/kr-15.csv`. Each
 pair runs, in turn, the command (`$ROBCAL`, default target/release/robcal,
@@ -9,7 +9,9 @@ pair runs, in turn, the command (`$ROBCAL`, default target/release/robcal,
 package's call in this process (`robcal.calibrate(setup, data,
 **settings).json()`, timed around the call: reading the files, the
 calibration and the JSON, as the command does). Both must print the same
-JSON. One warm-up of each; the order within a pair alternates. Printed:
+JSON. With `--frame` the call is given the data as a pandas DataFrame
+(read before the pairs; the call converts it, as a notebook's call does).
+One warm-up of each; the order within a pair alternates. Printed:
 the median [min, max] of each side's wall time and of the ratio
 call / command taken pair by pair.
 """
@@ -27,6 +29,7 @@ import robcal
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("-n", type=int, default=11)
+    p.add_argument("--frame", action="store_true")
     p.add_argument("args", nargs=argparse.REMAINDER)
     a = p.parse_args()
     args = [x for x in a.args if x != "--"]
@@ -38,6 +41,11 @@ def main() -> None:
     k.add_argument("--no-diagnose", action="store_true")
     o = k.parse_args(args)
     settings = {"method": o.method, "diagnose": not o.no_diagnose}
+    data = o.data
+    if a.frame:
+        import pandas as pd
+
+        data = pd.read_csv(o.data)
 
     def command() -> tuple[float, str]:
         t = time.perf_counter()
@@ -46,7 +54,7 @@ def main() -> None:
 
     def call() -> tuple[float, str]:
         t = time.perf_counter()
-        out = robcal.calibrate(o.setup, o.data, **settings).json()
+        out = robcal.calibrate(o.setup, data, **settings).json()
         return time.perf_counter() - t, out
 
     (_, want), (_, got) = command(), call()

@@ -259,7 +259,11 @@ class Job:
                     f"column {k!r}: {v.dtype} values: give numbers in the contract's units "
                     "(a time in seconds)"
                 )
-            if v.dtype.kind == "f":
+            if v.dtype.kind == "f" or (
+                v.dtype.kind in "iu" and bool(np.all((v > -(2**53)) & (v < 2**53)))
+            ):
+                # Integers below 2⁵³ are exact as float64, and written back
+                # without a fraction ("1", not "1.0"): no text per cell here.
                 cols.append((k, np.ascontiguousarray(v, dtype=np.float64).tobytes()))
             else:
                 cols.append((k, [str(x) for x in v.tolist()]))
