@@ -39,10 +39,12 @@ __all__ = [
     "Measurements",
     "Model",
     "NotACalibrationError",
+    "Plan",
     "RobcalWarning",
     "calibrate",
     "import_figaroh_mocap",
     "import_poses",
+    "plan",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -333,6 +335,110 @@ def calibrate(
     else:
         raise TypeError("setup: a dict or TOML text needs urdf= (the URDF's text)")
     return job.calibrate(data, **settings)
+
+
+class Plan:
+    """``robcal plan``'s result: the configurations to measure, in the order
+    chosen, and what they predict. ``q`` (K, dof) [rad or m] and ``load_kg``
+    (K,) [kg]; ``csv()`` the points CSV the command writes (``--output``),
+    the same text; ``frame()`` it as a DataFrame."""
+
+    def __init__(self, native: "_robcal.Plan", dof: int):
+        self._native = native
+        self.q: np.ndarray = np.frombuffer(native.q, dtype=np.float64).reshape(-1, dof).copy()
+        self.load_kg: np.ndarray = np.array(native.load_kg, dtype=np.float64)
+        self.criterion, self.candidates, self.exchanges = native.summary
+        names, units, left_out, notes = native.parameters
+        self.names: list[str] = names
+        """The parameters planned for (those the pool determines)."""
+        self.units: list[str] = units
+        self.left_out: list[str] = left_out
+        """Declared parameters no candidate determines."""
+        self.notes: list[str] = notes
+        planned, random = native.scores()
+        self.std: np.ndarray = np.array(planned.pop("std"), dtype=np.float64)
+        """Each parameter's predicted σ after measuring the plan [units]."""
+        self.scores: dict = planned
+        """``log_det``, ``trace_scaled``, ``min_eigenvalue_scaled``,
+        ``condition``, ``predicted_rms_um`` (the command's JSON keys)."""
+        self.std_random: Optional[np.ndarray] = None
+        """The same from as many random candidates (None for your pool)."""
+        self.scores_random: Optional[dict] = None
+        if random is not None:
+            self.std_random = np.array(random.pop("std"), dtype=np.float64)
+            self.scores_random = random
+
+    def csv(self) -> str:
+        """The points CSV ``robcal plan --output`` writes."""
+        return self._native.csv()
+
+    def frame(self):
+        """The configurations as a pandas DataFrame (the points CSV's columns)."""
+        import io
+
+        import pandas as pd
+
+        return pd.read_csv(io.StringIO(self.csv()))
+
+    def parameters_frame(self):
+        """Predicted σ per parameter, the plan's and random poses'."""
+        import pandas as pd
+
+        d = {"std": self.std, "unit": self.units}
+        if self.std_random is not None:
+            d["std_random"] = self.std_random
+        return pd.DataFrame(d, index=pd.Index(self.names, name="name"))
+
+
+def plan(
+    setup: Union[PathLike, Job],
+    poses: int,
+    *,
+    candidates: int = 1000,
+    pool: Any = None,
+    criterion: str = "d",
+    seed: int = 0x706C616E,
+    load_kg: Sequence[float] = (),
+    limits: Optional[Mapping[str, tuple[float, float]]] = None,
+    exchange_passes: int = 10,
+) -> Plan:
+    """``robcal plan --setup SETUP --poses K``: the ``poses`` configurations
+    that determine the setup's declared model best, chosen before
+    measuring. Candidates: ``candidates`` random ones within the joint
+    limits (``limits={joint: (lo, hi)}`` tighter, rad or m), each with
+    every mass of ``load_kg``; or your ``pool``: rows of joint values (n,
+    dof), or a DataFrame with a ``<joint>_rad``/``_m`` column per joint and
+    optionally ``load_kg``. ``criterion``: ``d``, ``a``, ``i``, ``e`` or
+    ``condition`` (docs/plan.md)."""
+    job = setup if isinstance(setup, Job) else Job.load(setup)
+    dof = len(job.joint_names)
+    pool_q = pool_load = None
+    if pool is not None:
+        if hasattr(pool, "columns"):
+            units = ["rad" if a else "m" for a in job._native.joint_is_angular]
+            cols = [f"{n}_{u}" for n, u in zip(job.joint_names, units)]
+            missing = [c for c in cols if c not in pool.columns]
+            if missing:
+                raise ValueError(f"pool: no column {missing[0]!r} (one per joint: {', '.join(cols)})")
+            q = _real(pool[cols].to_numpy(), "pool")
+            if "load_kg" in pool.columns:
+                pool_load = _real(pool["load_kg"].to_numpy(), "pool load_kg").tolist()
+        else:
+            q, _ = _rows(pool, dof, "pool", "joint values")
+        pool_q = np.ascontiguousarray(q, dtype=np.float64).tobytes()
+    native = _robcal.plan(
+        job._native,
+        poses,
+        candidates=candidates,
+        pool_q=pool_q,
+        pool_load_kg=pool_load,
+        criterion=criterion,
+        seed=seed,
+        load_kg=[float(m) for m in load_kg],
+        limits=[(str(k), float(v[0]), float(v[1])) for k, v in (limits or {}).items()],
+        exchange_passes=exchange_passes,
+    )
+    return Plan(native, dof)
 
 
 def import_figaroh_mocap(input: PathLike, output: PathLike, job: Optional[Job] = None) -> tuple[int, int]:

@@ -99,3 +99,29 @@ class Model:
 
 def import_figaroh_mocap(input: str, output: str, job: Optional[Job] = ...) -> tuple[int, int]: ...
 def import_poses(input: str, output: str, split: Optional[str] = ...) -> tuple[int, int]: ...
+
+class Plan:
+    @property
+    def q(self) -> bytes: ...
+    @property
+    def load_kg(self) -> list[float]: ...
+    def csv(self) -> str: ...
+    @property
+    def summary(self) -> tuple[str, int, int]: ...
+    @property
+    def parameters(self) -> tuple[list[str], list[str], list[str], list[str]]: ...
+    def scores(self) -> tuple[dict, Optional[dict]]: ...
+
+def plan(
+    job: Job,
+    poses: int,
+    *,
+    candidates: int = ...,
+    pool_q: Optional[bytes] = ...,
+    pool_load_kg: Optional[list[float]] = ...,
+    criterion: str = ...,
+    seed: int = ...,
+    load_kg: list[float] = ...,
+    limits: list[tuple[str, float, float]] = ...,
+    exchange_passes: int = ...,
+) -> Plan: ...

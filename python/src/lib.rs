@@ -812,6 +812,239 @@ impl Model {
     }
 }
 
+/// What a selection of poses predicts ([`robcal::calibrate::plan::Scores`]),
+/// by the command's JSON keys.
+fn scores<'py>(
+    py: Python<'py>,
+    s: &robcal::calibrate::plan::Scores,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("log_det", s.log_det)?;
+    d.set_item("trace_scaled", s.trace)?;
+    d.set_item("min_eigenvalue_scaled", s.min_eigen)?;
+    d.set_item("condition", s.condition)?;
+    d.set_item("predicted_rms_um", s.predicted_um)?;
+    d.set_item("std", s.std.clone())?;
+    Ok(d)
+}
+
+/// A plan: the configurations to measure and what they predict.
+#[pyclass(frozen, module = "robcal._robcal")]
+struct Plan {
+    /// The chosen configurations' joint values, row-major.
+    q: Vec<f64>,
+    load_kg: Vec<f64>,
+    csv: String,
+    criterion: &'static str,
+    candidates: usize,
+    exchanges: usize,
+    params: Vec<String>,
+    units: Vec<String>,
+    left_out: Vec<String>,
+    notes: Vec<String>,
+    planned: robcal::calibrate::plan::Scores,
+    random: Option<robcal::calibrate::plan::Scores>,
+}
+
+#[pymethods]
+impl Plan {
+    /// The chosen configurations' joint values \[rad or m\], `f64` bytes,
+    /// rows of the robot's joints in the order chosen.
+    #[getter]
+    fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        to_bytes(py, &self.q)
+    }
+
+    /// Their payload masses \[kg\].
+    #[getter]
+    fn load_kg(&self) -> Vec<f64> {
+        self.load_kg.clone()
+    }
+
+    /// The points CSV `robcal plan --output` writes, the same text.
+    fn csv(&self) -> String {
+        self.csv.clone()
+    }
+
+    /// The criterion (`d`, `a`, `i`, `e`, `condition`), the candidates
+    /// chosen from, the greedy steps and exchanges made.
+    #[getter]
+    fn summary(&self) -> (&'static str, usize, usize) {
+        (self.criterion, self.candidates, self.exchanges)
+    }
+
+    /// The parameters planned for and their units; those no candidate
+    /// determines; what the plan assumed.
+    #[getter]
+    fn parameters(&self) -> (Vec<String>, Vec<String>, Vec<String>, Vec<String>) {
+        (
+            self.params.clone(),
+            self.units.clone(),
+            self.left_out.clone(),
+            self.notes.clone(),
+        )
+    }
+
+    /// What the plan predicts, and as many random candidates as drawn
+    /// (None for a pool of the user's).
+    fn scores<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyDict>, Option<Bound<'py, PyDict>>)> {
+        let random = self.random.as_ref().map(|r| scores(py, r)).transpose()?;
+        Ok((scores(py, &self.planned)?, random))
+    }
+}
+
+/// `robcal plan`: the `poses` configurations of a pool of candidates that
+/// determine the job's declared model best; the candidates drawn within
+/// the joint limits (`limits` tighter, `(name, lo, hi)`), each with every
+/// mass of `load_kg`, or `pool_q` (rows of joint values, `f64` bytes) with
+/// `pool_load_kg`. The command's settings and checks. Releases the GIL.
+#[allow(clippy::too_many_arguments)]
+#[pyfunction]
+#[pyo3(signature = (job, poses, *, candidates = 1000, pool_q = None, pool_load_kg = None,
+    criterion = "d", seed = 0x706c_616e, load_kg = Vec::new(), limits = Vec::new(),
+    exchange_passes = 10))]
+fn plan(
+    py: Python<'_>,
+    job: &Job,
+    poses: i64,
+    candidates: i64,
+    pool_q: Option<&[u8]>,
+    pool_load_kg: Option<Vec<f64>>,
+    criterion: &str,
+    seed: u64,
+    load_kg: Vec<f64>,
+    limits: Vec<(String, f64, f64)>,
+    exchange_passes: i64,
+) -> PyResult<Plan> {
+    use robcal::calibrate::plan::{self as p, Candidate, Criterion, PlanSettings};
+    let range = |v: i64, lo: i64, hi: i64, what: &str| {
+        usize::try_from(v)
+            .ok()
+            .filter(|_| (lo..=hi).contains(&v))
+            .ok_or_else(|| PyValueError::new_err(format!("{what} = {v}: expected {lo} to {hi}")))
+    };
+    let poses = range(poses, 1, 100_000, "poses")?;
+    let candidates = range(candidates, 1, p::MAX_CANDIDATES as i64, "candidates")?;
+    let exchange_passes = range(exchange_passes, 0, 100, "exchange_passes")?;
+    let criterion = match criterion {
+        "d" => Criterion::D,
+        "a" => Criterion::A,
+        "i" => Criterion::I,
+        "e" => Criterion::E,
+        "condition" => Criterion::Condition,
+        c => {
+            return Err(PyValueError::new_err(format!(
+                "criterion {c:?}: expected 'd', 'a', 'i', 'e' or 'condition'"
+            )))
+        }
+    };
+    let max = MAX_LOAD_KG;
+    for m in load_kg.iter().chain(pool_load_kg.iter().flatten()) {
+        if !(m.is_finite() && (0.0..=max).contains(m)) {
+            return Err(PyValueError::new_err(format!(
+                "load_kg: {}: a mass from 0 to {max} kg",
+                short(*m)
+            )));
+        }
+    }
+    for (name, lo, hi) in &limits {
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "limits {name:?}: ({lo}, {hi}): expected finite bounds"
+            )));
+        }
+    }
+    let settings = PlanSettings {
+        poses,
+        candidates,
+        criterion,
+        seed,
+        loads_kg: load_kg,
+        limits,
+        exchange_passes,
+    };
+    let job = Arc::clone(&job.inner);
+    let dof = job.robot.dof();
+    let pool_candidates = match pool_q {
+        None => None,
+        Some(b) => {
+            let q = floats(b, "pool_q")?;
+            if q.is_empty() || !q.len().is_multiple_of(dof) {
+                return Err(PyValueError::new_err(format!(
+                    "pool_q: {} values are not rows of {dof} joints",
+                    q.len()
+                )));
+            }
+            let n = q.len() / dof;
+            within(&q, MAX_JOINT_RAD.max(MAX_POSITION_M), "pool_q", "rad or m")?;
+            let loads = pool_load_kg.unwrap_or_else(|| vec![0.0]);
+            if !(loads.len() == 1 || loads.len() == n) {
+                return Err(PyValueError::new_err(format!(
+                    "pool_load_kg: {} values for {n} rows",
+                    loads.len()
+                )));
+            }
+            Some(
+                (0..n)
+                    .map(|r| Candidate {
+                        q: q[r * dof..(r + 1) * dof].to_vec(),
+                        load_kg: loads[if loads.len() == 1 { 0 } else { r }],
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        }
+    };
+    let random = pool_candidates.is_none();
+    let out = py.detach(|| {
+        let cands = match pool_candidates {
+            Some(c) => c,
+            None => p::random_candidates(&job, &settings).map_err(|e| e.to_string())?,
+        };
+        let policy = calibrate::Policy::default();
+        let pool = p::pool(&job, cands, &policy).map_err(|e| e.to_string())?;
+        let planned = p::choose(
+            &pool,
+            settings.poses,
+            settings.criterion,
+            settings.exchange_passes,
+        )
+        .map_err(|e| e.to_string())?;
+        let baseline = random.then(|| {
+            let first: Vec<usize> = (0..settings.poses.min(pool.candidates.len())).collect();
+            pool.scores(&first)
+        });
+        let csv = p::points_csv(&job, &pool, &planned.chosen);
+        let q = planned
+            .chosen
+            .iter()
+            .flat_map(|&c| pool.candidates[c].q.iter().copied())
+            .collect();
+        let load_kg = planned
+            .chosen
+            .iter()
+            .map(|&c| pool.candidates[c].load_kg)
+            .collect();
+        Ok::<_, String>(Plan {
+            q,
+            load_kg,
+            csv,
+            criterion: planned.criterion.name(),
+            candidates: pool.candidates.len(),
+            exchanges: planned.exchanges,
+            params: pool.params.clone(),
+            units: pool.units.clone(),
+            left_out: pool.left_out.clone(),
+            notes: pool.notes.clone(),
+            planned: planned.scores,
+            random: baseline,
+        })
+    });
+    out.map_err(calibration_error)
+}
+
 /// `robcal import figaroh-mocap`: a FIGAROH mocap CSV into the contract
 /// CSV at `output` (rad, m), joints in `job`'s chain order when given;
 /// `output` untouched on error. Returns `(postures, rows)`.
@@ -861,6 +1094,8 @@ fn _robcal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Measurements>()?;
     m.add_class::<Calibration>()?;
     m.add_class::<Model>()?;
+    m.add_class::<Plan>()?;
+    m.add_function(wrap_pyfunction!(plan, m)?)?;
     m.add_function(wrap_pyfunction!(import_figaroh_mocap, m)?)?;
     m.add_function(wrap_pyfunction!(import_poses, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

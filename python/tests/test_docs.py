@@ -24,3 +24,4 @@ def test_the_python_page_runs_as_written(repo, shared, monkeypatch):
     assert namespace["c"].error_um.max() < 0.1
     assert namespace["v"]["rms_mm"] < 4.0
     assert list(namespace["small"].names) == ["k_a2", "k_a3"]
+    assert namespace["p"].q.shape == (12, 6)

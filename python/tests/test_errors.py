@@ -1422,3 +1422,43 @@ def test_a_cell_with_a_line_end_is_still_a_one_line_error(job, columns, tmp_path
         with pytest.raises(robcal.InputError) as e:
             job.measurements(p)
         message(e, "nl.csv:5: column 'marker': '1", "is not a marker id")
+
+
+# --------------------------------------------------------------------------
+# robcal.plan (mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, expect",
+    [
+        ({"poses": 5}, robcal.CalibrationError, "--load-kg"),
+        ({"poses": 50, "candidates": 20, "load_kg": [250.0]}, robcal.CalibrationError,
+         "50 poses to choose from 20 candidates"),
+        ({"poses": 5, "load_kg": [250.0], "limits": {"a9": (0.0, 1.0)}}, robcal.CalibrationError,
+         "unknown joint 'a9'"),
+        ({"poses": 5, "load_kg": [250.0], "limits": {"a2": (-9.0, 9.0)}}, robcal.CalibrationError,
+         "a2=-9:9"),
+        ({"poses": 5, "load_kg": [-3.0]}, ValueError, "a mass from 0"),
+        ({"poses": 5, "candidates": 100001}, ValueError, "100001"),
+        ({"poses": 0, "load_kg": [250.0]}, ValueError, "poses = 0"),
+        ({"poses": 5, "load_kg": [250.0], "criterion": "x"}, ValueError, 'criterion "x"'),
+        ({"poses": 5, "load_kg": [250.0], "exchange_passes": -1}, ValueError, "exchange_passes = -1"),
+        ({"poses": 5, "load_kg": [float("nan")]}, ValueError, "a mass from 0"),
+    ],
+)
+def test_what_cannot_be_planned_is_one_line(kwargs, error, expect):
+    """mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written"""
+    with pytest.raises(error) as e:
+        robcal.plan(SETUP, **kwargs)
+    message(e, expect)
+
+
+def test_a_pool_that_is_not_one_names_the_value():
+    """mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written
+    (the pool with a NaN)"""
+    with pytest.raises(ValueError) as e:
+        robcal.plan(SETUP, 1, pool=[[0, 0, 0, 0, float("nan"), 0]])
+    message(e, "pool_q: value 4 is NaN")
+    with pytest.raises(ValueError) as e:
+        robcal.plan(SETUP, 1, pool=[[0, 0, 0, 0, 0]])
+    message(e, "pool: shape (1, 5)")

@@ -183,3 +183,45 @@ def test_the_gil_is_released_while_it_calibrates(repo):
     assert alone > 0.05 and call > 0.05, (alone, call)
     assert len(during) > 100, len(during)
     assert gaps.max() < 0.5 * call, (gaps.max(), call)
+
+
+@pytest.mark.parametrize(
+    "setup, args, kwargs",
+    [
+        ("data/kr270/setup.toml", ["--poses", "12", "--load-kg", "250"], {"poses": 12, "load_kg": [250.0]}),
+        (
+            "data/kr270/setup.toml",
+            ["--poses", "8", "--load-kg", "0", "--load-kg", "250", "--criterion", "a", "--candidates", "300",
+             "--limit", "a2=-1.2:-0.2", "--seed", "7"],
+            {"poses": 8, "load_kg": [0.0, 250.0], "criterion": "a", "candidates": 300,
+             "limits": {"a2": (-1.2, -0.2)}, "seed": 7},
+        ),
+    ],
+)
+def test_a_plan_is_the_commands(cli, repo, tmp_path, setup, args, kwargs):
+    out = tmp_path / "plan.csv"
+    import json
+
+    want = json.loads(run(cli, "plan", "--setup", setup, *args, "--output", str(out), "--json"))
+    got = robcal.plan(repo / setup, **kwargs)
+    assert got.csv() == out.read_text()
+    assert got.names == [p["name"] for p in want["parameters"]]
+    assert np.array_equal(got.std, [p["std"] for p in want["parameters"]])
+    assert np.array_equal(got.std_random, [p["std_random"] for p in want["parameters"]])
+    assert got.scores == want["plan"] and got.scores_random == want["random"]
+    assert (got.criterion, got.candidates, got.exchanges) == (want["criterion"], want["candidates"], want["exchanges"])
+    frame = got.frame()
+    assert np.array_equal(frame[[c for c in frame.columns if c.endswith("_rad")]].to_numpy(), got.q)
+    assert np.array_equal(frame["load_kg"].to_numpy(), got.load_kg)
+
+
+def test_a_plan_from_a_pool_is_the_commands(cli, repo, tmp_path):
+    out = tmp_path / "plan.csv"
+    import json
+
+    pool = "data/kr270/poses.csv"
+    want = json.loads(run(cli, "plan", "--setup", KR270, "--poses", "6", "--pool", pool, "--output", str(out), "--json"))
+    got = robcal.plan(repo / KR270, 6, pool=pd.read_csv(repo / pool))
+    assert got.csv() == out.read_text()
+    assert np.array_equal(got.std, [p["std"] for p in want["parameters"]])
+    assert got.std_random is None and want["random"] is None

@@ -302,6 +302,38 @@ pub fn random_candidates(job: &Job, s: &PlanSettings) -> Result<Vec<Candidate>, 
     Ok(out)
 }
 
+/// The candidates `chosen` of `pool` as the points CSV of `robcal
+/// predict` (what `robcal plan --output` writes): `id` (`plan1`, …),
+/// `load_kg`, the setup's payload centre of mass (the plan's), one column
+/// per joint in rad or m; numbers as Rust writes them back exactly.
+pub fn points_csv(job: &Job, pool: &Pool, chosen: &[usize]) -> String {
+    use std::fmt::Write as _;
+    let com = job.setup.load.map_or([0.0; 3], |l| l.com);
+    let mut csv = String::from("id,load_kg,com_x_m,com_y_m,com_z_m");
+    for (name, j) in job.robot.joint_names.iter().zip(job.robot.chain.joints()) {
+        csv.push(',');
+        csv += &crate::io::points::joint_column(name, j.kind);
+    }
+    csv.push('\n');
+    for (k, &c) in chosen.iter().enumerate() {
+        let cand = &pool.candidates[c];
+        let _ = write!(
+            csv,
+            "plan{},{},{:?},{:?},{:?}",
+            k + 1,
+            cand.load_kg,
+            com[0],
+            com[1],
+            com[2]
+        );
+        for v in &cand.q {
+            let _ = write!(csv, ",{v:?}");
+        }
+        csv.push('\n');
+    }
+    csv
+}
+
 /// The rows of `candidates` for `job`'s declared model, as a [`Pool`].
 ///
 /// # Errors

@@ -169,31 +169,7 @@ pub fn run_plan(a: &PlanArgs) -> Result<(), String> {
         pool.scores(&first)
     });
 
-    // The configurations, SI, named per joint.
-    // (The payload's centre of mass: the setup's, which the plan used.)
-    let com = job.setup.load.map_or([0.0; 3], |l| l.com);
-    let mut csv = String::from("id,load_kg,com_x_m,com_y_m,com_z_m");
-    for (name, j) in job.robot.joint_names.iter().zip(job.robot.chain.joints()) {
-        csv.push(',');
-        csv += &robcal::io::points::joint_column(name, j.kind);
-    }
-    csv.push('\n');
-    for (k, &c) in planned.chosen.iter().enumerate() {
-        let cand = &pool.candidates[c];
-        let _ = write!(
-            csv,
-            "plan{},{},{:?},{:?},{:?}",
-            k + 1,
-            cand.load_kg,
-            com[0],
-            com[1],
-            com[2]
-        );
-        for v in &cand.q {
-            let _ = write!(csv, ",{v:?}");
-        }
-        csv.push('\n');
-    }
+    let csv = plan::points_csv(&job, &pool, &planned.chosen);
     robcal::io::write_all_atomic(
         &[(a.output.clone(), csv.into_bytes())],
         &[a.setup.as_path()],
