@@ -82,6 +82,38 @@ def _real(x: Any, name: str) -> np.ndarray:
     return np.asarray(a, dtype=np.float64, order="C")
 
 
+def _int(v: Any, name: str) -> int:
+    """A whole number (not a bool), as Python's int."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+        raise TypeError(f"{name}: expected a whole number, got {v!r}")
+    v = int(v)
+    if abs(v) >= 2**62:
+        raise ValueError(f"{name} = {v}: out of range")
+    return v
+
+
+def _number(v: Any, name: str) -> float:
+    """A real number (not a bool), as Python's float."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number, got {v!r}")
+    return float(v)
+
+
+def _joints(q: Any, names: list[str], angular: list[bool], name: str) -> Any:
+    """Joint values given as a DataFrame: its joint columns by name
+    (``<joint>_rad``, or ``_m`` for a prismatic joint), never by position."""
+    if not hasattr(q, "columns"):
+        return q
+    cols = [f"{n}_{'rad' if a else 'm'}" for n, a in zip(names, angular)]
+    missing = [c for c in cols if c not in q.columns]
+    if missing:
+        raise ValueError(
+            f"{name}: no column {missing[0]!r}: a DataFrame of joint values has one column "
+            f"per joint, by name and unit ({', '.join(cols)})"
+        )
+    return q[cols].to_numpy()
+
+
 def _rows(x: Any, width: int, name: str, what: str) -> tuple[np.ndarray, bool]:
     """`x` as (n, width) rows, and whether it was one row of shape (width,)."""
     a = _real(x, name)
@@ -102,7 +134,7 @@ def _per_row(x: Any, n: int, width: int, name: str) -> list[float]:
     if (width == 1 and a.shape == (n,)) or a.shape == (n, width):
         return a.reshape(-1).tolist()
     want = "()" if width == 1 else f"({width},)"
-    raise ValueError(f"{name}: shape {a.shape}: expected {want} or ({n}{'' if width == 1 else f', {width}'})")
+    raise ValueError(f"{name}: shape {a.shape}: expected {want} or ({n},{'' if width == 1 else f' {width}'})")
 
 
 # --------------------------------------------------------------------------
@@ -136,16 +168,28 @@ def _toml(value: Any, path: str = "") -> str:
     """A setup given as a dict, as TOML text (tables, arrays of tables,
     strings, numbers, booleans, arrays)."""
 
+    def quoted(text: str) -> str:
+        out = []
+        for c in text:
+            if c in '"\\':
+                out.append("\\" + c)
+            elif ord(c) < 0x20 or ord(c) == 0x7F:
+                out.append(f"\\u{ord(c):04X}")
+            else:
+                out.append(c)
+        return '"' + "".join(out) + '"'
+
     def scalar(v: Any, at: str) -> str:
-        if isinstance(v, bool):
+        if isinstance(v, np.ndarray) and v.ndim == 0:
+            v = v.item()
+        if isinstance(v, (bool, np.bool_)):
             return "true" if v else "false"
         if isinstance(v, (int, np.integer)):
             return str(int(v))
         if isinstance(v, (float, np.floating)):
             return repr(float(v))
         if isinstance(v, (str, os.PathLike)):
-            s = os.fspath(v)
-            return '"' + s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+            return quoted(os.fspath(v))
         if isinstance(v, (list, tuple, np.ndarray)):
             return "[" + ", ".join(scalar(x, at) for x in v) + "]"
         raise TypeError(f"setup {at}: a {type(v).__name__} has no TOML form")
@@ -291,6 +335,8 @@ class Job:
         ``--lambda``, ``diagnose=False`` for ``--no-diagnose``). Raises
         NotACalibrationError where the command exits 1, unless
         ``accept_unconverged``. The GIL is released while it runs."""
+        max_iter = _int(max_iter, "max_iter")
+        lambda_ = None if lambda_ is None else _number(lambda_, "lambda_")
         m = self.measurements(data)
         v = None if validate is None else self.measurements(validate)
         native = self._native.calibrate(
@@ -394,7 +440,7 @@ def plan(
     setup: Union[PathLike, Job],
     poses: int,
     *,
-    candidates: int = 1000,
+    candidates: Optional[int] = None,
     pool: Any = None,
     criterion: str = "d",
     seed: int = 0x706C616E,
@@ -406,14 +452,20 @@ def plan(
     that determine the setup's declared model best, chosen before
     measuring. Candidates: ``candidates`` random ones within the joint
     limits (``limits={joint: (lo, hi)}`` tighter, rad or m), each with
-    every mass of ``load_kg``; or your ``pool``: rows of joint values (n,
-    dof), or a DataFrame with a ``<joint>_rad``/``_m`` column per joint and
-    optionally ``load_kg``. ``criterion``: ``d``, ``a``, ``i``, ``e`` or
+    every mass of ``load_kg``; or your ``pool``: the points CSV's path (the
+    command's ``--pool``), a DataFrame with a ``<joint>_rad``/``_m`` column
+    per joint and optionally ``load_kg``, or rows of joint values (n, dof)
+    with ``load_kg`` one mass for all or one per row. ``criterion``: ``d``, ``a``, ``i``, ``e`` or
     ``condition`` (docs/plan.md)."""
     job = setup if isinstance(setup, Job) else Job.load(setup)
     dof = len(job.joint_names)
-    pool_q = pool_load = None
-    if pool is not None:
+    if pool is not None and candidates is not None:
+        raise ValueError("candidates: random candidates are drawn without a pool; a pool is given")
+    loads = _real(load_kg, "load_kg").reshape(-1).tolist()
+    pool_q = pool_load = pool_path = None
+    if isinstance(pool, (str, os.PathLike)):
+        pool_path = os.fspath(pool)
+    elif pool is not None:
         if hasattr(pool, "columns"):
             units = ["rad" if a else "m" for a in job._native.joint_is_angular]
             cols = [f"{n}_{u}" for n, u in zip(job.joint_names, units)]
@@ -425,18 +477,21 @@ def plan(
                 pool_load = _real(pool["load_kg"].to_numpy(), "pool load_kg").tolist()
         else:
             q, _ = _rows(pool, dof, "pool", "joint values")
+            if loads:
+                pool_load = loads  # one mass for every row, or one per row
         pool_q = np.ascontiguousarray(q, dtype=np.float64).tobytes()
     native = _robcal.plan(
         job._native,
-        poses,
-        candidates=candidates,
+        _int(poses, "poses"),
+        candidates=1000 if candidates is None else _int(candidates, "candidates"),
         pool_q=pool_q,
         pool_load_kg=pool_load,
+        pool_path=pool_path,
         criterion=criterion,
-        seed=seed,
-        load_kg=[float(m) for m in load_kg],
-        limits=[(str(k), float(v[0]), float(v[1])) for k, v in (limits or {}).items()],
-        exchange_passes=exchange_passes,
+        seed=_int(seed, "seed"),
+        load_kg=loads if pool is None else [],
+        limits=[(str(k), _number(v[0], f"limits {k!r}"), _number(v[1], f"limits {k!r}")) for k, v in (limits or {}).items()],
+        exchange_passes=_int(exchange_passes, "exchange_passes"),
     )
     return Plan(native, dof)
 
@@ -506,9 +561,11 @@ class Calibration:
 
     def __repr__(self) -> str:
         d = self.to_dict()
+        h = d["heldout_rms_um"]
+        held = "no held-out RMS" if h is None else f"held-out {h:.4g} µm"
         return (
-            f"<robcal.Calibration: {len(self.names)} parameters, rms {d['rms_um']:.3g} µm, "
-            f"held-out {d['heldout_rms_um']} µm, {len(d['effects'])} effects added>"
+            f"<robcal.Calibration: {len(self.names)} parameters, RMS {d['rms_um']:.4g} µm, "
+            f"{held}, {len(d['effects'])} effects added>"
         )
 
     @property
@@ -669,10 +726,12 @@ class Model:
         ``q`` ((dof,) or (n, dof)) with the payload ``load_kg`` (one, or one
         per row) at ``com_m`` [m, tip frame] ((3,) or (n, 3)): (3,) or
         (n, 3). ``marker`` may be left out when the model has one."""
+        q = _joints(q, self.joint_names, self._native.joint_is_angular, "q")
         rows, one = _rows(q, self.dof, "q", "joint values")
         n = rows.shape[0]
         load = _per_row(load_kg, n, 1, "load_kg")
         com = _per_row(com_m, n, 3, "com_m")
+        marker = None if marker is None else _int(marker, "marker")
         out = self._native.predict(rows.tobytes(), load, com, marker)
         self._warn_payload(load if len(load) == n else load * n)
         p = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
@@ -693,6 +752,7 @@ class Model:
         on ``targets_m`` [m, measurement frame] ((3,) or (n, 3)), Newton from
         ``q_start`` (e.g. the nominal inverse kinematics); with
         ``rotation_rad`` (rotation vectors of the tip frame) pose targets."""
+        q_start = _joints(q_start, self.joint_names, self._native.joint_is_angular, "q_start")
         q, one = _rows(q_start, self.dof, "q_start", "joint values")
         n = q.shape[0]
         t, _ = _rows(targets_m, 3, "targets_m", "points")
@@ -706,8 +766,16 @@ class Model:
             rot = r.tobytes()
         load = _per_row(load_kg, n, 1, "load_kg")
         com = _per_row(com_m, n, 3, "com_m")
+        marker = None if marker is None else _int(marker, "marker")
         qs, err, err_rot, its = self._native.compensate(
-            t.tobytes(), q.tobytes(), load, com, marker, rot, float(tolerance_um), int(max_iter)
+            t.tobytes(),
+            q.tobytes(),
+            load,
+            com,
+            marker,
+            rot,
+            _number(tolerance_um, "tolerance_um"),
+            _int(max_iter, "max_iter"),
         )
         self._warn_payload(load if len(load) == n else load * n)
         qs = np.frombuffer(qs, dtype=np.float64).reshape(n, self.dof).copy()

@@ -119,6 +119,7 @@ def plan(
     candidates: int = ...,
     pool_q: Optional[bytes] = ...,
     pool_load_kg: Optional[list[float]] = ...,
+    pool_path: Optional[str] = ...,
     criterion: str = ...,
     seed: int = ...,
     load_kg: list[float] = ...,

@@ -53,7 +53,7 @@ create_exception!(
 /// A message on one line, its quotes and length cut as the command's
 /// (`robcal: error: …`).
 fn one_line(e: impl std::fmt::Display) -> String {
-    robcal::io::input::shorten(&e.to_string().replace('\n', " "))
+    robcal::io::input::shorten(&e.to_string().replace(['\n', '\r'], " "))
 }
 
 fn input_error(e: impl std::fmt::Display) -> PyErr {
@@ -260,6 +260,11 @@ impl Job {
             Text(Vec<String>),
             Floats(Vec<f64>),
         }
+        if columns.is_empty() && rows > 0 {
+            return Err(PyValueError::new_err(
+                "a measurement table needs its columns (config, marker, the joints, x, y, z, …)",
+            ));
+        }
         let mut cols = Vec::with_capacity(columns.len());
         for (header, cells) in &columns {
             let c = if let Ok(b) = cells.cast::<PyBytes>() {
@@ -285,7 +290,8 @@ impl Job {
         let job = &self.inner;
         let headers: Vec<String> = columns.iter().map(|c| csv_cell(&c.0)).collect();
         let m = py.detach(|| {
-            let mut text = String::with_capacity(16 * rows * cols.len().max(1));
+            // Every row was given (checked above): about 16 bytes a cell.
+            let mut text = String::with_capacity(rows.saturating_mul(16 * cols.len()).min(1 << 30));
             text.push_str(&headers.join(","));
             text.push('\n');
             for r in 0..rows {
@@ -904,8 +910,8 @@ impl Plan {
 #[allow(clippy::too_many_arguments)]
 #[pyfunction]
 #[pyo3(signature = (job, poses, *, candidates = 1000, pool_q = None, pool_load_kg = None,
-    criterion = "d", seed = 0x706c_616e, load_kg = Vec::new(), limits = Vec::new(),
-    exchange_passes = 10))]
+    pool_path = None, criterion = "d", seed = 0x706c_616e, load_kg = Vec::new(),
+    limits = Vec::new(), exchange_passes = 10))]
 fn plan(
     py: Python<'_>,
     job: &Job,
@@ -913,6 +919,7 @@ fn plan(
     candidates: i64,
     pool_q: Option<&[u8]>,
     pool_load_kg: Option<Vec<f64>>,
+    pool_path: Option<PathBuf>,
     criterion: &str,
     seed: u64,
     load_kg: Vec<f64>,
@@ -951,11 +958,12 @@ fn plan(
         }
     }
     for (name, lo, hi) in &limits {
-        if !(lo.is_finite() && hi.is_finite()) {
-            return Err(PyValueError::new_err(format!(
-                "limits {name:?}: ({lo}, {hi}): expected finite bounds"
-            )));
-        }
+        within(
+            &[*lo, *hi],
+            MAX_JOINT_RAD.max(MAX_POSITION_M),
+            &format!("limits {name:?}"),
+            "rad or m",
+        )?;
     }
     let settings = PlanSettings {
         poses,
@@ -968,9 +976,36 @@ fn plan(
     };
     let job = Arc::clone(&job.inner);
     let dof = job.robot.dof();
-    let pool_candidates = match pool_q {
-        None => None,
-        Some(b) => {
+    let pool_candidates = match (pool_q, pool_path) {
+        (Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(
+                "a pool of rows or a pool file, not both",
+            ))
+        }
+        (None, Some(path)) => {
+            // The command's `--pool`: the points CSV, read as it reads it.
+            let text = robcal::io::input::read_text(
+                &path,
+                "the candidate poses",
+                robcal::io::input::MAX_DATA_BYTES,
+            )
+            .map_err(input_error)?;
+            let joints: Vec<_> = (job.robot.joint_names.iter().cloned())
+                .zip(job.robot.chain.joints().iter().map(|j| j.kind))
+                .collect();
+            let rows = robcal::io::points::parse_points(&text, &path, &joints, false)
+                .map_err(input_error)?;
+            Some(
+                rows.into_iter()
+                    .map(|r| Candidate {
+                        q: r.q,
+                        load_kg: r.load_kg,
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        }
+        (None, None) => None,
+        (Some(b), None) => {
             let q = floats(b, "pool_q")?;
             if q.is_empty() || !q.len().is_multiple_of(dof) {
                 return Err(PyValueError::new_err(format!(

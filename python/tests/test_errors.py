@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import robcal
@@ -1118,8 +1119,8 @@ def test_predict_refuses_an_impossible_load(model, load, says):
 @pytest.mark.parametrize(
     "load, com, says",
     [
-        ([1.0, 2.0], COM, "load_kg: shape (2,): expected () or (3)"),
-        ([[1.0, 2.0, 3.0]], COM, "load_kg: shape (1, 3): expected () or (3)"),
+        ([1.0, 2.0], COM, "load_kg: shape (2,): expected () or (3,)"),
+        ([[1.0, 2.0, 3.0]], COM, "load_kg: shape (1, 3): expected () or (3,)"),
         (LOADS3, [0.0, 0.0], "com_m: shape (2,): expected (3,) or (3, 3)"),
         (LOADS3, np.zeros((2, 3)), "com_m: shape (2, 3): expected (3,) or (3, 3)"),
         (LOADS3, [np.nan, 0.0, 0.0], "com_m: value 0 is NaN"),
@@ -1205,7 +1206,7 @@ def test_compensate_refuses_rows_that_do_not_match(model):
     message(e, "rotation_rad: 2 rotations for 3 rows of q_start")
     with pytest.raises(ValueError) as e:
         model.compensate(t, Q3, [1.0, 2.0], COM, marker=1)
-    message(e, "load_kg: shape (2,): expected () or (3)")
+    message(e, "load_kg: shape (2,): expected () or (3,)")
     with pytest.raises(ValueError) as e:
         model.compensate(t[:0], Q3[:0], LOADS3, COM, marker=1)
     message(e, "q_start: shape (0, 6)")
@@ -1462,3 +1463,68 @@ def test_a_pool_that_is_not_one_names_the_value():
     with pytest.raises(ValueError) as e:
         robcal.plan(SETUP, 1, pool=[[0, 0, 0, 0, 0]])
     message(e, "pool: shape (1, 5)")
+
+
+# --------------------------------------------------------------------------
+# Found by a second reading
+
+
+def test_joint_values_in_a_frame_are_taken_by_name(model):
+    """A DataFrame's joint columns by name and unit, never by position."""
+    cols = [f"a{i}_rad" for i in range(1, 7)]
+    q = pd.DataFrame([Q1], columns=cols)
+    want = model.predict(Q1, marker=1)
+    assert np.array_equal(model.predict(q[cols[::-1]], marker=1)[0], want)
+    with pytest.raises(ValueError) as e:
+        model.predict(pd.DataFrame([np.rad2deg(Q1)], columns=[c[:-4] for c in cols]), marker=1)
+    message(e, "q: no column 'a1_rad'")
+
+
+def test_a_string_or_a_bool_is_not_a_number():
+    with pytest.raises(TypeError) as e:
+        robcal.plan(SETUP, 4, load_kg="250")
+    message(e, "load_kg: expected real numbers")
+    with pytest.raises(TypeError) as e:
+        robcal.calibrate(SETUP, DATA, max_iter=True)
+    message(e, "max_iter: expected a whole number")
+
+
+def test_a_pool_file_is_the_commands_pool_and_excludes_candidates(repo):
+    by_file = robcal.plan(SETUP, 6, pool=repo / "data/kr270/poses.csv")
+    by_frame = robcal.plan(SETUP, 6, pool=pd.read_csv(repo / "data/kr270/poses.csv"))
+    assert by_file.csv() == by_frame.csv()
+    with pytest.raises(ValueError) as e:
+        robcal.plan(SETUP, 6, pool=repo / "data/kr270/poses.csv", candidates=100)
+    message(e, "candidates: random candidates are drawn without a pool")
+    # Rows of joint values carry their payload by load_kg.
+    rows = pd.read_csv(repo / "data/kr270/poses.csv")[[f"a{i}_rad" for i in range(1, 7)]].to_numpy()
+    assert robcal.plan(SETUP, 3, pool=rows, load_kg=250.0).load_kg.tolist() == [250.0] * 3
+
+
+def test_a_table_without_columns_is_refused(job):
+    with pytest.raises(ValueError) as e:
+        job._native.table_measurements([], 2**40)
+    message(e, "a measurement table needs its columns")
+
+
+def test_a_setup_dict_with_control_characters_means_what_it_says(repo):
+    """TOML escapes, numpy booleans and 0-d arrays in a setup dict."""
+    urdf = (repo / "data/kr270/kr270.urdf").read_text()
+    import tomllib
+
+    setup = tomllib.loads((repo / "data/kr270/setup.toml").read_text())
+    setup["model"]["base_frame"] = np.bool_(False)
+    setup["noise"]["lambda"] = np.array(1.0)
+    job = robcal.Job.from_text(setup, urdf)
+    assert "base_frame = false" in job.setup_toml()
+    setup["base_link"] = 'base_link\r"\\'
+    with pytest.raises(robcal.InputError) as e:
+        robcal.Job.from_text(setup, urdf)
+    message(e, "base_link")
+
+
+def test_huge_limits_are_said_short():
+    with pytest.raises(ValueError) as e:
+        robcal.plan(SETUP, 4, load_kg=[250.0], limits={"a1": (-1e300, 1e300)})
+    message(e, "-1e300")
+    assert len(str(e.value)) < 200
