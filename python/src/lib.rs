@@ -288,7 +288,10 @@ impl Job {
             cols.push(c);
         }
         let job = &self.inner;
-        let headers: Vec<String> = columns.iter().map(|c| csv_cell(&c.0)).collect();
+        let headers: Vec<String> = columns
+            .iter()
+            .map(|c| robcal::io::writer::csv_cell(&c.0))
+            .collect();
         let m = py.detach(|| {
             // Every row was given (checked above): about 16 bytes a cell.
             let mut text = String::with_capacity(rows.saturating_mul(16 * cols.len()).min(1 << 30));
@@ -300,7 +303,7 @@ impl Job {
                         text.push(',');
                     }
                     match c {
-                        Cells::Text(v) => text.push_str(&csv_cell(&v[r])),
+                        Cells::Text(v) => text.push_str(&robcal::io::writer::csv_cell(&v[r])),
                         // Rust's shortest representation: the same f64 read back.
                         Cells::Floats(v) => {
                             let _ = write!(text, "{}", v[r]);
@@ -397,15 +400,6 @@ impl Job {
             validate: v.map(|v| v.file.clone()),
             report,
         })
-    }
-}
-
-/// A CSV cell: quoted when it holds a separator, a quote or a line end.
-fn csv_cell(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_string()
     }
 }
 
@@ -982,28 +976,7 @@ fn plan(
                 "a pool of rows or a pool file, not both",
             ))
         }
-        (None, Some(path)) => {
-            // The command's `--pool`: the points CSV, read as it reads it.
-            let text = robcal::io::input::read_text(
-                &path,
-                "the candidate poses",
-                robcal::io::input::MAX_DATA_BYTES,
-            )
-            .map_err(input_error)?;
-            let joints: Vec<_> = (job.robot.joint_names.iter().cloned())
-                .zip(job.robot.chain.joints().iter().map(|j| j.kind))
-                .collect();
-            let rows = robcal::io::points::parse_points(&text, &path, &joints, false)
-                .map_err(input_error)?;
-            Some(
-                rows.into_iter()
-                    .map(|r| Candidate {
-                        q: r.q,
-                        load_kg: r.load_kg,
-                    })
-                    .collect::<Vec<_>>(),
-            )
-        }
+        (None, Some(path)) => Some(p::read_pool(&job, &path).map_err(input_error)?),
         (None, None) => None,
         (Some(b), None) => {
             let q = floats(b, "pool_q")?;
@@ -1032,25 +1005,10 @@ fn plan(
             )
         }
     };
-    let random = pool_candidates.is_none();
     let out = py.detach(|| {
-        let cands = match pool_candidates {
-            Some(c) => c,
-            None => p::random_candidates(&job, &settings).map_err(|e| e.to_string())?,
-        };
         let policy = calibrate::Policy::default();
-        let pool = p::pool(&job, cands, &policy).map_err(|e| e.to_string())?;
-        let planned = p::choose(
-            &pool,
-            settings.poses,
-            settings.criterion,
-            settings.exchange_passes,
-        )
-        .map_err(|e| e.to_string())?;
-        let baseline = random.then(|| {
-            let first: Vec<usize> = (0..settings.poses.min(pool.candidates.len())).collect();
-            pool.scores(&first)
-        });
+        let (pool, planned, baseline) =
+            p::make(&job, &settings, pool_candidates, &policy).map_err(|e| e.to_string())?;
         let csv = p::points_csv(&job, &pool, &planned.chosen);
         let q = planned
             .chosen

@@ -142,10 +142,11 @@ fn rows_mut<'r>(rows: &'r mut Arc<Rows>, last: &mut Mutex<Option<LastDesign>>) -
 }
 
 impl<'a> Engine<'a> {
-    /// An engine on rows of poses to be measured, not of measurements
-    /// ([`crate::calibrate::varied`]'s poses, [`crate::calibrate::plan`]'s
-    /// candidates): at `job`'s nominal robot, no held-out error.
-    pub fn for_poses(
+    /// An engine at `job`'s nominal robot, without a held-out error: as
+    /// rows of poses to be measured need it ([`crate::calibrate::varied`]'s
+    /// poses, [`crate::calibrate::plan`]'s candidates); a calibration
+    /// (`calibrate::run`) turns [`Engine::heldout`] on as its settings say.
+    pub fn nominal(
         job: &crate::io::job::Job,
         rows: Rows,
         names: Names,

@@ -51,6 +51,7 @@ use crate::calibrate::params::names::Names;
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::estimate::Block;
+use crate::io::error::InputError;
 use crate::io::job::Job;
 use crate::io::measurements::{Deflection, JointValues, Measurements, Observation};
 use crate::model::Param;
@@ -302,6 +303,66 @@ pub fn random_candidates(job: &Job, s: &PlanSettings) -> Result<Vec<Candidate>, 
     Ok(out)
 }
 
+/// Candidates of the user's: the points CSV at `path` (`robcal plan
+/// --pool`; `<joint>_rad`/`_m` per joint, optional `load_kg`; `marker`,
+/// `id` and the centre of mass ignored: the setup's is planned for).
+///
+/// # Errors
+/// The file cannot be read, or a row is not one of the points CSV
+/// ([`crate::io::points::parse_points`]): its line and column.
+pub fn read_pool(job: &Job, path: &std::path::Path) -> Result<Vec<Candidate>, InputError> {
+    let text = crate::io::input::read_text(
+        path,
+        "the candidate poses",
+        crate::io::input::MAX_DATA_BYTES,
+    )?;
+    let joints: Vec<_> = (job.robot.joint_names.iter().cloned())
+        .zip(job.robot.chain.joints().iter().map(|j| j.kind))
+        .collect();
+    Ok(
+        crate::io::points::parse_points(&text, path, &joints, false)?
+            .into_iter()
+            .map(|r| Candidate {
+                q: r.q,
+                load_kg: r.load_kg,
+            })
+            .collect(),
+    )
+}
+
+/// A plan made as `robcal plan` makes it: `settings.candidates` random
+/// candidates ([`random_candidates`]) unless `pool` gives them, their
+/// [`Pool`], the choice ([`choose`]), and the scores of the first `K`
+/// random candidates as drawn (what measuring without a plan gives; `None`
+/// for a pool of the user's).
+///
+/// # Errors
+/// As [`random_candidates`], [`pool`] and [`choose`].
+pub fn make(
+    job: &Job,
+    settings: &PlanSettings,
+    pool_candidates: Option<Vec<Candidate>>,
+    policy: &Policy,
+) -> Result<(Pool, Planned, Option<Scores>), CalibrationError> {
+    let random = pool_candidates.is_none();
+    let candidates = match pool_candidates {
+        Some(c) => c,
+        None => random_candidates(job, settings)?,
+    };
+    let pool = pool(job, candidates, policy)?;
+    let planned = choose(
+        &pool,
+        settings.poses,
+        settings.criterion,
+        settings.exchange_passes,
+    )?;
+    let baseline = random.then(|| {
+        let first: Vec<usize> = (0..settings.poses.min(pool.candidates.len())).collect();
+        pool.scores(&first)
+    });
+    Ok((pool, planned, baseline))
+}
+
 /// The candidates `chosen` of `pool` as the points CSV of `robcal
 /// predict` (what `robcal plan --output` writes): `id` (`plan1`, …),
 /// `load_kg`, the setup's payload centre of mass (the plan's), one column
@@ -478,7 +539,7 @@ pub fn pool(
     };
     let model = declared::declared(&job, std::path::Path::new("candidate poses"), &rows, &names)?;
     let mut quiet = |_: &str| {};
-    let mut e = Engine::for_poses(
+    let mut e = Engine::nominal(
         &job,
         rows,
         names,

@@ -8,7 +8,6 @@ use crate::calibrate::diagnosis;
 use crate::calibrate::effects::declared;
 use crate::calibrate::engine;
 use crate::calibrate::fit;
-use crate::calibrate::params::geometry::Geometry;
 use crate::calibrate::params::linearisation::Linearisation;
 use crate::calibrate::params::names::Names;
 use crate::calibrate::report::plausibility;
@@ -263,19 +262,12 @@ fn calibrate_rows(
     )
     .map_err(|e| CalibrationError::Core("noise settings", e))?;
     let weighting = weighting(setup, &rows, file)?;
-    let markers: Vec<Vector3<f64>> = names.markers.iter().map(|m| m.1).collect();
-    let mut e = engine::Engine {
-        cancel: None,
-        geometry: Geometry::nominal_tree(
-            &job.robot.chain,
-            &job.robot.ends,
-            &markers,
-            &job.marker_ends(),
-        ),
-        rows: std::sync::Arc::new(rows),
+    let mut e = engine::Engine::nominal(
+        job,
+        rows,
         names,
-        lin: Linearisation::nominal(settings.deflection_model),
-        fit_settings: fit::FitSettings {
+        Linearisation::nominal(settings.deflection_model),
+        fit::FitSettings {
             method: settings.method,
             weight,
             max_iterations: settings.max_iterations,
@@ -283,10 +275,9 @@ fn calibrate_rows(
             weighting,
         },
         policy,
-        heldout: settings.heldout,
         progress,
-        last_design: Default::default(),
-    };
+    );
+    e.heldout = settings.heldout;
     // (With the model's design in the same pass: the independence test
     // below needs it.)
     e.relinearise_for(&model)?;

@@ -151,7 +151,7 @@ pub fn varied(
     let mut names = names.clone();
     let rows = Rows::build(job, Cow::Owned(poses), true, &mut names, policy)?;
     let mut quiet = |_: &str| {};
-    let mut e = Engine::for_poses(
+    let mut e = Engine::nominal(
         job,
         rows,
         names,

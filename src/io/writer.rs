@@ -121,3 +121,13 @@ pub fn write_measurements(
 
     crate::io::atomic::write_atomic(path, &bytes).map_err(|e| io_err(&e))
 }
+
+/// A CSV cell of `text`: quoted (its quotes doubled) when it holds a
+/// separator, a quote or a line end, as the csv crate reads it back.
+pub fn csv_cell(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}

@@ -183,19 +183,11 @@ fn header(robot: &Predictor, row: &PointRow, target: bool) -> String {
     h.join(",")
 }
 
-fn csv_cell(text: &str) -> String {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_string()
-    }
-}
-
 fn lead(row: &PointRow, id: u32) -> String {
     let com = row.com_m.unwrap_or_default();
     let mut s = String::new();
     if let Some(i) = &row.id {
-        s += &csv_cell(i);
+        s += &robcal::io::writer::csv_cell(i);
         s.push(',');
     }
     let _ = write!(s, "{id},{},{},{},{}", row.load_kg, com[0], com[1], com[2]);

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::ValueEnum;
-use robcal::calibrate::plan::{self, Candidate, Criterion, PlanSettings, Pool, Scores};
+use robcal::calibrate::plan::{self, Criterion, PlanSettings, Scores};
 use robcal::io::Job;
 
 /// `--criterion`.
@@ -130,45 +130,13 @@ pub fn run_plan(a: &PlanArgs) -> Result<(), String> {
         limits: a.limit.clone(),
         exchange_passes: a.exchange_passes as usize,
     };
-    let random = a.pool.is_none();
-    let candidates = match &a.pool {
-        None => plan::random_candidates(&job, &settings).map_err(|e| e.to_string())?,
-        Some(path) => {
-            let text = robcal::io::input::read_text(
-                path,
-                "the candidate poses",
-                robcal::io::input::MAX_DATA_BYTES,
-            )
-            .map_err(|e| e.to_string())?;
-            let joints: Vec<_> = (job.robot.joint_names.iter().cloned())
-                .zip(job.robot.chain.joints().iter().map(|j| j.kind))
-                .collect();
-            robcal::io::points::parse_points(&text, path, &joints, false)
-                .map_err(|e| e.to_string())?
-                .into_iter()
-                .map(|r| Candidate {
-                    q: r.q,
-                    load_kg: r.load_kg,
-                })
-                .collect()
-        }
+    let pool_candidates = match &a.pool {
+        None => None,
+        Some(path) => Some(plan::read_pool(&job, path).map_err(|e| e.to_string())?),
     };
     let policy = robcal::calibrate::Policy::default();
-    let pool: Pool = plan::pool(&job, candidates, &policy).map_err(|e| e.to_string())?;
-    let planned = plan::choose(
-        &pool,
-        settings.poses,
-        settings.criterion,
-        settings.exchange_passes,
-    )
-    .map_err(|e| e.to_string())?;
-    // K candidates of the random pool as drawn: what measuring without a
-    // plan gives.
-    let baseline = random.then(|| {
-        let first: Vec<usize> = (0..settings.poses.min(pool.candidates.len())).collect();
-        pool.scores(&first)
-    });
-
+    let (pool, planned, baseline) =
+        plan::make(&job, &settings, pool_candidates, &policy).map_err(|e| e.to_string())?;
     let csv = plan::points_csv(&job, &pool, &planned.chosen);
     robcal::io::write_all_atomic(
         &[(a.output.clone(), csv.into_bytes())],
