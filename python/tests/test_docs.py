@@ -25,3 +25,12 @@ def test_the_python_page_runs_as_written(repo, shared, monkeypatch):
     assert namespace["v"]["rms_mm"] < 4.0
     assert list(namespace["small"].names) == ["k_a2", "k_a3"]
     assert namespace["p"].q.shape == (12, 6)
+
+
+def test_the_readmes_python_block_runs_as_written(repo, monkeypatch):
+    blocks = re.findall(r"```python\n(.*?)```", (repo / "README.md").read_text(), flags=re.S)
+    assert len(blocks) == 1
+    monkeypatch.chdir(repo)
+    namespace: dict = {}
+    exec(compile(blocks[0], "README.md's Python block", "exec"), namespace)
+    assert namespace["result"].failure is None
