@@ -46,6 +46,7 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
         deflections: true,
         absolute: true,
         time: true,
+        own_weight: false,
     };
     let b = bins(3);
     let model = [Param::Compliance { joint: 0 }];
@@ -110,6 +111,7 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
         deflections: true,
         absolute: false,
         time: false,
+        own_weight: false,
     };
     let c = candidates(&n, &[], defl, &b, &[false; 3]);
     assert!(c
@@ -157,6 +159,7 @@ fn the_device_lists_the_hosts_candidates_for_deflections() {
                 deflections: true,
                 absolute: false,
                 time,
+                own_weight: false,
             };
             let host = candidates(&n, model, kinds, &host_bins, &ok);
             let (layout, device) =

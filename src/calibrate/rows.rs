@@ -19,8 +19,8 @@ use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
 use crate::model::Sample;
 use crate::robot::{
-    equilibrium, Chain, EquilibriumSettings, Frames, JointKind, JointLaw, Loading, PointLoad,
-    Wrench,
+    equilibrium, gravity_moments, Chain, EquilibriumSettings, Frames, JointKind, JointLaw, Loading,
+    PointLoad, Wrench,
 };
 
 mod build;
@@ -120,6 +120,12 @@ pub struct RowExtra {
     /// row's, when the exact model's law has a gravity compliance (its
     /// frames are then at the equilibrium, not at `q`); else empty.
     pub gravity_q: Vec<[f64; 2]>,
+    /// Per joint, the moment \[N·m, measurement frame\] about its origin of
+    /// the robot's own weight it carries, at the row's frames: an absolute
+    /// row's, with a mass model (what bends the links,
+    /// [`crate::model::Param::LinkCompliance`]); empty without one. Read
+    /// through [`Row::weight_moments_nm`].
+    weight_moments_nm: Vec<Vector3<f64>>,
     /// With the exact model, the row's left-hand side \[m\] ([`Rows::y`]),
     /// which its frames alone do not give; `None` for the first-order
     /// model's.
@@ -182,6 +188,14 @@ impl Row {
         self.extra.as_ref().map_or(&[], |e| &e.gravity_q)
     }
 
+    /// Per joint, the moment of the robot's own weight about its origin
+    /// \[N·m\] ([`RowExtra::weight_moments_nm`]; empty: none).
+    pub fn weight_moments_nm(&self) -> &[Vector3<f64>] {
+        self.extra
+            .as_ref()
+            .map_or(&[][..], |e| &e.weight_moments_nm[..])
+    }
+
     /// The joint values the row's frames are at: its equilibrium's `θ`
     /// (the exact deflection model), or empty for the row's own `q`
     /// ([`Rows::frames`]).
@@ -208,6 +222,31 @@ impl Row {
         } else {
             self.extra_mut().tau.set(tau);
         }
+    }
+
+    /// Stores the own weight's moments about the joints of an absolute row
+    /// at `frames` on `chain` under `gravity` \[m/s², measurement frame\]
+    /// when the chain has a mass model (`weighs`); clears them otherwise.
+    fn set_weight_moments(
+        &mut self,
+        weighs: bool,
+        chain: &Chain<f64, J>,
+        frames: &Frames<f64, J>,
+        gravity: &Vector3<f64>,
+    ) -> Result<(), Error> {
+        if !(weighs && self.kind == RowKind::Absolute) {
+            if let Some(e) = &mut self.extra {
+                e.weight_moments_nm.clear();
+            }
+            return Ok(());
+        }
+        let mut m = [Vector3::zeros(); J];
+        let m = &mut m[..frames.dof()];
+        gravity_moments(chain, frames, gravity, m)?;
+        let e = self.extra_mut();
+        e.weight_moments_nm.clear();
+        e.weight_moments_nm.extend_from_slice(m);
+        Ok(())
     }
 
     /// Stores the frames' joint values `theta` (none: the row's own `q`).
@@ -267,6 +306,7 @@ impl Row {
                 Vector3::zeros()
             },
             gravity_q: self.gravity_q(),
+            weight_moments_nm: self.weight_moments_nm(),
         }
     }
 }
@@ -366,6 +406,12 @@ impl Rows {
         self.chains = geometry.placed_chains();
         self.markers.clone_from(&geometry.markers);
         let chains = &self.chains;
+        // Whether each chain has a mass model (its links' own weight).
+        let weighs: Vec<bool> = chains
+            .iter()
+            .map(|c| c.joints().iter().any(|j| j.link.is_some()))
+            .collect();
+        let weighs = &weighs;
         // The frames are in the measurement frame, gravity is given in the
         // robot's base frame.
         let gravity = geometry.base.rotation * self.gravity;
@@ -443,6 +489,8 @@ impl Rows {
                         .torques(chain, rigid, tau)
                         .map_err(core("torques"))?;
                     row.set_tau(tau);
+                    row.set_weight_moments(weighs[end], chain, rigid, &gravity)
+                        .map_err(core("torques"))?;
                     row.set_load(loading.load.map(|l| l.wrench(rigid)));
                     row.set_theta(&[]);
                     if let Some(e) = &mut row.extra {
@@ -506,6 +554,8 @@ impl Rows {
                         .map(|(t, d)| t * *d)
                         .sum();
                     row.set_tau(&eq.tau[..dof]);
+                    row.set_weight_moments(weighs[end], chain, &eq.frames, &gravity)
+                        .map_err(core("torques"))?;
                     row.set_load(loading.load.map(|l| l.wrench(&eq.frames)));
                     row.extra_mut().y = Some(if absolute {
                         row.measured - p + linear

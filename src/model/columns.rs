@@ -43,6 +43,13 @@
 //! `Rⱼᵀĝ · bⱼ` (gravity compliance: [`gravity_basis`],
 //! [`gravity_components`]).
 //!
+//! **Link compliance** (lateral elasticity of link `j`): the moment `mⱼ`
+//! about `oⱼ` of what joint `j` carries bends it about the moment's part
+//! across its axis, `m⊥ = mⱼ − zⱼ(zⱼ · mⱼ)`, by `x m⊥`; the column is
+//! `m⊥ × (p − oⱼ)`. A deflection's `mⱼ` is the load's `(c − oⱼ) × F`; an
+//! absolute position's (host only, `std`) is the robot's own weight's,
+//! [`crate::robot::gravity_moments`] ([`Sample::weight_moments_nm`]).
+//!
 //! ```
 //! use nalgebra::Vector3;
 //! use robcal::model::compliance_columns;
@@ -141,20 +148,24 @@ impl Param {
                     twist(joint)? * t.signum()
                 }
             }
-            Param::LinkCompliance { joint } => match (&s.load, s.absolute) {
-                (Some(w), false)
-                    if cfg!(not(feature = "tree"))
-                        || s.frames.joint(usize::from(joint))?.carries =>
-                {
-                    let jf = s.frames.joint(usize::from(joint))?;
-                    let o = jf.origin_m();
-                    let m = (w.point_m - o).cross(&w.force_n);
-                    let z = jf.axis.into_inner();
-                    let m_perp = m - z * z.dot(&m);
-                    m_perp.cross(&(p - o))
+            Param::LinkCompliance { joint } => {
+                let jf = s.frames.joint(usize::from(joint))?;
+                let o = jf.origin_m();
+                let m = match (&s.load, s.absolute) {
+                    _ if cfg!(feature = "tree") && !jf.carries => None,
+                    (Some(w), false) => Some((w.point_m - o).cross(&w.force_n)),
+                    #[cfg(feature = "std")]
+                    (_, true) => s.weight_moments_nm.get(usize::from(joint)).copied(),
+                    _ => None,
+                };
+                match m {
+                    Some(m) => {
+                        let z = jf.axis.into_inner();
+                        (m - z * z.dot(&m)).cross(&(p - o))
+                    }
+                    None => zero,
                 }
-                _ => zero,
-            },
+            }
             Param::LoadCom { axis: a } => match (&s.load, s.absolute) {
                 (Some(w), false) => {
                     let dir = s.frames.tip().rotation * Vector3::ith(axis(a, 3)?, T::one());

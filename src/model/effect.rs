@@ -153,6 +153,10 @@ pub struct DataKinds {
     pub absolute: bool,
     /// A time column.
     pub time: bool,
+    /// Absolute rows of a robot with a mass model: its own weight loads
+    /// and bends its links. Host only (`std`).
+    #[cfg(feature = "std")]
+    pub own_weight: bool,
 }
 
 /// The parameters a [`Candidate`] adds to the model.
@@ -261,7 +265,8 @@ impl Candidate<'_> {
 /// 3. `nonlinear_stiffness`, when it has one;
 /// 4. `backlash`;
 ///
-/// with deflection rows, for a revolute joint:
+/// with deflection rows, or (host only, `std`) absolute rows of a robot
+/// with a mass model (`own_weight`), for a revolute joint:
 /// 5. `link_compliance`;
 ///
 /// with absolute rows:
@@ -339,7 +344,11 @@ pub fn candidates<'b, E>(
             }
         }
         let p = Param::LinkCompliance { joint };
-        if data.deflections && revolute(j) && !has(&p) {
+        #[cfg(feature = "std")]
+        let bends = data.deflections || data.own_weight;
+        #[cfg(not(feature = "std"))]
+        let bends = data.deflections;
+        if bends && revolute(j) && !has(&p) {
             emit(one(Effect::LinkCompliance, on, &[p]))?;
         }
         if data.absolute {
@@ -465,6 +474,8 @@ pub fn stream_candidates<
         deflections: true,
         absolute: false,
         time,
+        #[cfg(feature = "std")]
+        own_weight: false,
     };
     let revolute = |j: usize| chain.joints().get(j).map(|jt| jt.kind) == Some(JointKind::Revolute);
     let compensator = |j: usize| bins[j].compensator_ok.then_some(&bins[j].angles_urad[..]);

@@ -102,7 +102,9 @@ pub enum Param {
         joint: u8,
     },
     /// The link after joint `j` bends about the axes normal to the joint's
-    /// in proportion to the load's moment there.
+    /// in proportion to the moment there of what it carries: the load's
+    /// (a deflection) or the robot's own weight (an absolute position;
+    /// host only, `std`).
     LinkCompliance {
         /// Joint index.
         joint: u8,

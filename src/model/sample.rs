@@ -57,6 +57,13 @@ pub struct Sample<'a, T: RealField + Copy, const J: usize> {
     /// empty: computed at `frames`. Host only (`std`).
     #[cfg(feature = "std")]
     pub gravity_q: &'a [[T; 2]],
+    /// Per joint, the moment \[N·m, the frame of `frames`\] about its origin
+    /// of the robot's own weight it carries ([`crate::robot::gravity_moments`]):
+    /// an absolute row's, what bends its links
+    /// ([`super::Param::LinkCompliance`]); empty: none (no mass model, or a
+    /// deflection, whose own weight cancels). Host only (`std`).
+    #[cfg(feature = "std")]
+    pub weight_moments_nm: &'a [Vector3<T>],
 }
 
 impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
@@ -84,6 +91,8 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
             gravity: Vector3::zeros(),
             #[cfg(feature = "std")]
             gravity_q: &[],
+            #[cfg(feature = "std")]
+            weight_moments_nm: &[],
         }
     }
 

@@ -29,7 +29,7 @@ use nalgebra::{Point3, RealField, SMatrix, Vector3};
 
 use super::chain::{Chain, JointKind};
 use super::kinematics::{Frames, JointFrame};
-use super::load::{check_len, gravity_torques, joint_torques, PointLoad, Wrench};
+use super::load::{check_len, gravity_moments, gravity_torques, joint_torques, PointLoad, Wrench};
 use crate::error::Error;
 
 /// What loads the joints at the deflected pose.
@@ -68,6 +68,39 @@ impl<T: RealField + Copy> Loading<T> {
             joint_torques(frames, &load.wrench(frames), &mut extra)?;
             for (t, e) in tau.iter_mut().zip(&extra).take(dof) {
                 *t += *e;
+            }
+        }
+        Ok(())
+    }
+
+    /// Moments `mⱼ` \[N·m, base frame\] about each joint's origin of
+    /// everything the joint carries at `frames`, written to `out[..dof]`:
+    /// the own weight's ([`gravity_moments`]) and the load's
+    /// `(c − oⱼ) × F` (joints that carry the tip). Their parts along the
+    /// axes are [`Loading::torques`]; across them, what bends the links.
+    ///
+    /// # Errors
+    /// As [`Loading::torques`].
+    pub fn moments<const J: usize>(
+        &self,
+        chain: &Chain<T, J>,
+        frames: &Frames<T, J>,
+        out: &mut [Vector3<T>],
+    ) -> Result<(), Error> {
+        check_len(frames, out.len())?;
+        let dof = frames.dof();
+        for m in out.iter_mut().take(dof) {
+            *m = Vector3::zeros();
+        }
+        if let Some(g) = self.own_weight_mps2 {
+            gravity_moments(chain, frames, &g, out)?;
+        }
+        if let Some(load) = self.load {
+            let w = load.wrench(frames);
+            for (m, jf) in out.iter_mut().zip(frames.joints()).take(dof) {
+                if cfg!(not(feature = "tree")) || jf.carries {
+                    *m += (w.point_m - jf.origin_m()).cross(&w.force_n) + w.moment_nm;
+                }
             }
         }
         Ok(())

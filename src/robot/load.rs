@@ -158,6 +158,46 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
     Ok(())
 }
 
+/// Moments `mⱼ` \[N·m, base frame\] about each joint's origin `oⱼ` of the
+/// chain's own link masses under gravity `g` \[m/s², base frame\], added to
+/// `out[..dof]`: `mⱼ = Σₗ (cₗ − oⱼ) × mₗ g` over the links `l` joint `j`
+/// carries (`l ≥ j` in a serial chain), the whole vector — its part along
+/// `zⱼ` is [`gravity_torques`]'s `τⱼ`, the part across it what bends link
+/// `j` ([`crate::model::Param::LinkCompliance`]). Links without
+/// [`crate::robot::LinkInertia`] weigh nothing.
+///
+/// # Errors
+/// As [`gravity_torques`].
+pub fn gravity_moments<T: RealField + Copy, const J: usize>(
+    chain: &Chain<T, J>,
+    frames: &Frames<T, J>,
+    gravity_mps2: &Vector3<T>,
+    out: &mut [Vector3<T>],
+) -> Result<(), Error> {
+    check_len(frames, out.len())?;
+    if chain.dof() != frames.dof() {
+        return Err(Error::Mismatch {
+            what: "frames computed for another chain",
+        });
+    }
+    for (l, (joint, lf)) in chain.joints().iter().zip(frames.joints()).enumerate() {
+        let Some(link) = joint.link else { continue };
+        let force = gravity_mps2 * link.mass_kg;
+        let c = lf.frame.transform_point(&Point3::from(link.com_m)).coords;
+        #[cfg(feature = "tree")]
+        for j in chain.path(Some(l)) {
+            if let (Some(m), Some(jf)) = (out.get_mut(j), frames.joints().get(j)) {
+                *m += (c - jf.origin_m()).cross(&force);
+            }
+        }
+        #[cfg(not(feature = "tree"))]
+        for (m, jf) in out.iter_mut().zip(frames.joints()).take(l + 1) {
+            *m += (c - jf.origin_m()).cross(&force);
+        }
+    }
+    Ok(())
+}
+
 pub(crate) fn check_len<T: RealField + Copy, const J: usize>(
     frames: &Frames<T, J>,
     len: usize,

@@ -22,4 +22,4 @@ pub use chain::{Chain, End, Joint, JointKind, LinkInertia, Path};
 pub use compensate::{compensate, compensate_pose, CompensateSettings, Compensation, Compliances};
 pub use equilibrium::{equilibrium, Equilibrium, EquilibriumSettings, JointLaw, Loading};
 pub use kinematics::{Frames, JointFrame};
-pub use load::{gravity_torques, joint_torques, PointLoad, Wrench};
+pub use load::{gravity_moments, gravity_torques, joint_torques, PointLoad, Wrench};

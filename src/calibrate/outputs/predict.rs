@@ -12,7 +12,8 @@
 //! tables interpolated between their angles, nonlinear stiffness,
 //! backlash, the gear's cyclic error, the gravity compliance at the
 //! commanded pose) and, to first order as it was fitted, a link's bending
-//! under the payload ([`crate::model::Param::LinkCompliance`]). Not
+//! under the payload and its own weight
+//! ([`crate::model::Param::LinkCompliance`]). Not
 //! applied: the drift of the measurement system and the calibration tool's
 //! centre-of-mass estimate (properties of the calibration, not of the
 //! robot). All positions are in metres in the measurement frame; joint
@@ -492,7 +493,7 @@ impl Predictor {
         }
         let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
         let p = eq.frames.point_m(tool_m);
-        Ok(p + self.bending_m(&eq.frames, &p, &loading)?)
+        Ok(p + self.bending_m(chain, &eq.frames, &p, &loading)?)
     }
 
     /// The calibrated joint law at command `q`, the gravity compliance's
@@ -506,18 +507,29 @@ impl Predictor {
         self.lin.joint_law(q, true, &gravity)
     }
 
-    /// The links' bending under the payload at `frames` (first order, the
-    /// fitted `LinkCompliance` columns times their estimates) \[m\].
+    /// The links' bending under `loading` at `frames` on `chain` (first
+    /// order, the fitted `LinkCompliance` columns times their estimates):
+    /// under the moments about each joint of the payload and, when
+    /// `loading` has it, the robot's own weight ([`Loading::moments`])
+    /// \[m\].
     fn bending_m(
         &self,
+        chain: &Chain<f64, J>,
         frames: &crate::robot::Frames<f64, J>,
         p: &Vector3<f64>,
         loading: &Loading<f64>,
     ) -> Result<Vector3<f64>, Error> {
-        let Some(load) = loading.load.filter(|_| !self.bending.is_empty()) else {
+        if self.bending.is_empty() || (loading.load.is_none() && loading.own_weight_mps2.is_none())
+        {
             return Ok(Vector3::zeros());
+        }
+        let mut moments = [Vector3::zeros(); J];
+        let moments = &mut moments[..frames.dof()];
+        loading.moments(chain, frames, moments)?;
+        let sample = Sample {
+            weight_moments_nm: moments,
+            ..Sample::absolute(frames, *p, 0, &[])
         };
-        let sample = Sample::deflection(frames, *p, 0, &[], Some(load.wrench(frames)));
         self.bending
             .iter()
             .try_fold(Vector3::zeros(), |s, (param, x)| {
@@ -594,7 +606,7 @@ impl Predictor {
             )
         };
         let mut c = solve(target_m, q_start)?;
-        if self.bending.is_empty() || loading.load.is_none() {
+        if self.bending.is_empty() {
             return Ok(c);
         }
         // The links' bending is not a joint law: aim the rigid-link
@@ -602,7 +614,8 @@ impl Predictor {
         // stops changing (it is microns on a robot, a few passes).
         let dof = self.dof();
         for _ in 0..settings.max_iterations {
-            let bend = self.bending_m(&c.equilibrium.frames, &c.reached_m, &loading)?;
+            let bend =
+                self.bending_m(&self.chain, &c.equilibrium.frames, &c.reached_m, &loading)?;
             let reached = c.reached_m + bend;
             if (target_m - reached).norm() <= settings.tolerance_m {
                 c.error_m = (target_m - reached).norm();

@@ -273,6 +273,8 @@ impl Rows {
             deflections: rows.iter().any(|r| r.kind == RowKind::Deflection),
             absolute: rows.iter().any(|r| r.kind == RowKind::Absolute),
             time: data.has_time,
+            own_weight: rows.iter().any(|r| r.kind == RowKind::Absolute)
+                && job.robot.chain.joints().iter().any(|j| j.link.is_some()),
         };
         Ok(Self {
             rows,
