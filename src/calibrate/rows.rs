@@ -189,7 +189,8 @@ impl Row {
     }
 
     /// Per joint, the moment of the robot's own weight about its origin
-    /// \[N·m\] ([`RowExtra::weight_moments_nm`]; empty: none).
+    /// \[N·m, measurement frame\], with a mass model (what bends the
+    /// links, [`crate::model::Param::LinkCompliance`]); empty: none.
     pub fn weight_moments_nm(&self) -> &[Vector3<f64>] {
         self.extra
             .as_ref()
