@@ -46,6 +46,8 @@ mod io_setup;
 mod io_urdf;
 mod loop_effects;
 mod loop_gravity;
+mod loop_link_mass;
+mod loop_own_weight;
 mod model_columns;
 mod model_equilibrium;
 mod model_kinematics;

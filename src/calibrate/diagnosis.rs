@@ -464,6 +464,23 @@ pub fn run(
             r.rms_um, listed, r.own_rms_um
         ));
     }
+    // Which masses the model identified, and from what (the others keep
+    // their mass model's).
+    let masses: Vec<String> = (current.params.iter().zip(&current.fit.x))
+        .filter(|(p, _)| matches!(p, Param::LinkMass { .. }))
+        .map(|(p, &x)| {
+            let now = current.geometry.value(p, x);
+            let was = now - current.geometry.applied(p) - x;
+            format!("{} {now:.3} kg (mass model {was:.3} kg)", e.names.name(p))
+        })
+        .collect();
+    if !masses.is_empty() {
+        notes.push(format!(
+            "link masses identified: {}; every other moving body keeps its mass model's \
+             (the URDF's, or the setup's assumed_link_mass_kg)",
+            masses.join(", ")
+        ));
+    }
     let parameters = e.parameters(&current);
     let covariance = current
         .geometry

@@ -104,7 +104,8 @@ pub fn candidates(
 /// [`Policy::max_cyclic_mrad`] (a gear's transmission error is a fraction
 /// of a milliradian to a few) and a gravity compliance above
 /// [`Policy::max_gravity_deflection_mrad`] (a joint's sag under the
-/// robot's own weight); effects only absolute data show.
+/// robot's own weight), and a link's mass below zero (`x` holds the mass
+/// itself, not a Gauss–Newton step); effects only absolute data show.
 pub fn inadmissible(
     names: &Names,
     policy: &Policy,
@@ -135,6 +136,9 @@ pub fn inadmissible(
                             policy.max_cyclic_mrad
                         )
                     })
+                }
+                (Param::LinkMass { .. }, Some(v)) if v < 0.0 => {
+                    Some(format!("{} = {v:.3} kg < 0", names.name(p)))
                 }
                 (Param::GravityCompliance { joint, b: false }, Some(v)) => {
                     let w = value(&Param::GravityCompliance { joint, b: true }).unwrap_or(0.0);

@@ -346,7 +346,7 @@ impl Engine<'_> {
         params: &[Param],
         carried: &[Param],
     ) -> Result<(Fitted, Option<Accumulator<f64, nalgebra::Dyn>>), CalibrationError> {
-        let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_geometric);
+        let geometric = self.rows.kinds.absolute && params.iter().any(Param::is_stepped);
         let iterates = self.lin.iterates(params);
         let mut relinearisations = 0;
         let mut settled = true;
@@ -440,7 +440,7 @@ impl Engine<'_> {
             let step = params
                 .iter()
                 .zip(&x)
-                .filter(|(p, _)| p.is_geometric())
+                .filter(|(p, _)| p.is_stepped())
                 .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
             let moved = match &out {
                 Some((out, _)) if by_sigma => params
@@ -546,7 +546,7 @@ impl Engine<'_> {
             .iter()
             .zip(x)
             .map(|(p, &v)| {
-                if p.is_geometric() {
+                if p.is_stepped() {
                     0.0
                 } else if exact && Linearisation::tracks(p) {
                     self.lin.value(p, &self.names)
@@ -704,10 +704,15 @@ impl Engine<'_> {
             .iter()
             .zip(f.fit.x.iter().zip(&std))
             .map(|(p, (&x, &std))| {
-                let value = if p.is_geometric() {
+                let value = if p.is_stepped() {
                     f.geometry.value(p, x)
                 } else {
                     x
+                };
+                // A mass is told from its nominal value, not from zero.
+                let moved = match p {
+                    Param::LinkMass { .. } => f.geometry.applied(p) + x,
+                    _ => value,
                 };
                 Parameter {
                     name: self.names.name(p),
@@ -715,7 +720,7 @@ impl Engine<'_> {
                     std,
                     unit: self.names.unit(p).name.to_string(),
                     determined: matches!(p, Param::Base { .. })
-                        || value.abs() >= self.policy.determined_sigmas * std,
+                        || moved.abs() >= self.policy.determined_sigmas * std,
                 }
             })
             .collect()

@@ -261,6 +261,11 @@ impl Row {
         }
     }
 
+    /// Index into [`Rows::chains`] of the chain the row's frames are on.
+    pub fn chain_index(&self) -> usize {
+        usize::try_from(self.chain).unwrap_or(usize::MAX)
+    }
+
     /// The row's [`RowExtra`], made (empty) when it has none.
     fn extra_mut(&mut self) -> &mut RowExtra {
         self.extra.get_or_insert_with(Box::default)

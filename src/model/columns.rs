@@ -206,6 +206,12 @@ impl Param {
                 let qj = s.q(joint)?;
                 twist(joint)? * if cos { qj.cos() } else { qj.sin() }
             }
+            // A mass acts through the joints that carry it, the chain's
+            // structure and the compliances at the row: the host's design
+            // computes its column (`calibrate::params::masses`); a sample
+            // alone has none.
+            #[cfg(feature = "std")]
+            Param::LinkMass { .. } => zero,
             #[cfg(feature = "std")]
             Param::GravityCompliance { joint, b } => {
                 let g = match s.gravity_q.get(usize::from(joint)) {

@@ -60,6 +60,11 @@ pub enum Effect {
     /// `std`).
     #[cfg(feature = "std")]
     GravityCompliance,
+    /// A joint's moving body weighs other than the mass model says
+    /// (`Param::LinkMass`, seen through the compliances it loads; host
+    /// only, `std`).
+    #[cfg(feature = "std")]
+    LinkMass,
     /// A marker sits elsewhere than declared.
     Marker,
     /// The base is placed or turned elsewhere than declared.
@@ -69,7 +74,7 @@ pub enum Effect {
 impl Effect {
     /// Every effect, in the contract's order.
     #[cfg(feature = "std")]
-    pub const ALL: [Effect; 13] = [
+    pub const ALL: [Effect; 14] = [
         Effect::Compensator,
         Effect::JointCompliance,
         Effect::NonlinearStiffness,
@@ -81,6 +86,7 @@ impl Effect {
         Effect::Geometry,
         Effect::GearCyclic,
         Effect::GravityCompliance,
+        Effect::LinkMass,
         Effect::Marker,
         Effect::BaseFrame,
     ];
@@ -118,6 +124,8 @@ impl Effect {
             Effect::GearCyclic => "gear_cyclic",
             #[cfg(feature = "std")]
             Effect::GravityCompliance => "gravity_compliance",
+            #[cfg(feature = "std")]
+            Effect::LinkMass => "link_mass",
             Effect::Marker => "marker",
             Effect::BaseFrame => "base_frame",
         }
@@ -281,13 +289,16 @@ impl Candidate<'_> {
 ///    loads it through the URDF's masses): after `gear_cyclic`, which it
 ///    equals on a horizontal joint whose gravity direction only its own
 ///    angle turns;
+/// 10. `link_mass` (host only, `std`), with absolute rows of a robot with
+///    a mass model (`own_weight`) and a compliance or a link's bending in
+///    the model (a mass is seen only through what it bends);
 ///
 /// then, for the model:
-/// 10. `load_com`, with deflection rows and a compliance in the model (the
+/// 11. `load_com`, with deflection rows and a compliance in the model (the
 ///    load's position only moves a deflection through a compliance);
-/// 11. `drift`, with a time column;
-/// 12. `marker` for each of the `markers` markers, with absolute rows;
-/// 13. `base_frame`, with absolute rows.
+/// 12. `drift`, with a time column;
+/// 13. `marker` for each of the `markers` markers, with absolute rows;
+/// 14. `base_frame`, with absolute rows.
 ///
 /// An effect already in the model (any of its parameters) is not a
 /// candidate. `emit`'s first error ends the list and is returned.
@@ -314,6 +325,10 @@ pub fn candidates<'b, E>(
         remove: None,
     };
     let any_compliance = any(&|p| p.is_compliance());
+    // Whether the robot's own weight bends the model (a mass is seen only
+    // through what it bends).
+    #[cfg(feature = "std")]
+    let bending_model = any_compliance || any(&|p| matches!(p, Param::LinkCompliance { .. }));
     for j in 0..dof {
         let joint = j as u8;
         let on = Some(joint);
@@ -370,6 +385,10 @@ pub fn candidates<'b, E>(
                 let ps = [false, true].map(|b| Param::GravityCompliance { joint, b });
                 emit(one(Effect::GravityCompliance, on, &ps))?;
             }
+        }
+        #[cfg(feature = "std")]
+        if data.own_weight && bending_model && !has(&Param::LinkMass { joint }) {
+            emit(one(Effect::LinkMass, on, &[Param::LinkMass { joint }]))?;
         }
     }
     if data.deflections && any_compliance && !any(&|p| matches!(p, Param::LoadCom { .. })) {

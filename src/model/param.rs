@@ -17,6 +17,7 @@
 //! | [`Param::LinkCompliance`] | `urad/(N*m)` | 1e-6 | |
 //! | [`Param::NonlinearStiffness`] | `urad/(kN*m)^2` / `um/kN^2` | 1e-12 | |
 //! | [`Param::Drift`] | `um/s` | 1e-6 | |
+//! | `Param::LinkMass` (`std`) | `kg` | 1 | |
 //!
 //! Joint indices count the chain's movable joints from the base, from 0;
 //! marker indices count the markers of the job (or of the layout), from 0.
@@ -147,6 +148,18 @@ pub enum Param {
         /// `false`: the coefficient `x_a` of `aⱼ`; `true`: `x_b` of `bⱼ`.
         b: bool,
     },
+    /// The mass of joint `j`'s moving body (the link after it and what is
+    /// fixed to it) \[kg\], at its centre of mass (the URDF's, or the joint
+    /// frame's origin for an assumed mass): the robot's own weight loads
+    /// the joints that carry it, so it acts through their compliances and
+    /// their links' bending, bilinear in them. Estimated by the host's
+    /// Gauss–Newton as the geometry is (steps applied to the model), its
+    /// column at the current compliances. Host only (`std`).
+    #[cfg(feature = "std")]
+    LinkMass {
+        /// Joint index.
+        joint: u8,
+    },
 }
 
 /// The unit a parameter is estimated and reported in, and its SI value.
@@ -181,7 +194,7 @@ impl Param {
             | Param::LinkCompliance { joint }
             | Param::GearCyclic { joint, .. } => Some(joint),
             #[cfg(feature = "std")]
-            Param::GravityCompliance { joint, .. } => Some(joint),
+            Param::GravityCompliance { joint, .. } | Param::LinkMass { joint } => Some(joint),
             Param::Base { .. }
             | Param::Tool { .. }
             | Param::Marker { .. }
@@ -202,6 +215,18 @@ impl Param {
                 | Param::Tool { .. }
                 | Param::Marker { .. }
         )
+    }
+
+    /// Whether the host's Gauss–Newton applies the parameter's estimate
+    /// to the model as a step and evaluates the rows again there (its
+    /// estimate then the step's size): the geometric parameters and
+    /// (`std`) a link's mass.
+    pub fn is_stepped(&self) -> bool {
+        #[cfg(feature = "std")]
+        if matches!(self, Param::LinkMass { .. }) {
+            return true;
+        }
+        self.is_geometric()
     }
 
     /// Whether the parameter is a compliance of the declared kind (`k_<joint>`
@@ -258,6 +283,11 @@ impl Param {
                 name: "um/s",
                 si: 1e-6,
             },
+            #[cfg(feature = "std")]
+            Param::LinkMass { .. } => Unit {
+                name: "kg",
+                si: 1.0,
+            },
         }
     }
 
@@ -296,6 +326,8 @@ impl Param {
             | Param::NonlinearStiffness { .. }
             | Param::Backlash { .. }
             | Param::LinkCompliance { .. } => "",
+            #[cfg(feature = "std")]
+            Param::LinkMass { .. } => "",
         }
     }
 
@@ -337,6 +369,8 @@ impl fmt::Display for Param {
             Param::GravityCompliance { joint, .. } => {
                 write!(f, "gravity_compliance_j{joint}.{c}")
             }
+            #[cfg(feature = "std")]
+            Param::LinkMass { joint } => write!(f, "link_mass_j{joint}"),
         }
     }
 }

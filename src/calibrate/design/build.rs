@@ -2,6 +2,8 @@
 //! the storage of the design before, held or not ([`crate::calibrate::design::source`]), and
 //! in the pass of a relinearisation ([`Design::relinearised`]).
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, Vector3};
 
 use crate::calibrate::design::columns::Columns;
@@ -145,7 +147,14 @@ impl Design {
     ) -> Result<Self, Error> {
         let rows = &all.rows[..];
         let (m, n) = (rows.len(), params.len());
-        let columns = Columns::new(params, lin, names, all, &all.markers);
+        let columns = Columns::new(
+            params,
+            lin,
+            names,
+            all,
+            &all.markers,
+            Cow::Borrowed(&all.chains),
+        );
         let per = crate::calibrate::rows::run_length(m, threads);
         let Storage {
             b: mut data,
@@ -254,7 +263,13 @@ impl Design {
             mut y,
             group,
         } = old.unwrap_or_default();
-        let columns = Columns::new(params, lin, names, all, &geometry.markers);
+        // (The rows' chains are the geometry's once relinearised below.)
+        let chains = if params.iter().any(|p| matches!(p, Param::LinkMass { .. })) {
+            Cow::Owned(geometry.placed_chains())
+        } else {
+            Cow::Borrowed(&[][..])
+        };
+        let columns = Columns::new(params, lin, names, all, &geometry.markers, chains);
         // Each run's left-hand sides, from the frames computed there
         // ([`Rows::y`]: the rows keep none).
         zeroed(&mut y, 3 * m);

@@ -6,10 +6,13 @@ use std::borrow::Cow;
 
 use nalgebra::Vector3;
 
+use crate::calibrate::params::geometry::J;
 use crate::calibrate::params::linearisation::Linearisation;
+use crate::calibrate::params::masses;
 use crate::calibrate::rows::{Row, Rows};
 use crate::error::Error;
 use crate::model::Param;
+use crate::robot::Chain;
 
 /// How the columns of some parameters are computed at a row.
 pub(super) struct Columns<'a> {
@@ -25,7 +28,16 @@ pub(super) struct Columns<'a> {
     /// The markers' positions on their links \[m\] (a row's predicted
     /// point is its frames' at its marker: [`Rows::point_m`]).
     pub(super) markers: &'a [Vector3<f64>],
+    /// With a link mass among the parameters, the chains of the rows'
+    /// markers (by [`Row::chain_index`]: their structure and the bodies'
+    /// centres of mass) and gravity \[m/s², robot base frame\]; empty
+    /// otherwise.
+    pub(super) masses: Option<Masses<'a>>,
 }
+
+/// The chains of the rows' markers and gravity \[m/s², robot base frame\]
+/// ([`Columns::masses`]).
+pub(super) type Masses<'a> = (Cow<'a, [Chain<f64, J>]>, Vector3<f64>);
 
 impl<'a> Columns<'a> {
     pub(super) fn new(
@@ -34,6 +46,7 @@ impl<'a> Columns<'a> {
         names: &crate::calibrate::params::names::Names,
         all: &Rows,
         markers: &'a [Vector3<f64>],
+        chains: Cow<'a, [Chain<f64, J>]>,
     ) -> Self {
         Self {
             params,
@@ -42,6 +55,7 @@ impl<'a> Columns<'a> {
             lin,
             mixed: all.mixed(),
             markers,
+            masses: masses(params, chains, all.gravity),
         }
     }
 
@@ -80,8 +94,23 @@ impl<'a> Columns<'a> {
         let point = frames.point_m(&crate::calibrate::rows::marker_m(self.markers, row));
         let sample = row.sample(frames, point, &compliance, gravity_unit);
         let scale = crate::calibrate::rows::row_scale(self.mixed, row);
+        // A mass's column: the row's chain, gravity in the frames' frame
+        // (the measurement frame: `gravity_unit` is turned there) and the
+        // joint law at the row.
+        let weight = self.masses.as_ref().map(|(chains, g)| {
+            let chain = chains.get(row.chain_index()).or(chains.first());
+            let law = self.lin.joint_law(&row.q, true, &[]);
+            (chain, gravity_unit * g.norm(), law)
+        });
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
-            let mut col = p.column_si(&sample)? * si;
+            let mut col = match (p, &weight) {
+                (Param::LinkMass { joint }, Some((Some(chain), g, law))) => {
+                    masses::column(chain, &sample, usize::from(*joint), g, law, |i| {
+                        self.lin.bending(i)
+                    })?
+                }
+                _ => p.column_si(&sample)?,
+            } * si;
             if scale != 1.0 {
                 col *= scale;
             }
@@ -89,4 +118,17 @@ impl<'a> Columns<'a> {
         }
         Ok(())
     }
+}
+
+/// [`Columns::masses`] of `params`: `chains` and gravity when a link mass
+/// is among them.
+pub(super) fn masses<'a>(
+    params: &[Param],
+    chains: Cow<'a, [Chain<f64, J>]>,
+    gravity_mps2: Vector3<f64>,
+) -> Option<Masses<'a>> {
+    params
+        .iter()
+        .any(|p| matches!(p, Param::LinkMass { .. }))
+        .then_some((chains, gravity_mps2))
 }

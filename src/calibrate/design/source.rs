@@ -201,6 +201,7 @@ impl Design {
             lin: &r.lin,
             mixed: r.mixed,
             markers: &all.markers,
+            masses: super::columns::masses(&self.params, Cow::Borrowed(&all.chains), all.gravity),
         };
         let mut frames = crate::robot::Frames::empty();
         for (k, i) in rows.enumerate() {

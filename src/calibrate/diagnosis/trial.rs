@@ -215,8 +215,15 @@ fn one(e: &mut Engine<'_>, params: &[Param], c: &Candidate) -> Result<Outcome, C
     if let Some(why) = wandering(e, &next, c)? {
         return Ok(Outcome::Rejected(why));
     }
+    // A mass is judged as the mass it is, not as its last step.
+    let x: Vec<f64> = (next.params.iter().zip(&next.fit.x))
+        .map(|(p, &v)| match p {
+            Param::LinkMass { .. } => next.geometry.value(p, v),
+            _ => v,
+        })
+        .collect();
     Ok(
-        match inadmissible(&e.names, &e.policy, &next.params, &next.fit.x, &c.add) {
+        match inadmissible(&e.names, &e.policy, &next.params, &x, &c.add) {
             Some(why) => {
                 Outcome::Rejected(format!("rejected: its estimate is not physical ({why})"))
             }

@@ -22,7 +22,9 @@
 //! - joint-frame error: `originⱼ ← originⱼ · E(x)`;
 //! - marker: `markerₘ ← markerₘ + δ` (tip frame);
 //! - tool frame: every marker (and its nominal position) `r ← E(x) · r`
-//!   in the tip frame.
+//!   in the tip frame;
+//! - a link's mass ([`Param::LinkMass`]): `mⱼ ← mⱼ + x` \[kg\] at its
+//!   centre of mass (the rows' own-weight torques follow it).
 //!
 //! Deflection rows move with the model too: their `Δp` is measured in the
 //! measurement frame, so their columns (and the load's torques, gravity
@@ -154,8 +156,9 @@ impl Geometry {
         self.base = Isometry3::from_parts(Translation3::from(cb - rot * ca), rot);
     }
 
-    /// Applies the geometric part of the estimate `x` of `params` (reported
-    /// units: mm, mrad) to the model; returns the largest step applied.
+    /// Applies the stepped part ([`Param::is_stepped`]) of the estimate `x`
+    /// of `params` (reported units: mm, mrad, kg) to the model; returns the
+    /// largest step applied.
     pub fn apply(&mut self, params: &[Param], x: &[f64]) -> f64 {
         let dof = self.chain.dof();
         let mut base = [Vector3::zeros(); 2];
@@ -163,12 +166,21 @@ impl Geometry {
         let mut frame = vec![[Vector3::zeros(); 2]; dof];
         let mut largest: f64 = 0.0;
         for (p, &v) in params.iter().zip(x) {
-            if !p.is_geometric() || v == 0.0 {
+            if !p.is_stepped() || v == 0.0 {
                 continue;
             }
             largest = largest.max(v.abs());
             let si = v * 1e-3;
             match *p {
+                Param::LinkMass { joint } => {
+                    let jt = &mut self.chain.joints_mut()[usize::from(joint)];
+                    let link = jt.link.get_or_insert(crate::robot::LinkInertia {
+                        mass_kg: 0.0,
+                        com_m: Vector3::zeros(),
+                    });
+                    link.mass_kg += v;
+                    *self.applied.entry(*p).or_insert(0.0) += v;
+                }
                 Param::Base { axis } => base[usize::from(axis / 3)][usize::from(axis % 3)] = si,
                 Param::Marker { marker, axis } => {
                     self.markers[usize::from(marker)][usize::from(axis)] += si;
@@ -277,6 +289,13 @@ impl Geometry {
             .collect()
     }
 
+    /// The sum of the steps applied to stepped parameter `p`
+    /// ([`Param::is_stepped`]; the base and the markers, which are moved
+    /// in place, excepted): a link mass's change from its nominal value.
+    pub fn applied(&self, p: &Param) -> f64 {
+        self.applied.get(p).copied().unwrap_or(0.0)
+    }
+
     /// The value of geometric parameter `p` in the model, plus a last step
     /// `dx` not applied (reported units): the base as its translation \[mm\]
     /// and rotation vector (axis × angle) \[mrad\] in the measurement frame;
@@ -302,6 +321,15 @@ impl Geometry {
                     == Some(crate::robot::JointKind::Revolute) =>
             {
                 wrap_mrad(self.applied.get(p).copied().unwrap_or(0.0) + dx)
+            }
+            // A link's mass as the mass it is (nominal plus its steps).
+            Param::LinkMass { joint } => {
+                let link = self
+                    .chain
+                    .joints()
+                    .get(usize::from(joint))
+                    .and_then(|j| j.link);
+                link.map_or(0.0, |l| l.mass_kg) + dx
             }
             _ => self.applied.get(p).copied().unwrap_or(0.0) + dx,
         }

@@ -63,6 +63,12 @@ pub struct Linearisation {
     /// (compliances in rad/(N·m) or m/N, backlash, cyclic error and gravity
     /// compliance in rad or m, nonlinear stiffness in rad/(N·m)²).
     values: BTreeMap<Param, f64>,
+    /// SI value \[rad/(N·m)\] of each link's bending
+    /// ([`Param::LinkCompliance`], by joint), with a link mass among the
+    /// parameters (empty otherwise): not a term of the joint law, but what
+    /// a link mass's column goes through besides it
+    /// ([`crate::calibrate::params::masses`]).
+    bending: BTreeMap<u8, f64>,
 }
 
 /// Whether `p` acts through a joint value and enters the joint law.
@@ -92,6 +98,7 @@ impl Linearisation {
         Self {
             model,
             values: BTreeMap::new(),
+            bending: BTreeMap::new(),
         }
     }
 
@@ -104,6 +111,7 @@ impl Linearisation {
                 .into_iter()
                 .filter(|(p, _)| acts_on_joint(p))
                 .collect(),
+            bending: BTreeMap::new(),
         }
     }
 
@@ -122,15 +130,40 @@ impl Linearisation {
                 .filter(|(p, _)| acts_on_joint(p))
                 .map(|(p, v)| (*p, v * names.unit(p).si))
                 .collect(),
+            // Held only for a mass's column: otherwise a change of a
+            // bending alone would make the rows look evaluated elsewhere.
+            bending: if params.iter().any(|p| matches!(p, Param::LinkMass { .. })) {
+                params
+                    .iter()
+                    .zip(x)
+                    .filter_map(|(p, v)| match *p {
+                        Param::LinkCompliance { joint } => Some((joint, v * names.unit(p).si)),
+                        _ => None,
+                    })
+                    .collect()
+            } else {
+                BTreeMap::new()
+            },
         }
     }
 
+    /// The SI value \[rad/(N·m)\] of joint `j`'s link bending (0 without
+    /// one).
+    pub fn bending(&self, j: usize) -> f64 {
+        u8::try_from(j)
+            .ok()
+            .and_then(|j| self.bending.get(&j))
+            .copied()
+            .unwrap_or(0.0)
+    }
+
     /// Whether the rows depend on the values: the exact model with a
-    /// parameter acting through a joint value, or a `load_com` column
-    /// (first order about the compliances, in either model).
+    /// parameter acting through a joint value, or a `load_com` or
+    /// `link_mass` column (first order about the compliances, in either
+    /// model).
     pub fn iterates(&self, params: &[Param]) -> bool {
         params.iter().any(|p| match p {
-            Param::LoadCom { .. } => true,
+            Param::LoadCom { .. } | Param::LinkMass { .. } => true,
             p => self.model == DeflectionModel::Exact && acts_on_joint(p),
         })
     }
@@ -145,9 +178,17 @@ impl Linearisation {
         for (p, v) in &to.values {
             *values.entry(*p).or_insert(0.0) += t * v;
         }
+        let mut bending = self.bending.clone();
+        for v in bending.values_mut() {
+            *v *= 1.0 - t;
+        }
+        for (j, v) in &to.bending {
+            *bending.entry(*j).or_insert(0.0) += t * v;
+        }
         Self {
             model: to.model,
             values,
+            bending,
         }
     }
 

@@ -307,14 +307,24 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
     }
     // The bounds an effect was admitted under, on the final estimate.
     let m = &report.model;
+    // (A mass as the mass it is, not as its last step.)
+    let x: Vec<f64> = (m.params.iter().zip(&m.x))
+        .map(|(p, &v)| match p {
+            Param::LinkMass { .. } => m.geometry.value(p, v),
+            _ => v,
+        })
+        .collect();
     for p in &m.params {
         let bounded = matches!(
             p,
-            Param::GearCyclic { .. } | Param::GravityCompliance { .. } | Param::Drift { .. }
+            Param::GearCyclic { .. }
+                | Param::GravityCompliance { .. }
+                | Param::Drift { .. }
+                | Param::LinkMass { .. }
         );
         if let Some(why) = bounded
             .then(|| {
-                crate::calibrate::effects::inadmissible(&m.names, policy, &m.params, &m.x, &[*p])
+                crate::calibrate::effects::inadmissible(&m.names, policy, &m.params, &x, &[*p])
             })
             .flatten()
         {
