@@ -405,6 +405,10 @@ fn effects(v: &Value) -> Vec<String> {
 /// - Rerun with the exact deflection model (issue 13; docs/tiago.md): the
 ///   same choice and effects, leave-one-out 2.352 / 2.597 mm (were 2.349 /
 ///   2.501 with eq. 3), BL 3.310 mm; days swapped 2.413 mm.
+/// - Rerun with the links' bending under the robot's own weight (issue
+///   56; docs/tiago.md): the same choice, leave-one-out 2.218 / 2.343 mm,
+///   BL 3.017 mm (FIGAROH's full model: 3.07); days swapped, of the OLS
+///   runs `setup.toml`'s is chosen now, BL 2.161 mm.
 #[test]
 fn protocol_pins_the_validation_run() {
     if skip("protocol_pins_the_validation_run") {
@@ -437,35 +441,18 @@ fn protocol_pins_the_validation_run() {
     let chosen = calibrate_ols(&select, &d30, Some(&d26));
     let other = calibrate_ols(&full, &d30, None);
     let loo = |v: &Value| v["heldout_rms_um"].as_f64().unwrap() / 1e3;
-    assert!(near(loo(&chosen), 2.352), "{}", loo(&chosen));
-    // 2.597 before `gravity_compliance` (docs/tiago.md).
-    assert!(near(loo(&other), 2.383), "{}", loo(&other));
-    // Its wrist sag was within the 50 mrad bound when the loop added it
-    // and ends past it: a warning by the plausibility rule, not silence.
-    let warned = warnings(&other);
-    assert!(
-        warned
-            .iter()
-            .any(|w| w.starts_with("gravity_compliance_arm_6_joint |x| 51.5")
-                && w.contains("in the final model")),
-        "{warned:?}"
-    );
-    // Its wrist compliance, added at step 2, ends undetermined once the
-    // nonlinear stiffness of step 5 takes over (3 562 ± 7 794 urad/(N*m)):
-    // said, by the rule of `plausibility::determined`; so are the four
-    // other estimates within 2 σ of 0, in one warning.
+    // 2.352 / 2.383 before the links' bending under the robot's own
+    // weight (issue 56; docs/tiago.md).
+    assert!(near(loo(&chosen), 2.218), "{}", loo(&chosen));
+    assert!(near(loo(&other), 2.343), "{}", loo(&other));
+    assert!(loo(&chosen) < loo(&other));
+    // The estimates within 2 σ of 0 are said, in one warning, by the rule
+    // of `plausibility::determined`.
     let warned = warnings(&chosen);
-    assert_eq!(warned.len(), 2, "{warned:?}");
+    assert_eq!(warned.len(), 1, "{warned:?}");
     assert!(
-        warned[0].starts_with(
-            "joint_compliance on arm_6_joint, added at step 2, is within 2 sigma of 0"
-        ),
-        "{warned:?}"
-    );
-    assert!(
-        warned[1].starts_with("4 estimates are within 2 sigma of 0")
-            && warned[1].contains("arm_6_joint.ry = -4.1726 ± 3.6584 mrad")
-            && !warned[1].contains("k_arm_6_joint"),
+        warned[0].starts_with("4 estimates are within 2 sigma of 0")
+            && warned[0].contains("arm_6_joint.tz = -1.2222 ± 0.6514 mm"),
         "{warned:?}"
     );
     let flagged = chosen["parameters"]
@@ -474,31 +461,42 @@ fn protocol_pins_the_validation_run() {
         .iter()
         .filter(|p| p["determined"] == false)
         .count();
-    assert_eq!(flagged, 5, "the compliance and the four");
+    assert_eq!(flagged, 4);
     assert_eq!(
         effects(&chosen),
         [
             "geometry arm_6_joint",
             "joint_compliance arm_6_joint",
-            "geometry arm_2_joint",
-            "joint_compliance arm_2_joint",
-            "nonlinear_stiffness arm_6_joint"
+            "link_compliance arm_1_joint",
+            "geometry arm_1_joint",
+            "gear_cyclic arm_1_joint"
         ]
     );
     let bl = chosen["validation"]["per_marker_rms_mm"]["1"]
         .as_f64()
         .unwrap();
-    assert!(near(bl, 3.310), "BL validation {bl} mm");
-    assert!(bl < 4.23, "not better than FIGAROH's joint offsets");
+    assert!(near(bl, 3.017), "BL validation {bl} mm");
+    assert!(bl < 3.07, "better than FIGAROH's full model");
 
-    // Days swapped.
+    // Days swapped: of the OLS runs, `setup.toml`'s has the lower
+    // leave-one-out RMS (the protocol's choice over all four runs is
+    // `setup.toml` with IRLS, 2.278 mm, BL 2.207 mm: docs/tiago.md; IRLS
+    // takes a minute here).
     let rev = calibrate_ols(&select, &d26, Some(&d30));
-    let rev_other = calibrate_ols(&full, &d26, None);
-    assert!(loo(&rev) < loo(&rev_other));
-    let bl = rev["validation"]["per_marker_rms_mm"]["1"]
-        .as_f64()
-        .unwrap();
-    assert!(near(bl, 2.413), "BL validation, days swapped: {bl} mm");
+    let rev_other = calibrate_ols(&full, &d26, Some(&d30));
+    assert!(near(loo(&rev), 2.436), "{}", loo(&rev));
+    assert!(near(loo(&rev_other), 2.383), "{}", loo(&rev_other));
+    let bl = |v: &Value| v["validation"]["per_marker_rms_mm"]["1"].as_f64().unwrap();
+    assert!(
+        near(bl(&rev), 2.341),
+        "BL validation, days swapped: {} mm",
+        bl(&rev)
+    );
+    assert!(
+        near(bl(&rev_other), 2.161),
+        "BL validation, days swapped: {} mm",
+        bl(&rev_other)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
