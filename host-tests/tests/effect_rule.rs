@@ -47,6 +47,7 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
         absolute: true,
         time: true,
         own_weight: false,
+        temperature: false,
     };
     let b = bins(3);
     let model = [Param::Compliance { joint: 0 }];
@@ -112,6 +113,7 @@ fn the_rule_lists_what_the_model_lacks_in_its_order() {
         absolute: false,
         time: false,
         own_weight: false,
+        temperature: false,
     };
     let c = candidates(&n, &[], defl, &b, &[false; 3]);
     assert!(c
@@ -160,6 +162,7 @@ fn the_device_lists_the_hosts_candidates_for_deflections() {
                 absolute: false,
                 time,
                 own_weight: false,
+                temperature: false,
             };
             let host = candidates(&n, model, kinds, &host_bins, &ok);
             let (layout, device) =

@@ -739,6 +739,47 @@ fn instrument_sigma_columns() {
     assert_eq!(back.observations[0].sigma_m, rows[0].sigma_m);
 }
 
+/// `[model] temperature_column`: the named column is each point's
+/// temperature in °C, from −50 to 150; declared, it must be there, and it
+/// cannot be a fixed column or a joint.
+#[test]
+fn temperature_column() {
+    let mut job = job();
+    job.setup.model.temperature_column = Some("air_c".into());
+    let m = read(
+        &job,
+        &format!("{HEADER},air_c\n1,0,7,0,90,-45,150,1234.5,-0.25,1000,21.25\n"),
+    )
+    .unwrap();
+    assert_eq!(m.observations[0].temp_c, Some(21.25));
+    let e = read_err(
+        &job,
+        &format!("{HEADER}\n1,0,7,0,90,-45,150,1234.5,-0.25,1000\n"),
+    );
+    assert_eq!(
+        e.to_string(),
+        "d.csv:1: column 'air_c': missing column (the setup's temperature_column)"
+    );
+    // Kelvin, below −50 °C, empty, not a number: one error each, at the cell.
+    for cell in ["294.4", "-60", "", "warm"] {
+        let e = read_err(
+            &job,
+            &format!("{HEADER},air_c\n1,0,7,0,90,-45,150,1234.5,-0.25,1000,{cell}\n"),
+        );
+        assert_eq!(e.column.as_deref(), Some("air_c"), "{cell}: {e}");
+        assert_eq!(e.line, Some(2), "{cell}: {e}");
+        if cell == "294.4" {
+            assert!(e.message.contains("kelvin"), "{e}");
+        }
+    }
+    job.setup.model.temperature_column = Some("j2".into());
+    let e = read_err(
+        &job,
+        &format!("{HEADER}\n1,0,7,0,90,-45,150,1234.5,-0.25,1000\n"),
+    );
+    assert_eq!(e.kind, ErrorKind::DuplicateColumn, "{e}");
+}
+
 /// A file of more than a few MB is read in chunks on worker threads
 /// (`io::measurements`, issue 16) when the machine has more than one: every
 /// row, line number, warning and error must be what one reader gives. The

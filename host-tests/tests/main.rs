@@ -48,6 +48,7 @@ mod loop_effects;
 mod loop_gravity;
 mod loop_link_mass;
 mod loop_own_weight;
+mod loop_thermal;
 mod model_columns;
 mod model_equilibrium;
 mod model_kinematics;

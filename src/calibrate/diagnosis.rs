@@ -481,6 +481,15 @@ pub fn run(
             masses.join(", ")
         ));
     }
+    // Thermal expansion's reference: the model's lengths hold there.
+    if let (Some((column, mean)), true) = (
+        &e.rows.temperature_ref_c,
+        current.params.contains(&Param::ThermalExpansion),
+    ) {
+        notes.push(format!(
+            "thermal_expansion is about the data's mean temperature, {mean:.2} degC (column              {column}): the identified lengths hold there, and predict, compensate and              robot.urdf give the robot at that temperature"
+        ));
+    }
     let parameters = e.parameters(&current);
     let covariance = current
         .geometry

@@ -104,8 +104,9 @@ pub fn candidates(
 /// [`Policy::max_cyclic_mrad`] (a gear's transmission error is a fraction
 /// of a milliradian to a few) and a gravity compliance above
 /// [`Policy::max_gravity_deflection_mrad`] (a joint's sag under the
-/// robot's own weight), and a link's mass below zero (`x` holds the mass
-/// itself, not a Gauss–Newton step); effects only absolute data show.
+/// robot's own weight), a link's mass below zero (`x` holds the mass
+/// itself, not a Gauss–Newton step; effects only absolute data show), and
+/// a thermal expansion above [`Policy::max_thermal_expansion_um_per_m_k`].
 pub fn inadmissible(
     names: &Names,
     policy: &Policy,
@@ -139,6 +140,14 @@ pub fn inadmissible(
                 }
                 (Param::LinkMass { .. }, Some(v)) if v < 0.0 => {
                     Some(format!("{} = {v:.3} kg < 0", names.name(p)))
+                }
+                (Param::ThermalExpansion, Some(v))
+                    if v.abs() > policy.max_thermal_expansion_um_per_m_k =>
+                {
+                    Some(format!(
+                        "thermal_expansion |{v:.3}| um/(m*K) > {} um/(m*K)",
+                        policy.max_thermal_expansion_um_per_m_k
+                    ))
                 }
                 (Param::GravityCompliance { joint, b: false }, Some(v)) => {
                     let w = value(&Param::GravityCompliance { joint, b: true }).unwrap_or(0.0);

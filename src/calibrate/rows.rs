@@ -95,6 +95,11 @@ pub struct RowExtra {
     /// Time \[s\] relative to the data's mean time (absolute rows) or between
     /// the unloaded and the loaded measurement (deflection rows).
     pub dt: Option<f64>,
+    /// Temperature \[K\] relative to the data's mean temperature
+    /// ([`Rows::temperature_ref_c`], absolute rows) or between the loaded
+    /// and the unloaded measurement (deflection rows), when the setup
+    /// names a temperature column.
+    pub dtemp_k: Option<f64>,
     /// The instrument's σ of what was measured, per axis \[m\] (data
     /// contract 7.2): the point's, or for a deflection the root sum of
     /// squares of its two points'.
@@ -161,6 +166,11 @@ impl Row {
     /// [`RowExtra::dt`].
     pub fn dt(&self) -> Option<f64> {
         self.extra.as_ref().and_then(|e| e.dt)
+    }
+
+    /// [`RowExtra::dtemp_k`].
+    pub fn dtemp_k(&self) -> Option<f64> {
+        self.extra.as_ref().and_then(|e| e.dtemp_k)
     }
 
     /// [`RowExtra::sigma`].
@@ -305,6 +315,7 @@ impl Row {
             load: self.load(),
             absolute,
             dt_s: self.dt().unwrap_or(0.0),
+            dtemp_k: self.dtemp_k().unwrap_or(0.0),
             compliance,
             gravity: if absolute {
                 gravity_unit
@@ -338,6 +349,11 @@ pub struct Rows {
     pub com: Vector3<f64>,
     /// The measurement file (for errors).
     pub file: String,
+    /// The temperature column's name and the data's mean temperature
+    /// \[°C\]: the reference of every row's [`Row::dtemp_k`] and of
+    /// [`crate::model::Param::ThermalExpansion`]; `None` without a
+    /// temperature column.
+    pub temperature_ref_c: Option<(String, f64)>,
     /// The chains of the markers' links placed at the geometry of the last
     /// [`Rows::relinearise`] ([`Geometry::placed_chains`]); empty before.
     pub chains: Vec<Chain<f64, J>>,

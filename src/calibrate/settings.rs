@@ -212,6 +212,12 @@ pub struct Policy {
     /// thermal drift of a tracker or of the robot's base is a fraction of a
     /// millimetre per hour; 5 mm/h is not a drift but a moving base.
     pub max_drift_mm_per_h: f64,
+    /// Largest admissible `|α|` of the links' thermal expansion
+    /// \[µm/(m·K)\] ([`crate::model::Param::ThermalExpansion`]): an arm's
+    /// metals expand by 11 (cast iron) to 26 (magnesium) µm/(m·K), steel
+    /// 12, aluminium 23; 50 would be a plastic arm, or a temperature that
+    /// drives something else (the tracker's air compensation, the floor).
+    pub max_thermal_expansion_um_per_m_k: f64,
     /// A declared joint-law parameter needs a row with at least this
     /// torque at its joint \[N·m\]: below it (no load, gravity along the
     /// axis) the column is zero but for rounding. 1e-3.
@@ -325,6 +331,7 @@ impl Default for Policy {
             max_cyclic_mrad: 10.0,
             max_gravity_deflection_mrad: 50.0,
             max_drift_mm_per_h: 5.0,
+            max_thermal_expansion_um_per_m_k: 50.0,
             min_torque_nm: 1e-3,
             max_scale_ratio: 2.0,
             warn_scale_ratio: 1.2,

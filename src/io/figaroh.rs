@@ -137,6 +137,7 @@ impl MocapFile {
                     q_written: Default::default(),
                     p_m: *point,
                     t_s: p.t_mid_s,
+                    temp_c: None,
                     sigma_m: None,
                     line: p.line,
                 });

@@ -45,7 +45,9 @@ use std::path::{Path, PathBuf};
 use crate::io::cells::{self, Scale};
 use crate::io::error::{ErrorKind, InputError, InputWarning};
 use crate::io::setup::Setup;
-pub use crate::io::units::{MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S};
+pub use crate::io::units::{
+    MAX_LOAD_KG, MAX_POSITION_M, MAX_TEMPERATURE_C, MAX_TIME_S, MIN_TEMPERATURE_C,
+};
 use crate::io::urdf::Robot;
 
 mod header;
@@ -81,6 +83,9 @@ pub struct Observation {
     pub p_m: [f64; 3],
     /// Time \[s\], when the file has a `t` column.
     pub t_s: Option<f64>,
+    /// Temperature \[°C\], when the setup names its column
+    /// (`[model] temperature_column`).
+    pub temp_c: Option<f64>,
     /// The instrument's standard deviation of this point per axis \[m\],
     /// when the file has `sx, sy, sz` (data contract 7.2).
     pub sigma_m: Option<[f64; 3]>,
@@ -431,6 +436,8 @@ enum Col {
     Time,
     /// `sx, sy, sz`: the instrument's σ per axis.
     Sigma(usize),
+    /// The setup's `[model] temperature_column` \[°C\].
+    Temperature,
 }
 
 const FIXED: [(&str, Col); 11] = [

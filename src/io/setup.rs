@@ -28,6 +28,7 @@
 //! | `[model] base_frame` | `false` |
 //! | `[model] markers` | `"nominal"` (`"nominal"` \| `"identify"`) |
 //! | `[model] tool_frame` | `false` |
+//! | `[model] temperature_column` | absent: the CSV column of each point's temperature \[°C\], from −50 to 150; the loop then offers `thermal_expansion` |
 //!
 //! `geometry = "select"` extends the data contract (an optional value of
 //! an existing key; the contract's three values keep their meaning): no
@@ -217,6 +218,11 @@ pub struct Model {
     /// marker together (extension of the contract; default `false`).
     #[serde(default)]
     pub tool_frame: bool,
+    /// The measurement CSV's column of the temperature \[°C\] at each
+    /// point (extension of the contract; absent: none): the closed loop
+    /// then offers the links' thermal expansion (`thermal_expansion`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_column: Option<String>,
 }
 
 /// The setup file. See the module doc for keys and defaults.

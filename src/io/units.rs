@@ -56,3 +56,12 @@ pub const MAX_POSITION_M: f64 = 1e4;
 /// 1.8·10⁹). Larger is another unit (ms since 1970 is 1.8·10¹²) or an
 /// overflow, and differences of such times lose the seconds.
 pub const MAX_TIME_S: f64 = 1e10;
+
+/// Lowest temperature a measurement may be taken at \[°C\]
+/// (`[model] temperature_column`): below it, a cell is
+/// in another unit.
+pub const MIN_TEMPERATURE_C: f64 = -50.0;
+
+/// Highest temperature a measurement may be taken at \[°C\]: above it, the
+/// cell is in kelvin or °F.
+pub const MAX_TEMPERATURE_C: f64 = 150.0;

@@ -50,6 +50,10 @@
 //! absolute position's (host only, `std`) is the robot's own weight's,
 //! [`crate::robot::gravity_moments`] ([`Sample::weight_moments_nm`]).
 //!
+//! **Thermal expansion** (host only, `std`): every length from the first
+//! joint's origin `o₁` out grows by `α ΔT`, so the column of `α` is
+//! `ΔT (p − o₁)` ([`Sample::dtemp_k`]).
+//!
 //! ```
 //! use nalgebra::Vector3;
 //! use robcal::model::compliance_columns;
@@ -182,6 +186,10 @@ impl Param {
                 _ => zero,
             },
             Param::Drift { axis: a } => Vector3::ith(axis(a, 3)?, s.dt_s),
+            // Every length from the first joint's origin out grows by
+            // `α ΔT`: the marker moves by `ΔT (p − o₁)` per unit of `α`.
+            #[cfg(feature = "std")]
+            Param::ThermalExpansion => (p - s.frames.joint(0)?.origin_m()) * s.dtemp_k,
             _ if !s.absolute => zero,
             // Rigid at the (equilibrium) frames, like the frame errors and
             // the base: a joint offset and the next joint's frame error move

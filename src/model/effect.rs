@@ -65,6 +65,10 @@ pub enum Effect {
     /// only, `std`).
     #[cfg(feature = "std")]
     LinkMass,
+    /// The links expand with the temperature (`Param::ThermalExpansion`;
+    /// needs the setup's temperature column; host only, `std`).
+    #[cfg(feature = "std")]
+    ThermalExpansion,
     /// A marker sits elsewhere than declared.
     Marker,
     /// The base is placed or turned elsewhere than declared.
@@ -74,7 +78,7 @@ pub enum Effect {
 impl Effect {
     /// Every effect, in the contract's order.
     #[cfg(feature = "std")]
-    pub const ALL: [Effect; 14] = [
+    pub const ALL: [Effect; 15] = [
         Effect::Compensator,
         Effect::JointCompliance,
         Effect::NonlinearStiffness,
@@ -87,6 +91,7 @@ impl Effect {
         Effect::GearCyclic,
         Effect::GravityCompliance,
         Effect::LinkMass,
+        Effect::ThermalExpansion,
         Effect::Marker,
         Effect::BaseFrame,
     ];
@@ -126,6 +131,8 @@ impl Effect {
             Effect::GravityCompliance => "gravity_compliance",
             #[cfg(feature = "std")]
             Effect::LinkMass => "link_mass",
+            #[cfg(feature = "std")]
+            Effect::ThermalExpansion => "thermal_expansion",
             Effect::Marker => "marker",
             Effect::BaseFrame => "base_frame",
         }
@@ -165,6 +172,10 @@ pub struct DataKinds {
     /// and bends its links. Host only (`std`).
     #[cfg(feature = "std")]
     pub own_weight: bool,
+    /// A temperature column (`[model] temperature_column`): the links'
+    /// thermal expansion can be traced. Host only (`std`).
+    #[cfg(feature = "std")]
+    pub temperature: bool,
 }
 
 /// The parameters a [`Candidate`] adds to the model.
@@ -297,8 +308,9 @@ impl Candidate<'_> {
 /// 11. `load_com`, with deflection rows and a compliance in the model (the
 ///    load's position only moves a deflection through a compliance);
 /// 12. `drift`, with a time column;
-/// 13. `marker` for each of the `markers` markers, with absolute rows;
-/// 14. `base_frame`, with absolute rows.
+/// 13. `thermal_expansion` (host only, `std`), with a temperature column;
+/// 14. `marker` for each of the `markers` markers, with absolute rows;
+/// 15. `base_frame`, with absolute rows.
 ///
 /// An effect already in the model (any of its parameters) is not a
 /// candidate. `emit`'s first error ends the list and is returned.
@@ -399,6 +411,14 @@ pub fn candidates<'b, E>(
         let ps = [0, 1, 2].map(|axis| Param::Drift { axis });
         emit(one(Effect::Drift, None, &ps))?;
     }
+    #[cfg(feature = "std")]
+    if data.temperature && !has(&Param::ThermalExpansion) {
+        emit(one(
+            Effect::ThermalExpansion,
+            None,
+            &[Param::ThermalExpansion],
+        ))?;
+    }
     if data.absolute {
         for m in 0..markers {
             if !any(&|p| matches!(p, Param::Marker { marker, .. } if *marker == m)) {
@@ -495,6 +515,8 @@ pub fn stream_candidates<
         time,
         #[cfg(feature = "std")]
         own_weight: false,
+        #[cfg(feature = "std")]
+        temperature: false,
     };
     let revolute = |j: usize| chain.joints().get(j).map(|jt| jt.kind) == Some(JointKind::Revolute);
     let compensator = |j: usize| bins[j].compensator_ok.then_some(&bins[j].angles_urad[..]);

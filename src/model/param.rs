@@ -18,6 +18,7 @@
 //! | [`Param::NonlinearStiffness`] | `urad/(kN*m)^2` / `um/kN^2` | 1e-12 | |
 //! | [`Param::Drift`] | `um/s` | 1e-6 | |
 //! | `Param::LinkMass` (`std`) | `kg` | 1 | |
+//! | `Param::ThermalExpansion` (`std`) | `um/(m*K)` | 1e-6 | |
 //!
 //! Joint indices count the chain's movable joints from the base, from 0;
 //! marker indices count the markers of the job (or of the layout), from 0.
@@ -160,6 +161,15 @@ pub enum Param {
         /// Joint index.
         joint: u8,
     },
+    /// The links' thermal expansion: every length from the first joint's
+    /// origin out (the joints' offsets, the tool, the markers) grows by
+    /// `α ΔT`, `ΔT` the point's temperature over the data's mean (the
+    /// setup's temperature column), so the marker moves by
+    /// `α ΔT (p − o₁)`, `o₁` the first joint's origin. One coefficient `α`
+    /// \[1/K\] for the arm (steel 12, aluminium 23 µm/(m·K)). Host only
+    /// (`std`).
+    #[cfg(feature = "std")]
+    ThermalExpansion,
 }
 
 /// The unit a parameter is estimated and reported in, and its SI value.
@@ -200,6 +210,8 @@ impl Param {
             | Param::Marker { .. }
             | Param::LoadCom { .. }
             | Param::Drift { .. } => None,
+            #[cfg(feature = "std")]
+            Param::ThermalExpansion => None,
         }
     }
 
@@ -288,6 +300,11 @@ impl Param {
                 name: "kg",
                 si: 1.0,
             },
+            #[cfg(feature = "std")]
+            Param::ThermalExpansion => Unit {
+                name: "um/(m*K)",
+                si: 1e-6,
+            },
         }
     }
 
@@ -327,7 +344,7 @@ impl Param {
             | Param::Backlash { .. }
             | Param::LinkCompliance { .. } => "",
             #[cfg(feature = "std")]
-            Param::LinkMass { .. } => "",
+            Param::LinkMass { .. } | Param::ThermalExpansion => "",
         }
     }
 
@@ -371,6 +388,8 @@ impl fmt::Display for Param {
             }
             #[cfg(feature = "std")]
             Param::LinkMass { joint } => write!(f, "link_mass_j{joint}"),
+            #[cfg(feature = "std")]
+            Param::ThermalExpansion => write!(f, "thermal_expansion"),
         }
     }
 }

@@ -64,6 +64,12 @@ pub struct Sample<'a, T: RealField + Copy, const J: usize> {
     /// deflection, whose own weight cancels). Host only (`std`).
     #[cfg(feature = "std")]
     pub weight_moments_nm: &'a [Vector3<T>],
+    /// Temperature \[K\] over the data's mean (absolute rows) or between
+    /// the loaded and the unloaded measurement (deflections): what the
+    /// links' thermal expansion ([`super::Param::ThermalExpansion`]) is
+    /// proportional to; zero without a temperature. Host only (`std`).
+    #[cfg(feature = "std")]
+    pub dtemp_k: T,
 }
 
 impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
@@ -93,6 +99,8 @@ impl<'a, T: RealField + Copy, const J: usize> Sample<'a, T, J> {
             gravity_q: &[],
             #[cfg(feature = "std")]
             weight_moments_nm: &[],
+            #[cfg(feature = "std")]
+            dtemp_k: T::zero(),
         }
     }
 

@@ -184,6 +184,13 @@ fn variables(rows: &Rows, names: &Names) -> Vec<Variable> {
             false,
         ));
     }
+    if let Some((column, _)) = &rows.temperature_ref_c {
+        out.push(var(
+            column.clone(),
+            r.iter().map(|r| r.dtemp_k().unwrap_or(0.0)).collect(),
+            false,
+        ));
+    }
     if names.markers.len() > 1 {
         let id = |r: &crate::calibrate::rows::Row| f64::from(names.marker_id(r.marker));
         out.push(var("marker".into(), r.iter().map(id).collect(), false));
@@ -322,6 +329,18 @@ pub fn traced_variable(rows: &Rows, names: &Names, c: &Candidate) -> (String, Ve
                 "t [s]".into(),
                 r.iter().map(|r| r.dt().unwrap_or(0.0)).collect(),
             ),
+            crate::calibrate::effects::Effect::ThermalExpansion => {
+                let (column, mean) = rows
+                    .temperature_ref_c
+                    .clone()
+                    .unwrap_or_else(|| ("temperature".into(), 0.0));
+                (
+                    format!("{column} [degC]"),
+                    r.iter()
+                        .map(|r| mean + r.dtemp_k().unwrap_or(0.0))
+                        .collect(),
+                )
+            }
             crate::calibrate::effects::Effect::LoadCom => {
                 ("load_kg".into(), r.iter().map(|r| r.load_kg()).collect())
             }

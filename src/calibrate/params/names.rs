@@ -60,7 +60,8 @@ impl Names {
     /// `k_<joint>@<angle as written>`, `<joint>.offset`, `<joint>.tx`…,
     /// `base.tx`…, `tool.tx`…, `marker<id>.x`…, `<effect>_<joint>`, `load_com_x`…,
     /// `drift_x`…, `gear_cyclic_<joint>.sin`/`.cos`,
-    /// `gravity_compliance_<joint>.a`/`.b`, `link_mass_<joint>`.
+    /// `gravity_compliance_<joint>.a`/`.b`, `link_mass_<joint>`,
+    /// `thermal_expansion`.
     pub fn name(&self, p: &Param) -> String {
         let c = p.component();
         match *p {
@@ -91,6 +92,7 @@ impl Names {
                 format!("gravity_compliance_{}.{c}", self.joint(joint))
             }
             Param::LinkMass { joint } => format!("link_mass_{}", self.joint(joint)),
+            Param::ThermalExpansion => "thermal_expansion".into(),
         }
     }
 }

@@ -321,6 +321,7 @@ pub fn check_result(report: &Report, policy: &Policy) -> Result<Vec<String>, Cal
                 | Param::GravityCompliance { .. }
                 | Param::Drift { .. }
                 | Param::LinkMass { .. }
+                | Param::ThermalExpansion
         );
         if let Some(why) = bounded
             .then(|| {

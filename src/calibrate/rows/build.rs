@@ -73,6 +73,9 @@ impl Rows {
         let mut configs: Vec<i64> = data.observations.iter().map(|o| o.config).collect();
         configs.sort_unstable();
         configs.dedup();
+        // The temperature's reference: the mean over every point.
+        let temps: Vec<f64> = data.observations.iter().filter_map(|o| o.temp_c).collect();
+        let temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
         let times: Vec<f64> = data.observations.iter().filter_map(|o| o.t_s).collect();
         let t_mean = if times.is_empty() {
             0.0
@@ -160,6 +163,7 @@ impl Rows {
                    load_kg: f64,
                    q: &[f64],
                    dt: Option<f64>,
+                   dtemp_k: Option<f64>,
                    measured: [f64; 3],
                    line: usize,
                    sigma: Option<[f64; 3]>,
@@ -171,14 +175,17 @@ impl Rows {
             q: q.into(),
             measured: Vector3::from(measured),
             line: u32::try_from(line).unwrap_or(u32::MAX),
-            extra: (load_kg != 0.0 || dt.is_some() || sigma.is_some()).then(|| {
-                Box::new(RowExtra {
-                    load_kg,
-                    dt,
-                    sigma: sigma.map(Vector3::from),
-                    ..RowExtra::default()
-                })
-            }),
+            extra: (load_kg != 0.0 || dt.is_some() || dtemp_k.is_some() || sigma.is_some()).then(
+                || {
+                    Box::new(RowExtra {
+                        load_kg,
+                        dt,
+                        dtemp_k,
+                        sigma: sigma.map(Vector3::from),
+                        ..RowExtra::default()
+                    })
+                },
+            ),
         };
         let absolute_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
             row(
@@ -188,6 +195,7 @@ impl Rows {
                 0.0,
                 &o.q,
                 o.t_s.map(|t| t - t_mean),
+                o.temp_c.zip(temp_mean).map(|(t, m)| t - m),
                 o.p_m,
                 o.line,
                 o.sigma_m,
@@ -207,6 +215,7 @@ impl Rows {
                 d.load_kg,
                 &d.q,
                 dt,
+                loaded.temp_c.zip(unloaded.temp_c).map(|(a, b)| a - b),
                 d.dp_m,
                 d.lines[0],
                 loaded
@@ -275,6 +284,7 @@ impl Rows {
             time: data.has_time,
             own_weight: rows.iter().any(|r| r.kind == RowKind::Absolute)
                 && job.robot.chain.joints().iter().any(|j| j.link.is_some()),
+            temperature: rows.iter().any(|r| r.dtemp_k().is_some()),
         };
         Ok(Self {
             rows,
@@ -285,6 +295,7 @@ impl Rows {
             gravity,
             com,
             file: data.file.display().to_string(),
+            temperature_ref_c: setup.model.temperature_column.clone().zip(temp_mean),
             chains: Vec::new(),
             markers: Vec::new(),
             gravity_unit: Vector3::zeros(),

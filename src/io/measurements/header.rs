@@ -69,6 +69,25 @@ impl Header {
                 ));
             }
         }
+        let temperature = setup.model.temperature_column.as_deref();
+        if let Some(name) = temperature {
+            if FIXED.iter().any(|(f, _)| *f == name) || robot.joint_index(name).is_some() {
+                return Err(cell_err(
+                    ErrorKind::DuplicateColumn,
+                    1,
+                    name,
+                    "the setup's temperature_column names a fixed column or a joint".into(),
+                ));
+            }
+            if !header.iter().any(|n| n == name) {
+                return Err(cell_err(
+                    ErrorKind::MissingColumn,
+                    1,
+                    name,
+                    "missing column (the setup's temperature_column)".into(),
+                ));
+            }
+        }
         let mut cols = Vec::with_capacity(header.len());
         for (i, name) in header.iter().enumerate() {
             let col = FIXED
@@ -76,6 +95,7 @@ impl Header {
                 .find(|(f, _)| *f == name)
                 .map(|&(_, c)| c)
                 .or_else(|| robot.joint_index(name).map(Col::Joint))
+                .or_else(|| (temperature == Some(name)).then_some(Col::Temperature))
                 .or_else(|| {
                     setup
                         .ignore_columns

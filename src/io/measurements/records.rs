@@ -6,7 +6,8 @@ use std::path::Path;
 
 use crate::io::cells::{parse_int, parse_real, parse_real_written, Scale};
 use crate::io::measurements::{
-    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TIME_S,
+    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TEMPERATURE_C,
+    MAX_TIME_S, MIN_TEMPERATURE_C,
 };
 use crate::io::setup::{AngleUnit, LengthUnit, Setup};
 use crate::io::urdf::{Robot, UrdfJointKind};
@@ -187,6 +188,19 @@ impl Layout<'_> {
                         ));
                     }
                     o.t_s = Some(t);
+                }
+                Col::Temperature => {
+                    let t = parse_real(cell, Scale::One).map_err(|(k, m)| cerr(k, m))?;
+                    if !(MIN_TEMPERATURE_C..=MAX_TEMPERATURE_C).contains(&t) {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{t:?} °C is outside [{MIN_TEMPERATURE_C}, {MAX_TEMPERATURE_C}] \
+                                 °C (kelvin or °F?)"
+                            ),
+                        ));
+                    }
+                    o.temp_c = Some(t);
                 }
                 Col::Sigma(k) => {
                     let v = parse_real(cell, Scale::Length(self.setup.units.length))
