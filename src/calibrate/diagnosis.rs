@@ -450,7 +450,7 @@ pub fn run(
     let rigid = crate::calibrate::outputs::export::rigid_urdf(&mut e, &current, &model);
     if let Some(r) = rigid.as_ref().filter(|r| r.refit.is_some()) {
         let others: Vec<String> = (current.params.iter())
-            .filter(|p| !p.is_geometric())
+            .filter(|p| !p.is_geometric() && **p != Param::ThermalExpansion)
             .map(|p| e.names.name(p))
             .collect();
         let listed = match others.len() {
@@ -487,7 +487,9 @@ pub fn run(
         current.params.contains(&Param::ThermalExpansion),
     ) {
         notes.push(format!(
-            "thermal_expansion is about the data's mean temperature, {mean:.2} degC (column              {column}): the identified lengths hold there, and predict, compensate and              robot.urdf give the robot at that temperature"
+            "thermal_expansion is about the data's mean temperature, {mean:.2} degC (column \
+             {column}): the identified lengths hold there, and predict, compensate and \
+             robot.urdf give the robot at that temperature"
         ));
     }
     let parameters = e.parameters(&current);

@@ -179,7 +179,11 @@ pub(in crate::calibrate) fn rigid_urdf(
     f: &Fitted,
     model: &CalibratedModel,
 ) -> Option<RigidUrdf> {
-    if f.params.iter().all(Param::is_geometric) || !e.rows.kinds.absolute {
+    // A thermal expansion is zero at the data's mean temperature, where
+    // the model's geometry holds: a URDF of that geometry is the robot
+    // there, with nothing to refit.
+    let held = |p: &Param| p.is_geometric() || matches!(p, Param::ThermalExpansion);
+    if f.params.iter().all(held) || !e.rows.kinds.absolute {
         return None;
     }
     e.geometry = final_geometry(model);
