@@ -710,6 +710,19 @@ class Model:
         """The calibrated markers [m, tip frame] by id."""
         return {i: np.array(p) for i, p in self._native.markers}
 
+    @property
+    def thermal_expansion(self) -> Optional[tuple[float, float]]:
+        """The links' thermal expansion, ``(alpha [1/K], the temperature
+        [degC] the lengths hold at)``, or None when the calibration had no
+        temperature column."""
+        return self._native.thermal_expansion
+
+    def at_temperature(self, temp_c: float) -> "Model":
+        """The robot at ``temp_c`` [degC]: every length from the first
+        joint out stretched by ``1 + alpha (T - T_ref)``
+        (``robcal predict --temperature-c``)."""
+        return Model(self._native.at_temperature(float(temp_c)))
+
     def _warn_payload(self, load: list[float]) -> None:
         w = self._native.payload_warning(load)
         if w is not None:

@@ -669,6 +669,22 @@ impl Model {
             .collect()
     }
 
+    /// The links' thermal expansion: `(α [1/K], the temperature [°C] the
+    /// lengths hold at)`, or `None`.
+    #[getter]
+    fn thermal_expansion(&self) -> Option<(f64, f64)> {
+        self.inner.thermal_expansion()
+    }
+
+    /// The robot at `temp_c` \[°C\] (`robcal predict --temperature-c`).
+    fn at_temperature(&self, temp_c: f64) -> PyResult<Self> {
+        let inner = self
+            .inner
+            .at_temperature(temp_c)
+            .map_err(calibration_error)?;
+        Ok(Self { inner })
+    }
+
     /// The markers: `(id, [x, y, z])` \[m, tip frame\] each, calibrated.
     #[getter]
     fn markers(&self) -> Vec<(u32, [f64; 3])> {

@@ -137,6 +137,38 @@ def test_predict_and_compensate_are_the_commands(cli, repo, tmp_path):
     assert np.array_equal(result.model.predict(q, 250.0, com, marker=1), model.predict(q, 250.0, com, marker=1))
 
 
+def test_the_robot_at_a_temperature_is_the_commands(cli, repo, tmp_path):
+    out = tmp_path / "out"
+    run(cli, "calibrate", "--setup", KR270, "--data", KR270_DATA, "--no-diagnose", "--output", str(out))
+    text = (out / "model.json").read_text()
+    model = robcal.Model.from_json(text)
+    assert model.thermal_expansion is None
+    with pytest.raises(robcal.CalibrationError, match="no thermal_expansion"):
+        model.at_temperature(30.0)
+    # The KR-270 had no temperature column: the expansion added by hand.
+    import json
+
+    d = json.loads(text)
+    d["predictor"]["thermal_expansion"] = {"alpha_per_k": 12e-6, "reference_c": 21.5}
+    (out / "warm.json").write_text(json.dumps(d))
+    model = robcal.Model.load(out / "warm.json")
+    assert model.thermal_expansion == (12e-6, 21.5)
+    want = pd.read_csv(
+        pd.io.common.StringIO(
+            run(cli, "predict", "--model", str(out / "warm.json"), "--poses", "data/kr270/poses.csv",
+                "--temperature-c", "35")
+        )
+    )
+    q = want[[f"{j}_rad" for j in model.joint_names]].to_numpy()
+    com = want[["com_x_m", "com_y_m", "com_z_m"]].to_numpy()
+    m = int(want["marker"][0])
+    rows = (want["marker"] == m).to_numpy()
+    got = model.at_temperature(35).predict(q[rows], load_kg=want["load_kg"].to_numpy()[rows], com_m=com[rows], marker=m)
+    assert np.array_equal(got, want.loc[rows, ["x_m", "y_m", "z_m"]].to_numpy())
+    with pytest.raises(robcal.CalibrationError, match="outside"):
+        model.at_temperature(400)
+
+
 def test_a_tiago_session_is_the_commands(cli, repo, shared, tmp_path):
     session = shared / "datasets/tiago-mocap/qualisys_2021-11-30_static_postures.csv"
     by_cli = tmp_path / "cli.csv"

@@ -747,6 +747,7 @@ impl Engine<'_> {
                 f.fit.covariance.iter().copied(),
             ),
             heaviest_payload_kg: self.rows.rows.iter().fold(0.0, |m, r| r.load_kg().max(m)),
+            temperature_ref_c: self.rows.temperature_ref_c.as_ref().map(|t| t.1),
         }
     }
 }

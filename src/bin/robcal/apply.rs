@@ -25,6 +25,11 @@ pub struct PredictArgs {
     /// Write the CSV here (all or nothing) instead of stdout.
     #[arg(long)]
     output: Option<PathBuf>,
+    /// The robot at this temperature [°C] (a model with the links' thermal
+    /// expansion; default: the calibration's mean temperature, where its
+    /// lengths hold).
+    #[arg(long = "temperature-c", allow_negative_numbers = true)]
+    temperature_c: Option<f64>,
 }
 
 /// `robcal compensate`.
@@ -48,6 +53,11 @@ pub struct CompensateArgs {
     /// Newton steps at most per target.
     #[arg(long = "max-iter", default_value_t = 20, value_parser = crate::at_least_one)]
     max_iter: usize,
+    /// The robot at this temperature [°C] (a model with the links' thermal
+    /// expansion; default: the calibration's mean temperature, where its
+    /// lengths hold).
+    #[arg(long = "temperature-c", allow_negative_numbers = true)]
+    temperature_c: Option<f64>,
 }
 
 /// `robcal check`.
@@ -216,9 +226,21 @@ fn emit(out: &str, output: Option<&Path>, inputs: &[&Path]) -> Result<(), String
     }
 }
 
+/// The model file's robot, at `temperature_c` when given
+/// ([`Predictor::at_temperature`]).
+fn load_model_at(path: &Path, temperature_c: Option<f64>) -> Result<Predictor, String> {
+    let robot = load_model(path)?;
+    match temperature_c {
+        None => Ok(robot),
+        Some(t) => robot
+            .at_temperature(t)
+            .map_err(|e| format!("--temperature-c: {}: {e}", path.display())),
+    }
+}
+
 /// `robcal predict`.
 pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
-    let robot = load_model(&a.model)?;
+    let robot = load_model_at(&a.model, a.temperature_c)?;
     let rows = read_points(&robot, &a.poses, false)?;
     let mut out = header(&robot, &rows[0], false) + "\n";
     for row in &rows {
@@ -241,7 +263,7 @@ pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
 
 /// `robcal compensate`.
 pub fn run_compensate(a: &CompensateArgs) -> Result<(), String> {
-    let robot = load_model(&a.model)?;
+    let robot = load_model_at(&a.model, a.temperature_c)?;
     let rows = read_points(&robot, &a.targets, true)?;
     let settings = CompensateSettings {
         tolerance_m: a.tolerance_um * 1e-6,

@@ -23,7 +23,8 @@
 //!                  "nonlinear_stiffness": c, "backlash": b,
 //!                  "gear_cyclic_sin": s, "gear_cyclic_cos": c,
 //!                  "gravity_compliance_a": x_a, "gravity_compliance_b": x_b}, ..],
-//!   "link_compliance": [{"joint": "a3", "value": k, "unit": "rad/(N*m)"}]
+//!   "link_compliance": [{"joint": "a3", "value": k, "unit": "rad/(N*m)"}],
+//!   "thermal_expansion": {"alpha_per_k": a, "reference_c": t}  // when identified
 //! }
 //! ```
 //!
@@ -37,7 +38,10 @@
 //! and `(gₐ, g_b)` the components of the unit gravity direction
 //! (`gravity_mps2` normalised) on the joint's basis in its frame at the
 //! commanded pose ([`crate::model::gravity_components`]; the gravity
-//! compliance, written only when not zero).
+//! compliance, written only when not zero). With `thermal_expansion`,
+//! the lengths are the robot's at `reference_c` \[°C\]; at `T` every
+//! point `p` on it is at `o₁ + (1 + α (T − reference_c))(p − o₁)`, `o₁` the
+//! first joint's origin ([`Predictor::at_temperature`]).
 
 use std::collections::BTreeMap;
 
@@ -171,6 +175,17 @@ pub struct BendingRecord {
     pub unit: String,
 }
 
+/// The links' thermal expansion ([`Param::ThermalExpansion`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThermalRecord {
+    /// The coefficient `α` \[1/K\].
+    pub alpha_per_k: f64,
+    /// The temperature \[°C\] the file's lengths hold at (the calibration
+    /// data's mean).
+    pub reference_c: f64,
+}
+
 /// The `predictor` section of `model.json` (see the [module docs](self)).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -206,6 +221,9 @@ pub struct ModelFile {
     /// file written before it was recorded; [`crate::calibrate::outputs::predict::payload`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heaviest_payload_kg: Option<f64>,
+    /// The links' thermal expansion (absent without one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal_expansion: Option<ThermalRecord>,
 }
 
 fn quat(q: &UnitQuaternion<f64>) -> [f64; 4] {
@@ -326,6 +344,12 @@ impl ModelFile {
                 })
                 .collect(),
             heaviest_payload_kg: p.heaviest_payload_kg(),
+            thermal_expansion: p.thermal_expansion().map(|(alpha_per_k, reference_c)| {
+                ThermalRecord {
+                    alpha_per_k,
+                    reference_c,
+                }
+            }),
         }
     }
 
@@ -581,6 +605,26 @@ impl ModelFile {
                 b.value * 1e6,
             ));
         }
+        if let Some(t) = &self.thermal_expansion {
+            finite("thermal_expansion", &[t.alpha_per_k, t.reference_c])?;
+            let range = crate::io::units::MIN_TEMPERATURE_C..=crate::io::units::MAX_TEMPERATURE_C;
+            // (50e-6 is the loop's bound; a file may hold what a calibration
+            // with another policy admitted, not a length that turns inside out.)
+            if t.alpha_per_k.abs() > 1e-3 {
+                return Err(format!(
+                    "thermal_expansion: alpha_per_k {:e} 1/K is not a thermal expansion",
+                    t.alpha_per_k
+                ));
+            }
+            if !range.contains(&t.reference_c) {
+                return Err(format!(
+                    "thermal_expansion: reference_c {} degC is outside [{}, {}] degC",
+                    t.reference_c,
+                    range.start(),
+                    range.end()
+                ));
+            }
+        }
         Predictor::from_parts(
             chain,
             markers,
@@ -592,6 +636,10 @@ impl ModelFile {
         )
         .with_ends(&ends, marker_ends)
         .map(|p| p.with_heaviest_payload_kg(self.heaviest_payload_kg))
+        .map(|p| match &self.thermal_expansion {
+            Some(t) => p.with_thermal_expansion(t.alpha_per_k, t.reference_c),
+            None => p,
+        })
         .map_err(|e| format!("markers: {e}"))
     }
 }

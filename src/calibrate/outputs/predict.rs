@@ -16,7 +16,9 @@
 //! ([`crate::model::Param::LinkCompliance`]). Not
 //! applied: the drift of the measurement system and the calibration tool's
 //! centre-of-mass estimate (properties of the calibration, not of the
-//! robot). All positions are in metres in the measurement frame; joint
+//! robot). With the links' thermal expansion, the lengths are the
+//! calibration's mean temperature's; [`Predictor::at_temperature`] gives
+//! the robot at another. All positions are in metres in the measurement frame; joint
 //! values in rad (or m); [`payload`] says when a payload is extrapolated.
 //!
 //! [`Predictor::predict_covariance`] propagates the calibration's
@@ -86,6 +88,10 @@ pub struct Predictor {
     calibration: Option<(Box<CalibratedModel>, Vector3<f64>)>,
     /// The heaviest payload of the calibration \[kg\] ([`payload`]).
     heaviest_payload_kg: Option<f64>,
+    /// The links' thermal expansion ([`Param::ThermalExpansion`]): `α`
+    /// \[1/K\] and the temperature \[°C\] this predictor's lengths hold
+    /// at.
+    thermal: Option<(f64, f64)>,
 }
 
 /// The equilibrium settings of a prediction (the rows' own).
@@ -142,6 +148,10 @@ impl Predictor {
             joint_names: model.names.joints.clone(),
             calibration: Some((Box::new(model.clone()), gravity_mps2)),
             heaviest_payload_kg: Some(model.heaviest_payload_kg),
+            thermal: (model.params.iter().zip(x))
+                .find(|(p, _)| matches!(p, Param::ThermalExpansion))
+                .zip(model.temperature_ref_c)
+                .map(|((p, v), t)| (v * model.names.unit(p).si, t)),
         }
     }
 
@@ -173,7 +183,96 @@ impl Predictor {
             joint_names,
             calibration: None,
             heaviest_payload_kg: None,
+            thermal: None,
         }
+    }
+
+    /// This predictor with the links' thermal expansion `α` \[1/K\] about
+    /// `reference_c` \[°C\], the temperature its lengths hold at (a model
+    /// file's `thermal_expansion`).
+    pub fn with_thermal_expansion(mut self, alpha_per_k: f64, reference_c: f64) -> Self {
+        self.thermal = Some((alpha_per_k, reference_c));
+        self
+    }
+
+    /// The links' thermal expansion `(α [1/K], the temperature [°C] the
+    /// lengths hold at)`, when the calibration identified one.
+    pub fn thermal_expansion(&self) -> Option<(f64, f64)> {
+        self.thermal
+    }
+
+    /// The robot at `temp_c` \[°C\]: every length from the first joint's
+    /// origin `o₁` out (the joints' offsets, the tips, the markers, the
+    /// links' centres of mass) stretched by `1 + α (T − T_ref)`
+    /// ([`Param::ThermalExpansion`]), so every point on it moves to
+    /// `o₁ + (1 + α ΔT)(p − o₁)`. Tool points given to [`Self::predict`]
+    /// or [`Self::compensate`] are taken as given. Its
+    /// [`Self::predict_covariance`] is not available (the calibration's
+    /// covariance is at `T_ref`).
+    ///
+    /// # Errors
+    /// [`CalibrationError::Data`] when the model has no thermal expansion
+    /// or `temp_c` is not a temperature from −50 to 150 °C.
+    pub fn at_temperature(&self, temp_c: f64) -> Result<Self, CalibrationError> {
+        let (alpha, reference) = self.thermal.ok_or_else(|| {
+            CalibrationError::Data(
+                "the model has no thermal_expansion (a calibration with a temperature_column \
+                 identifies one)"
+                    .into(),
+            )
+        })?;
+        let range = crate::io::units::MIN_TEMPERATURE_C..=crate::io::units::MAX_TEMPERATURE_C;
+        if !range.contains(&temp_c) {
+            return Err(CalibrationError::Data(format!(
+                "temperature {temp_c} degC is outside [{}, {}] degC",
+                range.start(),
+                range.end()
+            )));
+        }
+        let s = 1.0 + alpha * (temp_c - reference);
+        let stretch = |iso: &mut nalgebra::Isometry3<f64>| iso.translation.vector *= s;
+        let mut chain = self.chain.clone();
+        let o1 = chain
+            .joints()
+            .first()
+            .map_or(Vector3::zeros(), |j| j.origin.translation.vector);
+        for j in 0..chain.dof() {
+            let parent = chain.parent(j);
+            let joint = &mut chain.joints_mut()[j];
+            match parent {
+                Some(_) => stretch(&mut joint.origin),
+                // Another root than the first (a tree): its origin from o₁.
+                None if j > 0 => {
+                    let t = &mut joint.origin.translation.vector;
+                    *t = o1 + (*t - o1) * s;
+                }
+                None => {}
+            }
+            if let Some(link) = joint.link.as_mut() {
+                link.com_m *= s;
+            }
+        }
+        let branches = self
+            .branches
+            .iter()
+            .map(|b| {
+                let mut end = b.tip_end();
+                stretch(&mut end.origin);
+                chain.with_tip(&end)
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| CalibrationError::Data(format!("thermal expansion: {e}")))?;
+        let mut tip = *chain.tip();
+        stretch(&mut tip);
+        chain.set_tip(tip);
+        Ok(Self {
+            chain,
+            branches,
+            markers: self.markers.iter().map(|m| m * s).collect(),
+            calibration: None,
+            thermal: Some((alpha, temp_c)),
+            ..self.clone()
+        })
     }
 
     /// The chain, placed in the measurement frame.

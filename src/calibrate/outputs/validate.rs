@@ -9,7 +9,9 @@
 //! of both as the calibration's deflection rows leave it out
 //! ([`Predictor::predict_deflection`]). The drift of the
 //! measurement system is a property of the calibration session and is not
-//! carried over to another file.
+//! carried over to another file. A model with the links' thermal
+//! expansion predicts an absolute point at the temperature the file gives
+//! it ([`Predictor::at_temperature`]).
 //!
 //! **Re-registration.** A file measured with the tracker set up elsewhere
 //! differs from the calibration's frame by a rigid transform, which moves
@@ -103,8 +105,22 @@ pub fn validate_with(
             ))
         };
         let m = usize::from(row.marker);
+        // With a thermal expansion, an absolute point at its temperature.
+        let warm = match (
+            robot.thermal_expansion(),
+            &rows.temperature_ref_c,
+            row.dtemp_k(),
+        ) {
+            (Some(_), Some((_, mean)), Some(dt)) if row.kind == RowKind::Absolute => {
+                Some(robot.at_temperature(mean + dt)?)
+            }
+            _ => None,
+        };
         let predicted = match row.kind {
-            RowKind::Absolute => robot.predict_marker(m, &row.q, None),
+            RowKind::Absolute => warm
+                .as_ref()
+                .unwrap_or(&robot)
+                .predict_marker(m, &row.q, None),
             RowKind::Deflection => {
                 let payload = Payload {
                     mass_kg: row.load_kg(),

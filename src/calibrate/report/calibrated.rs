@@ -34,4 +34,8 @@ pub struct CalibratedModel {
     /// The heaviest payload of the calibration's rows \[kg\] (0 without a
     /// loaded row): the range its compliances were identified over.
     pub heaviest_payload_kg: f64,
+    /// The calibration data's mean temperature \[°C\]: where the identified
+    /// lengths hold, with a thermal expansion (`None` without a temperature
+    /// column).
+    pub temperature_ref_c: Option<f64>,
 }
