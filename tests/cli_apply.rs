@@ -504,3 +504,87 @@ fn predicted_at_a_temperature() {
     rejected(&predict(&bad, None), "is not a thermal expansion");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A model whose links bend (`link_compliance`): under the robot's own
+/// weight too when the file says so (`link_compliance_own_weight`, what a
+/// calibration now writes), under the payload alone in a file written
+/// before the key (its geometry absorbed the rest); a pose compensation,
+/// which does not apply the bending, is refused for the former even
+/// without a payload (one line, nothing written).
+#[test]
+fn link_bending_under_the_own_weight_is_the_files_to_say() {
+    let dir = std::env::temp_dir().join(format!("robcal-bending-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let m = model(&dir);
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
+    assert!(json["predictor"]["joints"][1]["link_mass_kg"].is_number());
+    json["predictor"]["link_compliance"] =
+        serde_json::json!([{"joint": "a2", "value": 2e-6, "unit": "rad/(N*m)"}]);
+    let write = |name: &str, json: &serde_json::Value| {
+        let p = dir.join(name);
+        std::fs::write(&p, serde_json::to_string(json).unwrap()).unwrap();
+        p
+    };
+    let old = write("old.json", &json);
+    json["predictor"]["link_compliance_own_weight"] = serde_json::json!(true);
+    let new = write("new.json", &json);
+    let poses = dir.join("p.csv");
+    std::fs::write(
+        &poses,
+        "marker,load_kg,com_x_m,com_y_m,com_z_m,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad\n\
+         1,0,0,0,0,1.38,-0.5,-0.1,0.89,-1.7,-1.6\n",
+    )
+    .unwrap();
+    let predict = |model: &Path| {
+        let (head, rows) = table(&ok(&robcal(&[
+            "-q",
+            "predict",
+            "--model",
+            model.to_str().unwrap(),
+            "--poses",
+            poses.to_str().unwrap(),
+        ])));
+        ["x_m", "y_m", "z_m"].map(|c| rows[0][col(&head, c)].parse::<f64>().unwrap())
+    };
+    let (rigid, before, now) = (predict(&m), predict(&old), predict(&new));
+    assert_eq!(rigid, before, "no payload: a file of before does not bend");
+    let bent = (0..3)
+        .map(|k| (now[k] - rigid[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    // (Measured: 55 µm.)
+    assert!(bent > 1e-5, "the own weight bends a2's link by {bent} m");
+    let targets = dir.join("t.csv");
+    std::fs::write(
+        &targets,
+        "marker,load_kg,x_m,y_m,z_m,rx_rad,ry_rad,rz_rad,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad\n\
+         1,0,0.73,-2.22,0.97,0,0,0,1.38,-0.5,-0.1,0.89,-1.7,-1.6\n",
+    )
+    .unwrap();
+    let out = dir.join("out.csv");
+    let compensate = |model: &Path| {
+        robcal(&[
+            "-q",
+            "compensate",
+            "--model",
+            model.to_str().unwrap(),
+            "--targets",
+            targets.to_str().unwrap(),
+            "--output",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = compensate(&new);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("link bending"), "{err}");
+    assert!(!out.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -772,6 +772,16 @@ fn temperature_column() {
             assert!(e.message.contains("kelvin"), "{e}");
         }
     }
+    // The job's writer writes them back in its column, bit for bit; the
+    // plain writer, which has no column for them, refuses.
+    let path = temp("temperature.csv");
+    let mut rows = m.observations.clone();
+    rows[0].temp_c = Some(-12.375);
+    job.write_measurements(&path, &rows).unwrap();
+    let back = job.read_measurements(&path).unwrap();
+    assert_eq!(back.observations[0].temp_c, Some(-12.375));
+    let e = write_measurements(&path, &job.robot, job.setup.units, &rows).unwrap_err();
+    assert!(e.message.contains("temperature_column"), "{e}");
     job.setup.model.temperature_column = Some("j2".into());
     let e = read_err(
         &job,

@@ -9,7 +9,7 @@ use crate::io::measurements::{
 };
 use crate::io::setup::Setup;
 use crate::io::urdf::Robot;
-use crate::io::writer::write_measurements;
+use crate::io::writer::write_measurements_with;
 
 /// A calibration job: the setup, and the robot it names.
 #[derive(Debug, Clone, PartialEq)]
@@ -120,15 +120,22 @@ impl Job {
         read_measurements_limited(path, &self.robot, &self.setup, max_bytes)
     }
 
-    /// Writes a measurement file in this job's units ([`write_measurements`]).
+    /// Writes a measurement file in this job's units, the temperatures in
+    /// its `temperature_column` ([`write_measurements_with`]).
     ///
     /// # Errors
-    /// See [`write_measurements`].
+    /// See [`write_measurements_with`].
     pub fn write_measurements(
         &self,
         path: impl AsRef<Path>,
         rows: &[Observation],
     ) -> Result<(), InputError> {
-        write_measurements(path, &self.robot, self.setup.units, rows)
+        write_measurements_with(
+            path,
+            &self.robot,
+            self.setup.units,
+            self.setup.model.temperature_column.as_deref(),
+            rows,
+        )
     }
 }

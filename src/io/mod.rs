@@ -87,4 +87,4 @@ pub use setup::{
     Weighting,
 };
 pub use urdf::{JointLimits, OffChainBranch, Robot, UrdfJointKind, MAX_JOINTS};
-pub use writer::write_measurements;
+pub use writer::{write_measurements, write_measurements_with};

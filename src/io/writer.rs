@@ -28,7 +28,25 @@ pub fn write_measurements(
     units: Units,
     rows: &[Observation],
 ) -> Result<(), InputError> {
+    write_measurements_with(path, robot, units, None, rows)
+}
+
+/// [`write_measurements`], each row's temperature \[°C\] in the column
+/// `temperature_column` (the setup's `[model] temperature_column`) after
+/// the others.
+///
+/// # Errors
+/// As [`write_measurements`]; also some rows with a temperature and some
+/// without, or rows with one and no column to write it in.
+pub fn write_measurements_with(
+    path: impl AsRef<Path>,
+    robot: &Robot,
+    units: Units,
+    temperature_column: Option<&str>,
+    rows: &[Observation],
+) -> Result<(), InputError> {
     let path = path.as_ref();
+    let has_temperature = rows.first().is_some_and(|r| r.temp_c.is_some());
     let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
     let has_sigma = rows.first().is_some_and(|r| r.sigma_m.is_some());
     let dof = robot.dof();
@@ -53,6 +71,20 @@ pub fn write_measurements(
     }
     if has_sigma {
         header.extend(["sx", "sy", "sz"]);
+    }
+    if has_temperature {
+        match temperature_column {
+            Some(c) => header.push(c),
+            None => {
+                return Err(InputError::new(
+                    path,
+                    ErrorKind::InvalidValue,
+                    "the rows have temperatures and no column is named for them (the \
+                     setup's temperature_column)"
+                        .to_string(),
+                ))
+            }
+        }
     }
     let io_err = |e: &dyn std::fmt::Display| {
         InputError::new(
@@ -79,6 +111,12 @@ pub fn write_measurements(
                 "some rows have a time and some do not".into(),
             );
         }
+        if r.temp_c.is_some() != has_temperature {
+            return err(
+                ErrorKind::InvalidValue,
+                "some rows have a temperature and some do not".into(),
+            );
+        }
         if r.sigma_m.is_some() != has_sigma {
             return err(
                 ErrorKind::InvalidValue,
@@ -90,6 +128,7 @@ pub fn write_measurements(
             r.q.iter()
                 .chain(&r.p_m)
                 .chain(&r.t_s)
+                .chain(&r.temp_c)
                 .chain([&r.load_kg])
                 .chain(sigma.clone());
         if numbers.clone().any(|v| !v.is_finite()) {
@@ -115,6 +154,7 @@ pub fn write_measurements(
         );
         fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
         fields.extend(sigma.map(|&v| format_real(v, Scale::Length(units.length))));
+        fields.extend(r.temp_c.map(|t| format_real(t, Scale::One)));
         out.write_record(&fields).map_err(|e| io_err(&e))?;
     }
     let bytes = out.into_inner().map_err(|e| io_err(&e))?;

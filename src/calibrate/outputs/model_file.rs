@@ -24,6 +24,7 @@
 //!                  "gear_cyclic_sin": s, "gear_cyclic_cos": c,
 //!                  "gravity_compliance_a": x_a, "gravity_compliance_b": x_b}, ..],
 //!   "link_compliance": [{"joint": "a3", "value": k, "unit": "rad/(N*m)"}],
+//!   "link_compliance_own_weight": true,   // with link_compliance: the own weight bends them too
 //!   "thermal_expansion": {"alpha_per_k": a, "reference_c": t}  // when identified
 //! }
 //! ```
@@ -217,6 +218,11 @@ pub struct ModelFile {
     /// The links' bending.
     #[serde(default)]
     pub link_compliance: Vec<BendingRecord>,
+    /// Whether the links bend under the robot's own weight too (written
+    /// with `link_compliance`; absent in a file written before: under the
+    /// payload alone, as that calibration fitted them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_compliance_own_weight: Option<bool>,
     /// The heaviest payload of the calibration \[kg\] (0: none; absent in a
     /// file written before it was recorded; [`crate::calibrate::outputs::predict::payload`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -343,6 +349,7 @@ impl ModelFile {
                     })
                 })
                 .collect(),
+            link_compliance_own_weight: (!p.bending().is_empty()).then(|| p.bending_own_weight()),
             heaviest_payload_kg: p.heaviest_payload_kg(),
             thermal_expansion: p.thermal_expansion().map(|(alpha_per_k, reference_c)| {
                 ThermalRecord {
@@ -636,6 +643,7 @@ impl ModelFile {
         )
         .with_ends(&ends, marker_ends)
         .map(|p| p.with_heaviest_payload_kg(self.heaviest_payload_kg))
+        .map(|p| p.with_bending_own_weight(self.link_compliance_own_weight.unwrap_or(false)))
         .map(|p| match &self.thermal_expansion {
             Some(t) => p.with_thermal_expansion(t.alpha_per_k, t.reference_c),
             None => p,

@@ -92,6 +92,11 @@ pub struct Predictor {
     /// \[1/K\] and the temperature \[°C\] this predictor's lengths hold
     /// at.
     thermal: Option<(f64, f64)>,
+    /// Whether the links bend under the robot's own weight too, as the
+    /// calibration fitted them (absolute rows of a robot with a mass
+    /// model), not under the payload alone: `false` for a model file
+    /// written before (its geometry absorbed that bending).
+    bending_own_weight: bool,
 }
 
 /// The equilibrium settings of a prediction (the rows' own).
@@ -152,6 +157,7 @@ impl Predictor {
                 .find(|(p, _)| matches!(p, Param::ThermalExpansion))
                 .zip(model.temperature_ref_c)
                 .map(|((p, v), t)| (v * model.names.unit(p).si, t)),
+            bending_own_weight: true,
         }
     }
 
@@ -184,7 +190,31 @@ impl Predictor {
             calibration: None,
             heaviest_payload_kg: None,
             thermal: None,
+            bending_own_weight: true,
         }
+    }
+
+    /// This predictor with the links bending under the payload alone
+    /// (`false`: a model file written before the calibration fitted their
+    /// bending under the robot's own weight) or under the robot's own
+    /// weight too (`true`, the default).
+    pub fn with_bending_own_weight(mut self, own_weight: bool) -> Self {
+        self.bending_own_weight = own_weight;
+        self
+    }
+
+    /// Whether the links bend under the robot's own weight too
+    /// ([`Self::with_bending_own_weight`]).
+    pub fn bending_own_weight(&self) -> bool {
+        self.bending_own_weight
+    }
+
+    /// Whether the model's links bend where no payload is: a bending
+    /// under the robot's own weight, and a link with a mass.
+    fn bends_unloaded(&self) -> bool {
+        !self.bending.is_empty()
+            && self.bending_own_weight
+            && self.chain.joints().iter().any(|j| j.link.is_some())
     }
 
     /// This predictor with the links' thermal expansion `α` \[1/K\] about
@@ -252,27 +282,56 @@ impl Predictor {
                 link.com_m *= s;
             }
         }
+        // An end on a joint is in that joint's frame; one fixed to the base
+        // (a tree's, `joint: None`) is in the measurement frame, about o₁.
+        let end_at = |joint: Option<usize>, iso: &mut nalgebra::Isometry3<f64>| match joint {
+            Some(_) => stretch(iso),
+            None => {
+                let t = &mut iso.translation.vector;
+                *t = o1 + (*t - o1) * s;
+            }
+        };
         let branches = self
             .branches
             .iter()
             .map(|b| {
                 let mut end = b.tip_end();
-                stretch(&mut end.origin);
+                end_at(end.joint, &mut end.origin);
                 chain.with_tip(&end)
             })
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| CalibrationError::Data(format!("thermal expansion: {e}")))?;
         let mut tip = *chain.tip();
-        stretch(&mut tip);
+        end_at(chain.tip_joint(), &mut tip);
         chain.set_tip(tip);
         Ok(Self {
             chain,
             branches,
             markers: self.markers.iter().map(|m| m * s).collect(),
-            calibration: None,
             thermal: Some((alpha, temp_c)),
-            ..self.clone()
+            ..self.without_calibration()
         })
+    }
+
+    /// This predictor without its calibration (no
+    /// [`Self::predict_covariance`]): a cheap clone.
+    pub fn without_calibration(&self) -> Self {
+        Self {
+            marker_ids: self.marker_ids.clone(),
+            markers: self.markers.clone(),
+            marker_ends: self.marker_ends.clone(),
+            chain: self.chain.clone(),
+            branches: self.branches.clone(),
+            gravity_mps2: self.gravity_mps2,
+            lin: self.lin.clone(),
+            bending: self.bending.clone(),
+            load_com_shift_m: self.load_com_shift_m,
+            joint_names: self.joint_names.clone(),
+            calibration: None,
+            heaviest_payload_kg: self.heaviest_payload_kg,
+            thermal: self.thermal,
+            bending_own_weight: self.bending_own_weight,
+        }
     }
 
     /// The chain, placed in the measurement frame.
@@ -618,6 +677,10 @@ impl Predictor {
         p: &Vector3<f64>,
         loading: &Loading<f64>,
     ) -> Result<Vector3<f64>, Error> {
+        let loading = &Loading {
+            own_weight_mps2: loading.own_weight_mps2.filter(|_| self.bending_own_weight),
+            ..*loading
+        };
         if self.bending.is_empty() || (loading.load.is_none() && loading.own_weight_mps2.is_none())
         {
             return Ok(Vector3::zeros());
@@ -750,7 +813,7 @@ impl Predictor {
         settings: &CompensateSettings<f64>,
     ) -> Result<Compensation<f64, J>, Error> {
         self.check_q(q_start)?;
-        if !self.bending.is_empty() && payload.is_some() {
+        if !self.bending.is_empty() && (payload.is_some() || self.bends_unloaded()) {
             return Err(Error::Mismatch {
                 what: "a pose compensation of a model with link bending",
             });

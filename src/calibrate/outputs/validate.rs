@@ -11,7 +11,9 @@
 //! measurement system is a property of the calibration session and is not
 //! carried over to another file. A model with the links' thermal
 //! expansion predicts an absolute point at the temperature the file gives
-//! it ([`Predictor::at_temperature`]).
+//! it ([`Predictor::at_temperature`]); a deflection at the reference (its
+//! loaded and unloaded points are measured moments apart: the
+//! temperature's change between them is not carried over).
 //!
 //! **Re-registration.** A file measured with the tracker set up elsewhere
 //! differs from the calibration's frame by a rigid transform, which moves
