@@ -362,6 +362,7 @@ impl Engine<'_> {
         let mut reference: Option<Option<Vec<Vector3<f64>>>> = None;
         // The fit is back at the best linearisation and ends there.
         let mut stuck = false;
+        let mut masses = MassSteps::default();
         loop {
             if self.cancel.is_some_and(|c| c()) {
                 return Err(CalibrationError::Cancelled);
@@ -470,6 +471,7 @@ impl Engine<'_> {
                 // This design's storage is the next one's: nobody else
                 // may hold it (a second 300 MB at 10⁶ rows).
                 drop(d);
+                let x = masses.damped(params, &x, &self.lin, &self.names);
                 self.geometry.apply(params, &x);
                 let to = Linearisation::of(self.lin.model, params, &x, &self.names);
                 self.step_towards(&to, &all)?;
@@ -749,5 +751,65 @@ impl Engine<'_> {
             heaviest_payload_kg: self.rows.rows.iter().fold(0.0, |m, r| r.load_kg().max(m)),
             temperature_ref_c: self.rows.temperature_ref_c.as_ref().map(|t| t.1),
         }
+    }
+}
+
+/// Gauss–Newton's steps damped where a link's mass is among the
+/// parameters ([`Param::LinkMass`]): bilinear with the compliances it
+/// loads, on a valley as flat as DLR Justin's its full steps overshoot,
+/// each undoing most of the last (measured: the sign alternating, each
+/// step −0.8 times the one before, 50 relinearisations without settling).
+/// When a mass's step turns back by more than a third of the one before,
+/// the next steps go half as far along the Gauss–Newton direction (the
+/// geometry's and the masses' steps; the joint law's values from where
+/// they are), down to 1/32 of it; a step that keeps its sign doubles the
+/// fraction again, up to the whole step. Without a mass every step is
+/// whole.
+#[derive(Debug, Default)]
+struct MassSteps {
+    /// Each mass's last whole step \[kg\], by its index in the parameters.
+    last: Vec<(usize, f64)>,
+    /// The fraction of the step taken (the whole at the first).
+    scale: f64,
+}
+
+impl MassSteps {
+    fn damped(
+        &mut self,
+        params: &[Param],
+        x: &[f64],
+        lin: &Linearisation,
+        names: &crate::calibrate::params::names::Names,
+    ) -> Vec<f64> {
+        let now: Vec<(usize, f64)> = (params.iter().zip(x).enumerate())
+            .filter(|(_, (p, _))| matches!(p, Param::LinkMass { .. }))
+            .map(|(i, (_, &v))| (i, v))
+            .collect();
+        if now.is_empty() {
+            return x.to_vec();
+        }
+        let back = (now.iter().zip(&self.last))
+            .any(|(&(_, v), &(_, u))| v * u < 0.0 && v.abs() > u.abs() / 3.0);
+        self.scale = if self.last.is_empty() {
+            1.0
+        } else if back {
+            (self.scale * 0.5).max(1.0 / 32.0)
+        } else {
+            (self.scale * 2.0).min(1.0)
+        };
+        self.last = now;
+        let s = self.scale;
+        (params.iter().zip(x))
+            .map(|(p, &v)| {
+                if p.is_stepped() {
+                    v * s
+                } else if Linearisation::tracks(p) {
+                    let at = lin.value(p, names);
+                    at + (v - at) * s
+                } else {
+                    v
+                }
+            })
+            .collect()
     }
 }

@@ -222,6 +222,28 @@ fn one(e: &mut Engine<'_>, params: &[Param], c: &Candidate) -> Result<Outcome, C
             _ => v,
         })
         .collect();
+    // A body heavier than all the robot's other bodies together is not a
+    // correction of its mass model: a payload (a [load]), or an error of
+    // another kind that the mass absorbs (Justin: a 2 kg lump fitted at
+    // 75 ± 17 kg, no better held out).
+    let heavy = (next.params.iter().zip(&x)).find_map(|(p, &m)| match p {
+        Param::LinkMass { joint } if c.add.contains(p) => {
+            let others = next.geometry.others_mass_kg(*joint);
+            (m > others).then(|| {
+                format!(
+                    "{} = {m:.3} kg, more than all the robot's other bodies together, \
+                     {others:.3} kg",
+                    e.names.name(p)
+                )
+            })
+        }
+        _ => None,
+    });
+    if let Some(why) = heavy {
+        return Ok(Outcome::Rejected(format!(
+            "rejected: its estimate is not physical ({why})"
+        )));
+    }
     Ok(
         match inadmissible(&e.names, &e.policy, &next.params, &x, &c.add) {
             Some(why) => {

@@ -289,6 +289,16 @@ impl Geometry {
             .collect()
     }
 
+    /// The mass of every moving body but joint `joint`'s, together \[kg\],
+    /// as the model has them now (the mass model with the identified
+    /// masses' steps).
+    pub fn others_mass_kg(&self, joint: u8) -> f64 {
+        (self.chain.joints().iter().enumerate())
+            .filter(|(j, _)| *j != usize::from(joint))
+            .filter_map(|(_, jt)| jt.link.map(|l| l.mass_kg))
+            .sum()
+    }
+
     /// The sum of the steps applied to stepped parameter `p`
     /// ([`Param::is_stepped`]; the base and the markers, which are moved
     /// in place, excepted): a link mass's change from its nominal value.
