@@ -57,6 +57,28 @@ fn col(head: &[String], name: &str) -> usize {
         .unwrap_or_else(|| panic!("{name} in {head:?}"))
 }
 
+/// `robcal -q predict --model MODEL --poses POSES` with `extra` arguments.
+fn predict(model: &Path, poses: &Path, extra: &[&str]) -> Output {
+    let args = [
+        "-q",
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--poses",
+        poses.to_str().unwrap(),
+    ];
+    robcal(&[&args[..], extra].concat())
+}
+
+/// The points `x_m, y_m, z_m` of a successful `predict`, one per row.
+fn points(o: &Output) -> Vec<[f64; 3]> {
+    let (head, rows) = table(&ok(o));
+    let xyz = ["x_m", "y_m", "z_m"].map(|c| col(&head, c));
+    rows.iter()
+        .map(|r| xyz.map(|k| r[k].parse::<f64>().unwrap()))
+        .collect()
+}
+
 fn model(dir: &Path) -> PathBuf {
     let o = robcal(&[
         "calibrate",
@@ -356,23 +378,16 @@ fn a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning() {
     );
     let q = "1.38,-0.5,-0.1,0.89,-1.7,-1.6";
     let head = "marker,load_kg,com_x_m,com_y_m,com_z_m,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad";
-    let predict = |loads: &[&str], model: &Path| {
+    let predict_loads = |loads: &[&str], model: &Path| {
         let mut poses = format!("{head}\n");
         for l in loads {
             let _ = writeln!(poses, "1,{l},0.25,0,0.3,{q}");
         }
         let p = dir.join("p.csv");
         std::fs::write(&p, poses).unwrap();
-        robcal(&[
-            "-q",
-            "predict",
-            "--model",
-            model.to_str().unwrap(),
-            "--poses",
-            p.to_str().unwrap(),
-        ])
+        predict(model, &p, &[])
     };
-    let o = predict(&["0", "250", "551"], &m);
+    let o = predict_loads(&["0", "250", "551"], &m);
     ok(&o);
     assert!(
         o.stderr.is_empty(),
@@ -380,7 +395,7 @@ fn a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning() {
         String::from_utf8_lossy(&o.stderr)
     );
     // 25 kg read as 25 000: the point moves, exit 0, and it is said once.
-    let o = predict(&["250", "25000", "600"], &m);
+    let o = predict_loads(&["250", "25000", "600"], &m);
     let out = ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
@@ -396,7 +411,7 @@ fn a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning() {
         .expect("the key");
     let end = key + 2 + text[key + 2..].find('\n').unwrap();
     std::fs::write(&old, format!("{}{}", &text[..key], &text[end..])).unwrap();
-    let o = predict(&["25000"], &old);
+    let o = predict_loads(&["25000"], &old);
     ok(&o);
     assert!(
         o.stderr.is_empty(),
@@ -413,7 +428,7 @@ fn a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning() {
     )
     .unwrap();
     rejected(
-        &predict(&["1"], &bad),
+        &predict_loads(&["1"], &bad),
         "heaviest_payload_kg: -1 kg is not a payload",
     );
     let _ = std::fs::remove_dir_all(&dir);
@@ -450,26 +465,9 @@ fn predicted_at_a_temperature() {
          1,0,0,0,0,-0.4,-1.1,0.6,0.2,1.1,0.3\n",
     )
     .unwrap();
-    let predict = |model: &Path, t: Option<&str>| {
-        let mut args = vec![
-            "-q",
-            "predict",
-            "--model",
-            model.to_str().unwrap(),
-            "--poses",
-            poses.to_str().unwrap(),
-        ];
-        if let Some(t) = t {
-            args.extend(["--temperature-c", t]);
-        }
-        robcal(&args)
-    };
-    let points = |o: &Output| {
-        let (head, rows) = table(&ok(o));
-        let xyz = ["x_m", "y_m", "z_m"].map(|c| col(&head, c));
-        rows.iter()
-            .map(|r| xyz.map(|k| r[k].parse::<f64>().unwrap()))
-            .collect::<Vec<_>>()
+    let predict = |model: &Path, t: Option<&str>| match t {
+        Some(t) => predict(model, &poses, &["--temperature-c", t]),
+        None => predict(model, &poses, &[]),
     };
     let at_ref = points(&predict(&warm, None));
     let plain = points(&predict(&m, None));
@@ -536,17 +534,7 @@ fn link_bending_under_the_own_weight_is_the_files_to_say() {
          1,0,0,0,0,1.38,-0.5,-0.1,0.89,-1.7,-1.6\n",
     )
     .unwrap();
-    let predict = |model: &Path| {
-        let (head, rows) = table(&ok(&robcal(&[
-            "-q",
-            "predict",
-            "--model",
-            model.to_str().unwrap(),
-            "--poses",
-            poses.to_str().unwrap(),
-        ])));
-        ["x_m", "y_m", "z_m"].map(|c| rows[0][col(&head, c)].parse::<f64>().unwrap())
-    };
+    let predict = |model: &Path| points(&predict(model, &poses, &[]))[0];
     let (rigid, before, now) = (predict(&m), predict(&old), predict(&new));
     assert_eq!(rigid, before, "no payload: a file of before does not bend");
     let bent = (0..3)

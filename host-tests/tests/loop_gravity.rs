@@ -17,93 +17,46 @@
 //! `δq = v · (g × ẑ) = gₐ v·(a × ẑ) + g_b v·(b × ẑ) = gₐ v_z + g_b v_x`:
 //! the parameters are `x_a = v_z`, `x_b = v_x`.
 
-use std::path::PathBuf;
+use nalgebra::{UnitQuaternion, Vector3};
+use robcal::calibrate::Report;
+use robcal::io::Job;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use robcal::calibrate::{self, Report, Settings};
-use robcal::io::{parse_measurements, Job, MarkerModel};
-use robcal_paper::rng::SplitMix64 as Rng;
+use crate::ur_like_common as ur_like;
 
 const ELBOW: usize = 2;
 
-fn setup() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/loop/ur_like.toml")
-}
-
-/// A massless UR-like arm measured in `configs` poses (two repetitions);
-/// the elbow bends by `v` \[rad\] (zero: a rigid robot). The declared model:
-/// the base frame, the markers at their nominal positions, no compliance.
+/// A massless UR-like arm measured in `configs` poses (two repetitions,
+/// [`ur_like::measure`]); the elbow bends by `v` \[rad\] (zero: a rigid
+/// robot). The declared model: the base frame, the markers at their
+/// nominal positions, no compliance.
 fn simulate(v: Vector3<f64>, configs: usize, seed: u64) -> (Job, robcal::io::Measurements) {
-    let mut job = Job::load(setup()).expect("fixture setup");
+    let mut job = ur_like::job();
     for j in job.robot.chain.joints_mut() {
         j.link = None;
     }
-    job.setup.model.compliance = vec![];
-    job.setup.model.base_frame = true;
-    job.setup.model.markers = MarkerModel::Nominal;
     let chain = job.robot.chain.clone();
     let joints = chain.joints().to_vec();
     let g = Vector3::from(job.setup.load.expect("fixture has a load").gravity).normalize();
-    let base = Isometry3::from_parts(
-        Translation3::new(1.5, -0.4, 0.2),
-        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.01, 0.7)),
-    );
-    let ranges = [
-        (-180.0, 180.0),
-        (-160.0, -20.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-    ];
-    let names = job.robot.joint_names.clone();
-    let mut rng = Rng::new(seed);
-    let mut csv = format!("config,rep,marker,load_kg,{},x,y,z\n", names.join(","));
-    for c in 0..configs {
-        let q_deg: Vec<f64> = ranges
-            .iter()
-            .map(|&(lo, hi)| (rng.range(lo, hi) * 100.0).round() / 100.0)
-            .collect();
-        let q: Vec<f64> = q_deg.iter().map(|d| d.to_radians()).collect();
+    let data = ur_like::measure(&job, configs, seed, None, |_, q| {
         // Rⱼ at the commanded pose, its own rotation included.
         let mut r = UnitQuaternion::identity();
-        for (joint, &qi) in joints.iter().zip(&q).take(ELBOW + 1) {
+        for (joint, &qi) in joints.iter().zip(q).take(ELBOW + 1) {
             r = r * joint.origin.rotation * UnitQuaternion::from_axis_angle(&joint.axis, qi);
         }
         let z = joints[ELBOW].axis.into_inner();
-        let mut q_true = q.clone();
+        let mut q_true = q.to_vec();
         q_true[ELBOW] += v.dot(&r.inverse_transform_vector(&g).cross(&z));
         let frames = chain.frames(&q_true).unwrap();
-        let sigma = Vector3::from_fn(|_, _| rng.range(10.0, 30.0) * 1e-6);
-        for rep in 1..=2 {
-            for m in &job.setup.markers {
-                let p = base.transform_point(&frames.point_m(&Vector3::from(m.xyz)).into());
-                let p = p.coords + Vector3::from_fn(|a, _| rng.normal() * sigma[a]);
-                let qs: Vec<String> = q_deg.iter().map(|v| format!("{v}")).collect();
-                csv += &format!(
-                    "{},{rep},{},0,{},{},{},{}\n",
-                    c + 1,
-                    m.id,
-                    qs.join(","),
-                    p.x * 1e3,
-                    p.y * 1e3,
-                    p.z * 1e3
-                );
-            }
-        }
-    }
-    let data = parse_measurements(csv.as_bytes(), "synthetic.csv", &job.robot, &job.setup)
-        .expect("synthetic data parse");
+        (job.setup.markers.iter())
+            .map(|m| frames.point_m(&Vector3::from(m.xyz)))
+            .collect()
+    });
     (job, data)
 }
 
 fn run(v: Vector3<f64>, configs: usize, seed: u64, heldout: bool) -> Report {
     let (job, data) = simulate(v, configs, seed);
-    let settings = Settings {
-        heldout,
-        ..Settings::default()
-    };
-    calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration")
+    ur_like::calibrate(&job, &data, heldout)
 }
 
 /// The loop names the elbow's gravity compliance first, both errors drop
@@ -186,7 +139,7 @@ fn the_prediction_applies_the_gravity_compliance() {
     use robcal::calibrate::Predictor;
     let v = Vector3::new(3.0e-3, 0.0, -4.0e-3);
     let (job, data) = simulate(v, 30, 41);
-    let r = calibrate::calibrate(&job, &data, &Settings::default(), &mut |_| {}).unwrap();
+    let r = ur_like::calibrate(&job, &data, true);
     assert!(
         r.parameters
             .iter()
@@ -195,7 +148,7 @@ fn the_prediction_applies_the_gravity_compliance() {
         host_tests::loop_summary(&r)
     );
     let (_, other) = simulate(v, 30, 42);
-    let val = calibrate::validate(&r.model, &job, &other).unwrap();
+    let val = robcal::calibrate::validate(&r.model, &job, &other).unwrap();
     // Noise (σ 10–30 µm per axis): ≈ 0.036 mm; without the effect the
     // elbow's 5 mrad would leave millimetres.
     eprintln!("other poses: RMS {:.4} mm", val.rms_mm);

@@ -54,13 +54,12 @@
 //! body's mass loads no compliance (a zero column). The loop must not name
 //! a mass there; the compliance carries the product.
 
-use std::path::PathBuf;
-
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use robcal::calibrate::{self, Report, Settings};
-use robcal::io::{parse_measurements, Job, MarkerModel, Measurements};
+use nalgebra::{Isometry3, Point3, Vector3};
+use robcal::calibrate::Report;
+use robcal::io::{Job, Measurements};
 use robcal::robot::Joint;
-use robcal_paper::rng::SplitMix64 as Rng;
+
+use crate::ur_like_common::{self as ur_like, frames};
 
 const WRIST_3: usize = 5;
 /// The declared compliant joints of tests 1 and 2.
@@ -70,10 +69,6 @@ const COMPLIANT: [&str; 3] = ["shoulder_lift", "elbow", "wrist_1"];
 const K: [f64; 6] = [0.0, 20e-6, 50e-6, 200e-6, 0.0, 0.0];
 /// The wrist-3 body's mass over the URDF's 0.2 kg \[kg\].
 const EXTRA_KG: f64 = 1.5;
-
-fn setup() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/loop/ur_like.toml")
-}
 
 /// The simulated robot.
 #[derive(Debug, Clone, Copy)]
@@ -90,20 +85,6 @@ impl Truth {
         extra_kg[WRIST_3] = EXTRA_KG;
         Self { k, extra_kg }
     }
-}
-
-/// Joint `j`'s frame `Tⱼ = Tⱼ₋₁ · originⱼ · rot(axisⱼ, θⱼ)`, every joint.
-fn frames(joints: &[Joint<f64>], theta: &[f64]) -> Vec<Isometry3<f64>> {
-    let mut t = Isometry3::identity();
-    joints
-        .iter()
-        .zip(theta)
-        .map(|(joint, &v)| {
-            let turn = UnitQuaternion::from_axis_angle(&joint.axis, v);
-            t = t * joint.origin * Isometry3::from_parts(Translation3::identity(), turn);
-            t
-        })
-        .collect()
 }
 
 /// The own-weight torques `τᵢ = zᵢ · Σ_{l ≥ i} (c_l − oᵢ) × m_l g` at the
@@ -162,21 +143,19 @@ fn settle(
 
 /// The UR-like arm with the true masses (the URDF's plus `truth.extra_kg`)
 /// and compliances, no payload, measured in `configs` poses (two
-/// repetitions). The declared model: the base frame, the markers at their
-/// nominal positions, the compliances of `compliant`, the URDF's masses.
-/// Also returns the largest move of a marker the mass error makes (the
-/// settled robot with the true masses against the one with the URDF's,
-/// before noise) \[m\].
+/// repetitions, [`ur_like::measure`]). The declared model: the base frame,
+/// the markers at their nominal positions, the compliances of `compliant`,
+/// the URDF's masses. Also returns the largest move of a marker the mass
+/// error makes (the settled robot with the true masses against the one
+/// with the URDF's, before noise) \[m\].
 fn simulate(
     truth: Truth,
     compliant: &[&str],
     configs: usize,
     seed: u64,
 ) -> (Job, Measurements, f64) {
-    let mut job = Job::load(setup()).expect("fixture setup");
+    let mut job = ur_like::job();
     job.setup.model.compliance = compliant.iter().map(|s| s.to_string()).collect();
-    job.setup.model.base_frame = true;
-    job.setup.model.markers = MarkerModel::Nominal;
     let chain = job.robot.chain.clone();
     let joints = chain.joints().to_vec();
     let urdf: Vec<f64> = joints
@@ -195,56 +174,22 @@ fn simulate(
     // Gravity [m/s²] in the robot's base frame (no load is carried:
     // load_kg = 0 in every row).
     let g = Vector3::from(job.setup.load.expect("fixture has a load").gravity);
-    let base = Isometry3::from_parts(
-        Translation3::new(1.5, -0.4, 0.2),
-        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.01, 0.7)),
-    );
-    let ranges = [
-        (-180.0, 180.0),
-        (-160.0, -20.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-    ];
-    let names = job.robot.joint_names.clone();
-    let mut rng = Rng::new(seed);
-    let mut csv = format!("config,rep,marker,load_kg,{},x,y,z\n", names.join(","));
     let mut max_effect: f64 = 0.0;
-    for c in 0..configs {
-        let q_deg: Vec<f64> = ranges
-            .iter()
-            .map(|&(lo, hi)| (rng.range(lo, hi) * 100.0).round() / 100.0)
-            .collect();
-        let q: Vec<f64> = q_deg.iter().map(|d| d.to_radians()).collect();
+    let data = ur_like::measure(&job, configs, seed, None, |_, q| {
         let tip_at = |mass: &[f64]| {
-            let f = frames(&joints, &settle(&joints, &q, &truth.k, mass, &g));
+            let f = frames(&joints, &settle(&joints, q, &truth.k, mass, &g));
             f[f.len() - 1] * chain.tip()
         };
         let (tip, with_urdf) = (tip_at(&mass), tip_at(&urdf));
-        let sigma = Vector3::from_fn(|_, _| rng.range(10.0, 30.0) * 1e-6);
-        for rep in 1..=2 {
-            for m in &job.setup.markers {
+        (job.setup.markers.iter())
+            .map(|m| {
                 let r = Point3::from(Vector3::from(m.xyz));
                 let p = tip.transform_point(&r);
                 max_effect = max_effect.max((p - with_urdf.transform_point(&r)).norm());
-                let p = base.transform_point(&p);
-                let p = p.coords + Vector3::from_fn(|a, _| rng.normal() * sigma[a]);
-                let qs: Vec<String> = q_deg.iter().map(|v| format!("{v}")).collect();
-                csv += &format!(
-                    "{},{rep},{},0,{},{},{},{}\n",
-                    c + 1,
-                    m.id,
-                    qs.join(","),
-                    p.x * 1e3,
-                    p.y * 1e3,
-                    p.z * 1e3
-                );
-            }
-        }
-    }
-    let data = parse_measurements(csv.as_bytes(), "synthetic.csv", &job.robot, &job.setup)
-        .expect("synthetic data parse");
+                p.coords
+            })
+            .collect()
+    });
     (job, data, max_effect)
 }
 
@@ -256,12 +201,7 @@ fn run(
     heldout: bool,
 ) -> (Report, f64) {
     let (job, data, effect) = simulate(truth, compliant, configs, seed);
-    let settings = Settings {
-        heldout,
-        ..Settings::default()
-    };
-    let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration");
-    (r, effect)
+    (ur_like::calibrate(&job, &data, heldout), effect)
 }
 
 /// The estimate `name` of `r` against `truth` in σ (the sandwich σ of

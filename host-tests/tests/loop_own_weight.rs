@@ -38,30 +38,22 @@
 //! tilt of the elbow's frame is named `geometry` (elbow), its bending
 //! `link_compliance`. This file bends the elbow.
 
-use std::path::PathBuf;
+use nalgebra::{Point3, UnitQuaternion, Vector3};
+use robcal::calibrate::Report;
+use robcal::io::Job;
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use robcal::calibrate::{self, Report, Settings};
-use robcal::io::{parse_measurements, Job, MarkerModel};
-use robcal_paper::rng::SplitMix64 as Rng;
+use crate::ur_like_common as ur_like;
 
 const ELBOW: usize = 2;
 
-fn setup() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/loop/ur_like.toml")
-}
-
 /// The UR-like arm with its URDF's link masses, no payload, measured in
-/// `configs` poses (two repetitions); the link after joint `j` bends by
-/// `k[j]` \[rad/(N·m)\] under the own weight it carries (all zero: a rigid
-/// robot). The declared model: the base frame, the markers at their nominal
-/// positions, no compliance. Also returns the largest bending of a marker
-/// \[m\] (before noise).
+/// `configs` poses (two repetitions, [`ur_like::measure`]); the link after
+/// joint `j` bends by `k[j]` \[rad/(N·m)\] under the own weight it carries
+/// (all zero: a rigid robot). The declared model: the base frame, the
+/// markers at their nominal positions, no compliance. Also returns the
+/// largest bending of a marker \[m\] (before noise).
 fn simulate(k: [f64; 6], configs: usize, seed: u64) -> (Job, robcal::io::Measurements, f64) {
-    let mut job = Job::load(setup()).expect("fixture setup");
-    job.setup.model.compliance = vec![];
-    job.setup.model.base_frame = true;
-    job.setup.model.markers = MarkerModel::Nominal;
+    let job = ur_like::job();
     let chain = job.robot.chain.clone();
     let joints = chain.joints().to_vec();
     assert!(
@@ -73,40 +65,11 @@ fn simulate(k: [f64; 6], configs: usize, seed: u64) -> (Job, robcal::io::Measure
     // Gravity [m/s²] in the robot's base frame (the setup's; no load is
     // carried: load_kg = 0 in every row).
     let g = Vector3::from(job.setup.load.expect("fixture has a load").gravity);
-    let base = Isometry3::from_parts(
-        Translation3::new(1.5, -0.4, 0.2),
-        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.01, 0.7)),
-    );
-    let ranges = [
-        (-180.0, 180.0),
-        (-160.0, -20.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-    ];
-    let names = job.robot.joint_names.clone();
-    let mut rng = Rng::new(seed);
-    let mut csv = format!("config,rep,marker,load_kg,{},x,y,z\n", names.join(","));
     let mut max_bend: f64 = 0.0;
-    for c in 0..configs {
-        let q_deg: Vec<f64> = ranges
-            .iter()
-            .map(|&(lo, hi)| (rng.range(lo, hi) * 100.0).round() / 100.0)
-            .collect();
-        let q: Vec<f64> = q_deg.iter().map(|d| d.to_radians()).collect();
+    let data = ur_like::measure(&job, configs, seed, None, |_, q| {
         // Tⱼ at the commanded pose, its own rotation included (base frame).
-        let mut t = Isometry3::identity();
-        let frames: Vec<Isometry3<f64>> = joints
-            .iter()
-            .zip(&q)
-            .map(|(joint, &qi)| {
-                let turn = UnitQuaternion::from_axis_angle(&joint.axis, qi);
-                t = t * joint.origin * Isometry3::from_parts(Translation3::identity(), turn);
-                t
-            })
-            .collect();
-        let tip = t * chain.tip();
+        let frames = ur_like::frames(&joints, q);
+        let tip = frames[frames.len() - 1] * chain.tip();
         // Each bending joint's origin oⱼ and rotation exp(kⱼ m⊥), from the
         // weight of the links it carries (those of joints j..).
         let bends: Vec<(Vector3<f64>, UnitQuaternion<f64>)> = (0..joints.len())
@@ -127,42 +90,23 @@ fn simulate(k: [f64; 6], configs: usize, seed: u64) -> (Job, robcal::io::Measure
                 (o, UnitQuaternion::from_scaled_axis(m_perp * k[j]))
             })
             .collect();
-        let sigma = Vector3::from_fn(|_, _| rng.range(10.0, 30.0) * 1e-6);
-        for rep in 1..=2 {
-            for m in &job.setup.markers {
+        (job.setup.markers.iter())
+            .map(|m| {
                 let rigid = tip.transform_point(&Point3::from(m.xyz)).coords;
                 // Outermost bend first: each inner one carries the outer
                 // links, already bent, round its own origin.
                 let p = bends.iter().rev().fold(rigid, |p, (o, r)| o + r * (p - o));
                 max_bend = max_bend.max((p - rigid).norm());
-                let p = base.transform_point(&p.into());
-                let p = p.coords + Vector3::from_fn(|a, _| rng.normal() * sigma[a]);
-                let qs: Vec<String> = q_deg.iter().map(|v| format!("{v}")).collect();
-                csv += &format!(
-                    "{},{rep},{},0,{},{},{},{}\n",
-                    c + 1,
-                    m.id,
-                    qs.join(","),
-                    p.x * 1e3,
-                    p.y * 1e3,
-                    p.z * 1e3
-                );
-            }
-        }
-    }
-    let data = parse_measurements(csv.as_bytes(), "synthetic.csv", &job.robot, &job.setup)
-        .expect("synthetic data parse");
+                p
+            })
+            .collect()
+    });
     (job, data, max_bend)
 }
 
 fn run(k: [f64; 6], configs: usize, seed: u64, heldout: bool) -> (Report, f64) {
     let (job, data, max_bend) = simulate(k, configs, seed);
-    let settings = Settings {
-        heldout,
-        ..Settings::default()
-    };
-    let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration");
-    (r, max_bend)
+    (ur_like::calibrate(&job, &data, heldout), max_bend)
 }
 
 /// The loop names the elbow's link compliance first, both errors drop to

@@ -21,22 +21,18 @@
 //! no drift (α = 0), no `thermal_expansion` is added in ≥ 99 % of 200
 //! jobs.
 
-use std::path::PathBuf;
-
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use robcal::calibrate::{self, Predictor, Report, Settings};
-use robcal::io::{parse_measurements, Job, MarkerModel, Measurements};
+use robcal::calibrate::{self, Predictor, Report};
+use robcal::io::{Job, Measurements};
 use robcal_paper::rng::SplitMix64 as Rng;
+
+use crate::ur_like_common as ur_like;
 
 /// The true coefficient \[1/K\]: 7.5 µm/(m·K), so that over the 10 K the
 /// farthest marker (~1.3 m from the first joint) moves by ~0.1 mm.
 const ALPHA: f64 = 7.5e-6;
 /// The temperature the URDF's lengths hold at \[°C\].
 const T_BUILT: f64 = 20.0;
-
-fn setup() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/loop/ur_like.toml")
-}
 
 /// The marker `r` \[m, tip frame\] at the joint values `q` \[rad\], every
 /// length from the first joint's origin out times `s`.
@@ -75,72 +71,27 @@ fn simulate_between(
     seed: u64,
     (from, to): (f64, f64),
 ) -> (Job, Measurements, f64) {
-    let mut job = Job::load(setup()).expect("fixture setup");
-    job.setup.model.compliance = Vec::new();
-    job.setup.model.base_frame = true;
-    job.setup.model.markers = MarkerModel::Nominal;
+    let mut job = ur_like::job();
     job.setup.model.temperature_column = Some("temp_c".into());
-    let base = Isometry3::from_parts(
-        Translation3::new(1.5, -0.4, 0.2),
-        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.01, 0.7)),
-    );
-    let ranges = [
-        (-180.0, 180.0),
-        (-160.0, -20.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-        (-150.0, 150.0),
-        (-180.0, 180.0),
-    ];
-    let names = job.robot.joint_names.clone();
-    let mut rng = Rng::new(seed);
-    let mut csv = format!(
-        "config,rep,marker,load_kg,{},x,y,z,temp_c\n",
-        names.join(",")
-    );
+    let temp_c = |c: usize| from + (to - from) * c as f64 / (configs - 1) as f64;
     let mut max_effect: f64 = 0.0;
-    for c in 0..configs {
-        let q_deg: Vec<f64> = ranges
-            .iter()
-            .map(|&(lo, hi)| (rng.range(lo, hi) * 100.0).round() / 100.0)
-            .collect();
-        let q: Vec<f64> = q_deg.iter().map(|d| d.to_radians()).collect();
-        let temp_c = from + (to - from) * c as f64 / (configs - 1) as f64;
-        let s = 1.0 + alpha * (temp_c - T_BUILT);
-        let sigma = Vector3::from_fn(|_, _| rng.range(10.0, 30.0) * 1e-6);
-        for rep in 1..=2 {
-            for m in &job.setup.markers {
+    let data = ur_like::measure(&job, configs, seed, Some(("temp_c", &temp_c)), |c, q| {
+        let s = 1.0 + alpha * (temp_c(c) - T_BUILT);
+        (job.setup.markers.iter())
+            .map(|m| {
                 let r = Vector3::from(m.xyz);
-                let p = marker_at(&job, &q, &r, s);
-                max_effect = max_effect.max((p - marker_at(&job, &q, &r, 1.0)).norm());
-                let p = base.transform_point(&Point3::from(p));
-                let p = p.coords + Vector3::from_fn(|a, _| rng.normal() * sigma[a]);
-                let qs: Vec<String> = q_deg.iter().map(|v| format!("{v}")).collect();
-                csv += &format!(
-                    "{},{rep},{},0,{},{},{},{},{temp_c}\n",
-                    c + 1,
-                    m.id,
-                    qs.join(","),
-                    p.x * 1e3,
-                    p.y * 1e3,
-                    p.z * 1e3
-                );
-            }
-        }
-    }
-    let data = parse_measurements(csv.as_bytes(), "synthetic.csv", &job.robot, &job.setup)
-        .expect("synthetic data parse");
+                let p = marker_at(&job, q, &r, s);
+                max_effect = max_effect.max((p - marker_at(&job, q, &r, 1.0)).norm());
+                p
+            })
+            .collect()
+    });
     (job, data, 2.0 * max_effect)
 }
 
 fn run(alpha: f64, configs: usize, seed: u64, heldout: bool) -> (Report, f64) {
     let (job, data, effect) = simulate(alpha, configs, seed);
-    let settings = Settings {
-        heldout,
-        ..Settings::default()
-    };
-    let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration");
-    (r, effect)
+    (ur_like::calibrate(&job, &data, heldout), effect)
 }
 
 fn is_thermal(effect: &str) -> bool {
@@ -220,27 +171,21 @@ fn no_drift_adds_no_thermal_expansion() {
 /// The calibrated robot at other temperatures: `Predictor::at_temperature`
 /// puts a marker where the generator does at 30 °C (5 K beyond the
 /// calibration's warmest pose) to within a fifth of what the expansion moved
-/// it (measured: 15.8 of 109.3 µm, the base's and α's errors together), and a recording taken at 28–38 °C validates at the noise with it
+/// it (measured: 15.8 of 109.3 µm, the base's and α's errors together),
+/// and a recording taken at 28–38 °C validates at the noise with it
 /// (each point at its own temperature), against ~110 µm for the same model
 /// at its reference temperature.
 #[test]
 fn the_robot_at_another_temperature() {
     let (job, data, _) = simulate(ALPHA, 40, 61);
-    let settings = Settings {
-        heldout: false,
-        ..Settings::default()
-    };
-    let r = calibrate::calibrate(&job, &data, &settings, &mut |_| {}).expect("calibration");
+    let r = ur_like::calibrate(&job, &data, false);
     assert!(r.effects.iter().any(|e| is_thermal(e.effect.name())));
     let robot = Predictor::new(&r.model, &job);
     let (alpha, reference) = robot.thermal_expansion().expect("a thermal expansion");
     assert!((reference - T_BUILT).abs() < 1e-9, "{reference}");
     assert!((alpha - ALPHA).abs() < 0.2 * ALPHA, "{alpha}");
     let warm = robot.at_temperature(30.0).expect("30 degC");
-    let base = Isometry3::from_parts(
-        Translation3::new(1.5, -0.4, 0.2),
-        UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.01, 0.7)),
-    );
+    let base = ur_like::base();
     let mut rng = Rng::new(7);
     let (mut worst, mut moved): (f64, f64) = (0.0, 0.0);
     for _ in 0..50 {

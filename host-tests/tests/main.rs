@@ -6,6 +6,7 @@
 mod model_common;
 mod paper_common;
 mod tiago_common;
+mod ur_like_common;
 
 // The firmware's own sources (examples/), compiled on the host.
 #[allow(dead_code)]

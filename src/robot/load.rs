@@ -138,24 +138,11 @@ pub fn gravity_torques<T: RealField + Copy, const J: usize>(
     for t in tau.iter_mut().take(frames.dof()) {
         *t = T::zero();
     }
-    for (l, (joint, lf)) in chain.joints().iter().zip(frames.joints()).enumerate() {
-        let Some(link) = joint.link else { continue };
-        let w = Wrench::force(
-            gravity_mps2 * link.mass_kg,
-            lf.frame.transform_point(&Point3::from(link.com_m)).coords,
-        );
-        #[cfg(feature = "tree")]
-        for j in chain.path(Some(l)) {
-            if let (Some(t), Some(jf)) = (tau.get_mut(j), frames.joints().get(j)) {
-                *t += w.torque_on(jf);
-            }
-        }
-        #[cfg(not(feature = "tree"))]
-        for (t, jf) in tau.iter_mut().zip(frames.joints()).take(l + 1) {
+    carried_weights(chain, frames, gravity_mps2, |j, jf, w| {
+        if let Some(t) = tau.get_mut(j) {
             *t += w.torque_on(jf);
         }
-    }
-    Ok(())
+    })
 }
 
 /// Moments `mⱼ` \[N·m, base frame\] about each joint's origin `oⱼ` of the
@@ -175,6 +162,26 @@ pub fn gravity_moments<T: RealField + Copy, const J: usize>(
     out: &mut [Vector3<T>],
 ) -> Result<(), Error> {
     check_len(frames, out.len())?;
+    carried_weights(chain, frames, gravity_mps2, |j, jf, w| {
+        if let Some(m) = out.get_mut(j) {
+            *m += (w.point_m - jf.origin_m()).cross(&w.force_n);
+        }
+    })
+}
+
+/// Each link's weight `m_l g` at its centre of mass `T_l · com_l` (a
+/// [`Wrench::force`], base frame) with each joint that carries it (`0..=l`
+/// in a serial chain): `f(j, joint j's frame, weight)`. Links without
+/// [`crate::robot::LinkInertia`] weigh nothing.
+///
+/// # Errors
+/// [`Error::Mismatch`] when `frames` was not computed for `chain`.
+fn carried_weights<T: RealField + Copy, const J: usize>(
+    chain: &Chain<T, J>,
+    frames: &Frames<T, J>,
+    gravity_mps2: &Vector3<T>,
+    mut f: impl FnMut(usize, &JointFrame<T>, &Wrench<T>),
+) -> Result<(), Error> {
     if chain.dof() != frames.dof() {
         return Err(Error::Mismatch {
             what: "frames computed for another chain",
@@ -182,17 +189,19 @@ pub fn gravity_moments<T: RealField + Copy, const J: usize>(
     }
     for (l, (joint, lf)) in chain.joints().iter().zip(frames.joints()).enumerate() {
         let Some(link) = joint.link else { continue };
-        let force = gravity_mps2 * link.mass_kg;
-        let c = lf.frame.transform_point(&Point3::from(link.com_m)).coords;
+        let w = Wrench::force(
+            gravity_mps2 * link.mass_kg,
+            lf.frame.transform_point(&Point3::from(link.com_m)).coords,
+        );
         #[cfg(feature = "tree")]
         for j in chain.path(Some(l)) {
-            if let (Some(m), Some(jf)) = (out.get_mut(j), frames.joints().get(j)) {
-                *m += (c - jf.origin_m()).cross(&force);
+            if let Some(jf) = frames.joints().get(j) {
+                f(j, jf, &w);
             }
         }
         #[cfg(not(feature = "tree"))]
-        for (m, jf) in out.iter_mut().zip(frames.joints()).take(l + 1) {
-            *m += (c - jf.origin_m()).cross(&force);
+        for (j, jf) in frames.joints().iter().enumerate().take(l + 1) {
+            f(j, jf, &w);
         }
     }
     Ok(())
