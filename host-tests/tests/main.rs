@@ -58,6 +58,7 @@ mod model_urdf;
 mod paper_batch;
 mod paper_estimates;
 mod plan;
+mod poses;
 mod reported_error;
 mod solve_covariance;
 mod solve_errors;

@@ -498,17 +498,29 @@ pub fn run(
         .reported_covariance(&current.params, &current.fit.covariance);
     // The report's vectors per configuration and per row: the fit's own,
     // taken over (`report/per_row.rs`).
-    let configs: std::sync::Arc<[i64]> = e.rows.configs.as_slice().into();
-    let noise = ConfigNoises::new(
-        configs.clone(),
-        std::mem::take(&mut current.fit.sigma),
-        std::mem::take(&mut current.fit.weights),
-    );
+    // The points' rows and configurations; a pose's orientation (the
+    // last rows and groups) in its own statistics, in rad.
+    let (points, point_groups) = (e.rows.positions(), e.rows.position_groups());
+    let configs: std::sync::Arc<[i64]> = e.rows.configs[..point_groups].into();
+    let mut sigma = std::mem::take(&mut current.fit.sigma);
+    let mut weights = std::mem::take(&mut current.fit.weights);
+    sigma.truncate(point_groups);
+    weights.truncate(point_groups);
+    let noise = ConfigNoises::new(configs.clone(), sigma, weights);
+    let mut residuals = std::mem::take(&mut current.residuals);
+    let turned = residuals.split_off(points.min(residuals.len()));
+    let turned_nominal: Vec<_> = nominal_um
+        .split_off(points.min(nominal_um.len()))
+        .into_iter()
+        .map(|y| y * 1e-6)
+        .collect();
+    let orientation = crate::calibrate::report::OrientationErrors::of(&turned_nominal, &turned);
     let mut row_errors = RowErrors::new(
         configs,
         e.names.markers.iter().map(|m| m.0).collect(),
-        (e.rows.rows.iter()).map(|r| (r.group(), r.marker, r.kind == RowKind::Deflection)),
-        std::mem::take(&mut current.residuals),
+        (e.rows.rows[..points].iter())
+            .map(|r| (r.group(), r.marker, r.kind == RowKind::Deflection)),
+        residuals,
     );
     row_errors.set_nominal_um(nominal_um);
     Ok(Report {
@@ -540,9 +552,10 @@ pub fn run(
         left_out,
         near_dependent,
         rows: e.rows.rows.len(),
-        configurations: e.rows.configs.len(),
+        configurations: e.rows.position_groups(),
         plots,
         row_errors,
+        orientation,
         model,
         notes,
         rigid,

@@ -300,7 +300,7 @@ impl Engine<'_> {
             .rows
             .rows
             .iter()
-            .filter(|r| r.kind == RowKind::Absolute)
+            .filter(|r| r.kind == RowKind::Absolute && !r.orientation)
             .collect();
         if !model.iter().any(|p| matches!(p, Param::Base { .. })) || absolute.len() < 3 {
             return Ok(());
@@ -523,7 +523,8 @@ impl Engine<'_> {
             };
             let fitted = Fitted {
                 params: params.to_vec(),
-                rms_um: rms_um(&residuals),
+                // Of the points: a pose's orientation is in rad.
+                rms_um: rms_um(&residuals[..self.rows.positions()]),
                 converged: settled && out.converged,
                 fit: out,
                 geometry: self.geometry.clone(),

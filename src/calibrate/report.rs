@@ -240,6 +240,56 @@ impl Nominal {
     }
 }
 
+/// The error of the measured poses' orientations (a 6-D instrument's
+/// `rx, ry, rz`, module [`crate::calibrate::rows::orientation`]): the angle
+/// of each pose's rotation left \[µrad\], before calibration (the nominal
+/// robot, as [`Nominal`]) and after. The points' errors ([`Nominal`],
+/// [`Report::rms_um`]) leave them out.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OrientationErrors {
+    /// Poses with an orientation.
+    pub poses: usize,
+    /// RMS before calibration \[µrad\].
+    pub nominal_rms_urad: f64,
+    /// RMS after \[µrad\].
+    pub rms_urad: f64,
+    /// Mean after \[µrad\].
+    pub mean_urad: f64,
+    /// Largest after \[µrad\].
+    pub max_urad: f64,
+}
+
+impl OrientationErrors {
+    /// Of the rotations left before (`nominal`) and after (`fitted`)
+    /// \[rad\]; `None` without any.
+    pub fn of(
+        nominal: &[nalgebra::Vector3<f64>],
+        fitted: &[nalgebra::Vector3<f64>],
+    ) -> Option<Self> {
+        if fitted.is_empty() {
+            return None;
+        }
+        let (n, a) = (Nominal::of(nominal), Nominal::of(fitted));
+        Some(Self {
+            poses: fitted.len(),
+            nominal_rms_urad: n.rms_um,
+            rms_urad: a.rms_um,
+            mean_urad: a.mean_um,
+            max_urad: a.max_um,
+        })
+    }
+}
+
+impl fmt::Display for OrientationErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} poses: RMS {:.1} urad before, {:.1} urad after (mean {:.1}, max {:.1} urad)",
+            self.poses, self.nominal_rms_urad, self.rms_urad, self.mean_urad, self.max_urad
+        )
+    }
+}
+
 impl fmt::Display for Nominal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
@@ -334,6 +384,8 @@ pub struct Report {
     /// Every row's error before and after, in the rows' order (deflections
     /// first, then absolute positions, in file order).
     pub row_errors: RowErrors,
+    /// The measured poses' orientations' errors, when the data have them.
+    pub orientation: Option<OrientationErrors>,
     /// The calibrated model (for validation and prediction).
     pub model: CalibratedModel,
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
@@ -473,6 +525,9 @@ impl fmt::Display for Report {
             writeln!(f, "weights: {}", weights_line(self.weights))?;
         }
         writeln!(f, "nominal (before calibration): {}", self.nominal)?;
+        if let Some(o) = &self.orientation {
+            writeln!(f, "orientation of the measured poses: {o}")?;
+        }
         if let Some(why) = &self.failure {
             writeln!(f, "error: NOT A CALIBRATION: {why}")?;
         }

@@ -25,6 +25,7 @@ use crate::robot::{
 
 mod build;
 mod noise;
+pub mod orientation;
 mod points;
 mod runs;
 mod values;
@@ -68,6 +69,12 @@ pub struct Row {
     pub kind: RowKind,
     /// Marker index (into [`Names::markers`]).
     pub marker: u8,
+    /// Whether the row is the orientation of a measured pose (an absolute
+    /// row): `measured` is then the rotation vector of the marker's link
+    /// frame \[rad\], the row's `y` the rotation `log(R_meas R_predᵀ)` and
+    /// its columns `∂θ/∂x`, the turn of that frame (module
+    /// [`orientation`]).
+    pub orientation: bool,
     /// Index into [`Rows::chains`] of the chain the row's frames are on
     /// (see [`Rows::frames`]; a `u32`: 8 B a row fewer).
     chain: u32,
@@ -193,6 +200,22 @@ impl Row {
         self.extra.as_ref().map_or(&[], |e| &e.twists)
     }
 
+    /// With the exact model, what joint `j`'s yield does to the row per
+    /// unit: the point's twist column, or a pose orientation's turn
+    /// ([`orientation::turn`] of its twists at the point and its probes).
+    pub fn joint_column(&self, j: usize) -> Vector3<f64> {
+        let t = self.twists();
+        if self.orientation {
+            let n = t.len() / 3;
+            match (t.get(j), t.get(n + j), t.get(2 * n + j)) {
+                (Some(a), Some(b), Some(c)) => orientation::turn(a, b, c),
+                _ => Vector3::zeros(),
+            }
+        } else {
+            t.get(j).copied().unwrap_or_default()
+        }
+    }
+
     /// [`RowExtra::gravity_q`].
     pub fn gravity_q(&self) -> &[[f64; 2]] {
         self.extra.as_ref().map_or(&[], |e| &e.gravity_q)
@@ -304,11 +327,32 @@ impl Row {
         compliance: &'a [f64],
         gravity_unit: Vector3<f64>,
     ) -> Sample<'a, f64, J> {
+        self.sample_probe(frames, point_m, 0, compliance, gravity_unit)
+    }
+
+    /// [`Row::sample`] at `point_m` with the joints' twists of probe
+    /// `probe` (a pose's orientation keeps them at its point, 0, and at
+    /// [`orientation::PROBES`], 1 and 2; other rows only the first).
+    pub fn sample_probe<'a>(
+        &'a self,
+        frames: &'a Frames<f64, J>,
+        point_m: Vector3<f64>,
+        probe: usize,
+        compliance: &'a [f64],
+        gravity_unit: Vector3<f64>,
+    ) -> Sample<'a, f64, J> {
         let absolute = self.kind == RowKind::Absolute;
+        let twists = self.twists();
+        let twists = if self.orientation && !twists.is_empty() {
+            let n = twists.len() / 3;
+            twists.get(probe * n..(probe + 1) * n).unwrap_or(&[])
+        } else {
+            twists
+        };
         Sample {
             frames,
             q: &self.q,
-            twists: self.twists(),
+            twists,
             point_m,
             marker: self.marker,
             tau: self.tau(),
@@ -334,8 +378,12 @@ impl Row {
 pub struct Rows {
     /// The rows: deflections first, then absolute positions, in file order.
     pub rows: Vec<Row>,
-    /// Configuration ids, one per group, sorted.
+    /// Configuration ids, one per group: the positions' groups, sorted,
+    /// then the poses' orientations' groups, sorted (a configuration with
+    /// a measured orientation is listed twice: module [`orientation`]).
     pub configs: Vec<i64>,
+    /// How many of the last [`Rows::configs`] are the orientations' groups.
+    pub orientation_groups: usize,
     /// What kinds of rows there are.
     pub kinds: DataKinds,
     /// Distinct angles \[µrad\] of each joint, in order of first appearance
@@ -361,6 +409,10 @@ pub struct Rows {
     /// last [`Rows::relinearise`] ([`Geometry::markers`]; empty before):
     /// with a row's frames, its predicted point ([`Rows::point_m`]).
     pub markers: Vec<Vector3<f64>>,
+    /// The tool frame's rotation at the geometry of the last
+    /// [`Rows::relinearise`] ([`Geometry::tool_rotation`]): a measured
+    /// pose's frame is the tip's turned by it.
+    pub tool_rotation: nalgebra::Rotation3<f64>,
     /// The unit direction of gravity \[measurement frame\] at the geometry
     /// of the last [`Rows::relinearise`] (zero before, and without
     /// gravity).
@@ -427,6 +479,7 @@ impl Rows {
         self.at = None;
         self.chains = geometry.placed_chains();
         self.markers.clone_from(&geometry.markers);
+        self.tool_rotation = geometry.tool_rotation.to_rotation_matrix();
         let chains = &self.chains;
         // Whether each chain has a mass model (its links' own weight).
         let weighs: Vec<bool> = chains
@@ -450,6 +503,8 @@ impl Rows {
         let before: Option<Vec<Vec<f64>>> = (threads > 1
             && lin.model == crate::calibrate::params::linearisation::DeflectionModel::Exact)
             .then(|| self.rows.iter().map(|r| r.theta().to_vec()).collect());
+        // A measured pose's frame: the tip's turned by the tool's rotation.
+        let tool = geometry.tool_rotation.to_rotation_matrix();
         // `rigid`: the run's frames of a rigid row, filled in place; `sink`
         // gets the row and its frames.
         let one = |row: &mut Row,
@@ -562,24 +617,40 @@ impl Rows {
                         )));
                     }
                     let p = eq.frames.point_m(&m);
-                    let twists: Vec<Vector3<f64>> = (0..dof)
-                        .map(|j| eq.twist_column(j, &p))
+                    // A pose's orientation: the twists at the point and
+                    // at its probes, one block each (module `orientation`).
+                    let probes: &[Vector3<f64>] = if row.orientation {
+                        &[
+                            Vector3::new(0.0, 0.0, 0.0),
+                            orientation::PROBES[0],
+                            orientation::PROBES[1],
+                        ]
+                    } else {
+                        &[Vector3::new(0.0, 0.0, 0.0)]
+                    };
+                    let twists: Vec<Vector3<f64>> = probes
+                        .iter()
+                        .flat_map(|d| (0..dof).map(move |j| (j, p + d)))
+                        .map(|(j, at)| eq.twist_column(j, &at))
                         .collect::<Result<_, _>>()
                         .map_err(core("equilibrium"))?;
                     if !twists.is_empty() || row.extra.is_some() {
                         row.extra_mut().twists = twists;
                     }
-                    let linear: Vector3<f64> = row
-                        .twists()
-                        .iter()
+                    let linear: Vector3<f64> = (0..dof)
                         .zip(&eq.deflection)
-                        .map(|(t, d)| t * *d)
+                        .map(|(j, d)| row.joint_column(j) * *d)
                         .sum();
                     row.set_tau(&eq.tau[..dof]);
                     row.set_weight_moments(weighs[end], chain, &eq.frames, &gravity)
                         .map_err(core("torques"))?;
                     row.set_load(loading.load.map(|l| l.wrench(&eq.frames)));
-                    row.extra_mut().y = Some(if absolute {
+                    row.extra_mut().y = Some(if row.orientation {
+                        orientation::residual(
+                            &row.measured,
+                            &(eq.frames.tip().rotation.to_rotation_matrix() * tool),
+                        ) + linear
+                    } else if absolute {
                         row.measured - p + linear
                     } else {
                         row.measured - (p - p_rigid) + linear
@@ -654,4 +725,20 @@ impl Rows {
 /// Whether a joint is revolute in `names`.
 pub(crate) fn revolute(names: &Names, j: usize) -> bool {
     names.kinds.get(j) == Some(&JointKind::Revolute)
+}
+
+impl Rows {
+    /// The rows of points (deflections and absolute positions): the first
+    /// ones, before every pose's orientation (module [`orientation`]).
+    pub fn positions(&self) -> usize {
+        self.rows
+            .iter()
+            .position(|r| r.orientation)
+            .unwrap_or(self.rows.len())
+    }
+
+    /// The configurations of points: the groups before the orientations'.
+    pub fn position_groups(&self) -> usize {
+        self.configs.len() - self.orientation_groups
+    }
 }

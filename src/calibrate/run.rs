@@ -65,6 +65,13 @@ fn robustly(
     let mut fits = 0;
     loop {
         let (mut rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), policy)?;
+        if rows.orientation_groups > 0 {
+            return Err(CalibrationError::Data(format!(
+                "{}: the robust loss weighs points; it does not take a pose's orientation \
+                 (rx, ry, rz) yet: calibrate without --robust, or from the points alone",
+                data.file.display()
+            )));
+        }
         let noise = robust::noise_of(&rows);
         if let Some(w) = &used {
             let scales: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
@@ -306,7 +313,8 @@ fn calibrate_rows(
     e.register_base(&with_dropped)?;
     // (The rows keep no left-hand side: computed from their frames.)
     let nominal_y = e.lhs()?;
-    let nominal = Nominal::of(&nominal_y);
+    // Of the points (a pose's orientation: `Report::orientation`).
+    let nominal = Nominal::of(&nominal_y[..e.rows.positions()]);
     // Each row's, for the report: computed again at the end where the
     // nominal robot needed no equilibrium (`diagnosis::NominalRows`).
     let exact = (e.rows.rows.iter()).any(|r| r.extra.as_ref().is_some_and(|x| x.y.is_some()));

@@ -139,6 +139,8 @@ impl MocapFile {
                     t_s: p.t_mid_s,
                     temp_c: None,
                     sigma_m: None,
+                    r_rad: None,
+                    sigma_rad: None,
                     line: p.line,
                 });
             }

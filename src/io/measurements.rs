@@ -7,7 +7,10 @@
 //! URDF joint name. Cells are trimmed. Joint columns and `x,y,z` are in the
 //! setup's `[units]` (prismatic joints in the length unit); `load_kg` in kg,
 //! `t` in s; `sx, sy, sz` (optional, all three or none), the instrument's
-//! standard deviation of the point per axis, in the length unit. Data
+//! standard deviation of the point per axis, in the length unit; `rx, ry,
+//! rz` (optional, all three or none), the measured orientation of the
+//! marker's link frame as a rotation vector in the angle unit (a 6-D pose),
+//! with `srx, sry, srz` (optional, only with them) its σ per axis. Data
 //! contract 7.2: `rep` may be left out (every row is
 //! repetition 1), `marker` when the setup declares one marker, `load_kg`
 //! when it has no `[load]` (every row unloaded); a column named in the
@@ -27,7 +30,10 @@
 //! `marker`, a loaded row without its unloaded row, no data row, and
 //! numbers that contradict `[units]` beyond doubt: a limited revolute joint
 //! (limits within ±2π) beyond ±2π with `angle = "rad"`, a position more than
-//! 100 m from the origin with `length = "m"`.
+//! 100 m from the origin with `length = "m"`. A pose's orientation is
+//! refused when its rotation vector is longer than π (another unit, or
+//! not a rotation vector) and on a loaded row (a deflection is of positions
+//! only).
 //!
 //! Warnings ([`Measurements::warnings`]): joint values outside the URDF
 //! limits by more than 10 % of the range (one warning per column, first
@@ -46,7 +52,7 @@ use crate::io::cells::{self, Scale};
 use crate::io::error::{ErrorKind, InputError, InputWarning};
 use crate::io::setup::Setup;
 pub use crate::io::units::{
-    MAX_LOAD_KG, MAX_POSITION_M, MAX_TEMPERATURE_C, MAX_TIME_S, MIN_TEMPERATURE_C,
+    MAX_LOAD_KG, MAX_POSITION_M, MAX_SIGMA_RAD, MAX_TEMPERATURE_C, MAX_TIME_S, MIN_TEMPERATURE_C,
 };
 use crate::io::urdf::Robot;
 
@@ -89,6 +95,14 @@ pub struct Observation {
     /// The instrument's standard deviation of this point per axis \[m\],
     /// when the file has `sx, sy, sz` (data contract 7.2).
     pub sigma_m: Option<[f64; 3]>,
+    /// The measured orientation of the marker's link frame in the
+    /// measurement frame, as a rotation vector (axis times angle, `|r| ≤ π`)
+    /// \[rad\], when the file has `rx, ry, rz` (a 6-D pose: a tracker's
+    /// 6-D probe, a motion-capture rigid body).
+    pub r_rad: Option<[f64; 3]>,
+    /// The instrument's standard deviation of the orientation per axis
+    /// \[rad\], when the file has `srx, sry, srz`.
+    pub sigma_rad: Option<[f64; 3]>,
     /// 1-based line in the file (header is line 1); ignored by the writer.
     pub line: usize,
 }
@@ -438,9 +452,13 @@ enum Col {
     Sigma(usize),
     /// The setup's `[model] temperature_column` \[°C\].
     Temperature,
+    /// `rx, ry, rz`: the measured orientation (rotation vector).
+    Rot(usize),
+    /// `srx, sry, srz`: the instrument's σ of the orientation per axis.
+    SigmaRot(usize),
 }
 
-const FIXED: [(&str, Col); 11] = [
+const FIXED: [(&str, Col); 17] = [
     ("config", Col::Config),
     ("rep", Col::Rep),
     ("marker", Col::Marker),
@@ -452,6 +470,12 @@ const FIXED: [(&str, Col); 11] = [
     ("sx", Col::Sigma(0)),
     ("sy", Col::Sigma(1)),
     ("sz", Col::Sigma(2)),
+    ("rx", Col::Rot(0)),
+    ("ry", Col::Rot(1)),
+    ("rz", Col::Rot(2)),
+    ("srx", Col::SigmaRot(0)),
+    ("sry", Col::SigmaRot(1)),
+    ("srz", Col::SigmaRot(2)),
 ];
 
 /// Reads a measurement file for `robot` and `setup` (units, markers, load).

@@ -52,6 +52,10 @@ pub const MAX_LOAD_KG: f64 = 1e5;
 /// Largest position \[m\] in any unit: 10 km, beyond any instrument.
 pub const MAX_POSITION_M: f64 = 1e4;
 
+/// Largest standard deviation of a measured orientation \[rad\]
+/// (`srx, sry, srz`): a radian, beyond any instrument that measures one.
+pub const MAX_SIGMA_RAD: f64 = 1.0;
+
 /// Largest `|t|` \[s\]: 10¹⁰ s (317 years; Unix time in seconds is
 /// 1.8·10⁹). Larger is another unit (ms since 1970 is 1.8·10¹²) or an
 /// overflow, and differences of such times lose the seconds.

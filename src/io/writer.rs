@@ -49,6 +49,8 @@ pub fn write_measurements_with(
     let has_temperature = rows.first().is_some_and(|r| r.temp_c.is_some());
     let has_time = rows.first().is_some_and(|r| r.t_s.is_some());
     let has_sigma = rows.first().is_some_and(|r| r.sigma_m.is_some());
+    let has_rot = rows.first().is_some_and(|r| r.r_rad.is_some());
+    let has_sigma_rot = rows.first().is_some_and(|r| r.sigma_rad.is_some());
     let dof = robot.dof();
     let scales: Vec<Scale> = robot
         .joint_kinds
@@ -71,6 +73,12 @@ pub fn write_measurements_with(
     }
     if has_sigma {
         header.extend(["sx", "sy", "sz"]);
+    }
+    if has_rot {
+        header.extend(["rx", "ry", "rz"]);
+    }
+    if has_sigma_rot {
+        header.extend(["srx", "sry", "srz"]);
     }
     if has_temperature {
         match temperature_column {
@@ -123,14 +131,22 @@ pub fn write_measurements_with(
                 "some rows have the instrument's σ and some do not".into(),
             );
         }
+        if r.r_rad.is_some() != has_rot || r.sigma_rad.is_some() != has_sigma_rot {
+            return err(
+                ErrorKind::InvalidValue,
+                "some rows have an orientation (or its σ) and some do not".into(),
+            );
+        }
         let sigma = r.sigma_m.iter().flatten();
+        let rot = r.r_rad.iter().flatten().chain(r.sigma_rad.iter().flatten());
         let numbers =
             r.q.iter()
                 .chain(&r.p_m)
                 .chain(&r.t_s)
                 .chain(&r.temp_c)
                 .chain([&r.load_kg])
-                .chain(sigma.clone());
+                .chain(sigma.clone())
+                .chain(rot.clone());
         if numbers.clone().any(|v| !v.is_finite()) {
             return err(ErrorKind::NonFinite, "non-finite value".into());
         }
@@ -154,6 +170,7 @@ pub fn write_measurements_with(
         );
         fields.extend(r.t_s.map(|t| format_real(t, Scale::One)));
         fields.extend(sigma.map(|&v| format_real(v, Scale::Length(units.length))));
+        fields.extend(rot.map(|&v| format_real(v, Scale::Angle(units.angle))));
         fields.extend(r.temp_c.map(|t| format_real(t, Scale::One)));
         out.write_record(&fields).map_err(|e| io_err(&e))?;
     }

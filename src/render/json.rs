@@ -26,6 +26,10 @@ pub struct ReportJson<'a> {
     converged: bool,
     relinearisations: usize,
     nominal: NominalJson,
+    /// The measured poses' orientations (`rx, ry, rz`; an extension):
+    /// absent for points alone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orientation: Option<OrientationJson>,
     parameters: Vec<ParameterJson<'a>>,
     rms_um: f64,
     heldout_rms_um: Option<f64>,
@@ -64,6 +68,15 @@ struct NominalJson {
     rms_um: f64,
     mean_um: f64,
     max_um: f64,
+}
+
+#[derive(Serialize)]
+struct OrientationJson {
+    poses: usize,
+    nominal_rms_urad: f64,
+    rms_urad: f64,
+    mean_urad: f64,
+    max_urad: f64,
 }
 
 #[derive(Serialize)]
@@ -162,6 +175,13 @@ impl<'a> ReportJson<'a> {
                 mean_um: r.nominal.mean_um,
                 max_um: r.nominal.max_um,
             },
+            orientation: r.orientation.map(|o| OrientationJson {
+                poses: o.poses,
+                nominal_rms_urad: o.nominal_rms_urad,
+                rms_urad: o.rms_urad,
+                mean_urad: o.mean_urad,
+                max_urad: o.max_urad,
+            }),
             parameters: r
                 .parameters
                 .iter()

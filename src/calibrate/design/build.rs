@@ -294,6 +294,7 @@ impl Design {
                 .collect()
         };
         let markers = &geometry.markers;
+        let tool = geometry.tool_rotation.to_rotation_matrix();
         let columns = &columns;
         let done = all.relinearise_with(
             geometry,
@@ -301,7 +302,7 @@ impl Design {
             threads,
             states.iter_mut().collect(),
             |(piece, one, sums, ys), k, row, frames, g| {
-                let y = crate::calibrate::rows::lhs(markers, row, frames);
+                let y = crate::calibrate::rows::lhs(markers, &tool, row, frames);
                 let y: [f64; 3] = crate::calibrate::rows::scaled_y(columns.mixed, row, y).into();
                 if let Some(at) = ys.get_mut(k) {
                     *at = y;

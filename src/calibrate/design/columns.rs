@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 use crate::calibrate::params::geometry::J;
 use crate::calibrate::params::linearisation::Linearisation;
 use crate::calibrate::params::masses;
-use crate::calibrate::rows::{Row, Rows};
+use crate::calibrate::rows::{orientation, Row, Rows};
 use crate::error::Error;
 use crate::model::Param;
 use crate::robot::Chain;
@@ -102,14 +102,28 @@ impl<'a> Columns<'a> {
             let law = self.lin.joint_law(&row.q, true, &[]);
             (chain, gravity_unit * g.norm(), law)
         });
+        let column = |p: &Param, sample: &crate::model::Sample<'_, f64, J>| match (p, &weight) {
+            (Param::LinkMass { joint }, Some((Some(chain), g, law))) => {
+                masses::column(chain, sample, usize::from(*joint), g, law, |i| {
+                    self.lin.bending(i)
+                })
+            }
+            _ => p.column_si(sample),
+        };
+        // A pose's orientation: each column's turn, from the columns at
+        // the point and at its probes (`rows::orientation`).
+        let probes = row.orientation.then(|| {
+            let [a, b] = orientation::PROBES;
+            (
+                row.sample_probe(frames, point + a, 1, &compliance, gravity_unit),
+                row.sample_probe(frames, point + b, 2, &compliance, gravity_unit),
+            )
+        });
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
-            let mut col = match (p, &weight) {
-                (Param::LinkMass { joint }, Some((Some(chain), g, law))) => {
-                    masses::column(chain, &sample, usize::from(*joint), g, law, |i| {
-                        self.lin.bending(i)
-                    })?
-                }
-                _ => p.column_si(&sample)?,
+            let at = column(p, &sample)?;
+            let mut col = match &probes {
+                Some((sx, sy)) => orientation::turn(&at, &column(p, sx)?, &column(p, sy)?),
+                None => at,
             } * si;
             if scale != 1.0 {
                 col *= scale;

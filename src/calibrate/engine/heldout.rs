@@ -119,7 +119,13 @@ impl Engine<'_> {
             }
             (None, _) => Vec::new(),
         };
+        // The points' configurations: a pose's orientation (a group of its
+        // own, after them) is not predicted here, in µm.
+        let points = self.rows.position_groups();
         for g in 0..groups {
+            if g >= points {
+                break;
+            }
             if let Some(f) = &fast {
                 if window.as_ref().is_none_or(|w| g >= w.first + w.ok.len()) {
                     window = Some(f.groups(&by, OlsHeldOut::window(&by, g, WINDOW_ROWS)));

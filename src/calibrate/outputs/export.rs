@@ -158,7 +158,7 @@ pub fn final_geometry(model: &CalibratedModel) -> Geometry {
 fn absolute_rms_um(e: &Engine<'_>, residuals: &[nalgebra::Vector3<f64>]) -> f64 {
     let mut sum = SquareSum::default();
     for (r, res) in e.rows.rows.iter().zip(residuals) {
-        if r.kind == RowKind::Absolute {
+        if r.kind == RowKind::Absolute && !r.orientation {
             sum.extend(&[*res]);
         }
     }

@@ -81,9 +81,11 @@ pub fn validate_with(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
+    // The points (a pose's orientation is not validated here: module
+    // `rows::orientation`).
     rows.rows.retain(|r| match r.kind {
         RowKind::Deflection => model.kinds.deflections,
-        RowKind::Absolute => model.kinds.absolute,
+        RowKind::Absolute => model.kinds.absolute && !r.orientation,
     });
     // A compensator table answers between its calibrated angles by linear
     // interpolation (Linearisation::compliance_at); count those points.

@@ -58,6 +58,10 @@ pub struct Geometry {
     pub marker_ends: Vec<usize>,
     /// Nominal marker positions \[m, tip frame\].
     nominal_markers: Vec<Vector3<f64>>,
+    /// The tool frame's identified rotation (its steps composed, in the
+    /// tip frame): what turns a measured pose's orientation with the
+    /// markers it moves (`rows::orientation`); identity without one.
+    pub tool_rotation: UnitQuaternion<f64>,
     /// Sum of the applied steps of each joint-offset and joint-frame
     /// parameter (reported units; first order for the frame errors, whose
     /// steps compose on the chain).
@@ -76,6 +80,7 @@ impl Geometry {
             base: Isometry3::identity(),
             markers: markers.to_vec(),
             nominal_markers: markers.to_vec(),
+            tool_rotation: UnitQuaternion::identity(),
             ends: vec![chain.tip_end()],
             marker_ends: vec![0; markers.len()],
             applied: BTreeMap::new(),
@@ -214,6 +219,7 @@ impl Geometry {
             for m in self.markers.iter_mut().chain(&mut self.nominal_markers) {
                 *m = (e * nalgebra::Point3::from(*m)).coords;
             }
+            self.tool_rotation = e.rotation * self.tool_rotation;
         }
         if base[0] != Vector3::zeros() || base[1] != Vector3::zeros() {
             self.base = small_pose(base[0], base[1]) * self.base;

@@ -73,6 +73,19 @@ impl Rows {
         let mut configs: Vec<i64> = data.observations.iter().map(|o| o.config).collect();
         configs.sort_unstable();
         configs.dedup();
+        // The configurations with a measured orientation: each its group
+        // after every position group (module `orientation`).
+        let mut oriented: Vec<i64> = if use_absolute {
+            data.observations
+                .iter()
+                .filter(|o| o.r_rad.is_some() && o.is_unloaded())
+                .map(|o| o.config)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        oriented.sort_unstable();
+        oriented.dedup();
         // The temperature's reference: the mean over every point.
         let temps: Vec<f64> = data.observations.iter().filter_map(|o| o.temp_c).collect();
         let temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
@@ -167,11 +180,18 @@ impl Rows {
                    measured: [f64; 3],
                    line: usize,
                    sigma: Option<[f64; 3]>,
+                   orientation: bool,
                    hint: &mut usize| Row {
             kind,
             marker: index_of(marker),
+            orientation,
             chain: 0,
-            group: u32::try_from(group_of(&configs, config, hint)).unwrap_or(u32::MAX),
+            group: u32::try_from(if orientation {
+                configs.len() + group_of(&oriented, config, hint)
+            } else {
+                group_of(&configs, config, hint)
+            })
+            .unwrap_or(u32::MAX),
             q: q.into(),
             measured: Vector3::from(measured),
             line: u32::try_from(line).unwrap_or(u32::MAX),
@@ -199,6 +219,24 @@ impl Rows {
                 o.p_m,
                 o.line,
                 o.sigma_m,
+                false,
+                hint,
+            )
+        };
+        // A pose's orientation: `measured` the rotation vector \[rad\].
+        let orientation_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
+            row(
+                RowKind::Absolute,
+                o.config,
+                o.marker,
+                0.0,
+                &o.q,
+                o.t_s.map(|t| t - t_mean),
+                o.temp_c.zip(temp_mean).map(|(t, m)| t - m),
+                o.r_rad.unwrap_or_default(),
+                o.line,
+                o.sigma_rad,
+                true,
                 hint,
             )
         };
@@ -222,6 +260,7 @@ impl Rows {
                     .sigma_m
                     .zip(unloaded.sigma_m)
                     .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
+                false,
                 hint,
             )
         };
@@ -247,6 +286,7 @@ impl Rows {
         // appended in reverse and the whole reversed at the end; with the
         // observations taken, each chunk is freed once its rows are made.
         let threads = crate::parallel::for_rows(unloaded);
+        let mut orientations: Vec<Row> = Vec::new();
         let mut end = if use_absolute {
             data.observations.len()
         } else {
@@ -267,10 +307,24 @@ impl Rows {
             for run in runs.into_iter().rev() {
                 rows.extend(run.into_iter().rev());
             }
+            if !oriented.is_empty() {
+                let mut hint = 0;
+                orientations.extend(
+                    chunk
+                        .iter()
+                        .rev()
+                        .filter(|o| o.is_unloaded() && o.r_rad.is_some())
+                        .map(|o| orientation_row(o, &mut hint)),
+                );
+            }
             release_from(&mut source, start);
             end = start;
         }
         rows[deflections..].reverse();
+        // The orientations after every position, in file order.
+        orientations.reverse();
+        rows.append(&mut orientations);
+        configs.extend(oriented.iter().copied());
         let data = &*source;
         if rows.is_empty() {
             return Err(CalibrationError::Data(format!(
@@ -288,6 +342,7 @@ impl Rows {
         };
         Ok(Self {
             rows,
+            orientation_groups: oriented.len(),
             configs,
             kinds,
             bins,
@@ -298,6 +353,7 @@ impl Rows {
             temperature_ref_c: setup.model.temperature_column.clone().zip(temp_mean),
             chains: Vec::new(),
             markers: Vec::new(),
+            tool_rotation: nalgebra::Rotation3::identity(),
             gravity_unit: Vector3::zeros(),
             at: None,
         })

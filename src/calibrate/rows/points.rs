@@ -2,7 +2,7 @@
 //! read): its predicted point ([`Rows::point_m`]) and its left-hand side
 //! ([`Rows::y`]), which the rows do not keep.
 
-use nalgebra::Vector3;
+use nalgebra::{Rotation3, Vector3};
 
 use crate::calibrate::params::geometry::{Geometry, J};
 use crate::calibrate::rows::{Row, RowKind, Rows};
@@ -56,7 +56,7 @@ impl Rows {
     /// [`Rows::relinearise`] kept it ([`crate::calibrate::rows::RowExtra::y`]). Not kept per row
     /// otherwise (24 MB at 10⁶ rows).
     pub fn y(&self, row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
-        lhs(&self.markers, row, frames)
+        lhs(&self.markers, &self.tool_rotation, row, frames)
     }
 
     /// [`Rows::y`] of every row, in order (their frames recomputed: on
@@ -94,7 +94,8 @@ impl Rows {
                         what: "a geometry without a chain",
                     })?;
             chain.frames_into(&row.q, frames)?;
-            Ok(row.measured - frames.point_m(&marker_m(&geometry.markers, row)))
+            let tool = geometry.tool_rotation.to_rotation_matrix();
+            Ok(rigid_y(&geometry.markers, &tool, row, frames))
         })
     }
 
@@ -142,13 +143,33 @@ fn needs_frames(row: &Row) -> bool {
 
 /// [`Rows::y`] with the markers `markers` (frames not read where
 /// [`needs_frames`] is false).
-pub(crate) fn lhs(markers: &[Vector3<f64>], row: &Row, frames: &Frames<f64, J>) -> Vector3<f64> {
+pub(crate) fn lhs(
+    markers: &[Vector3<f64>],
+    tool: &Rotation3<f64>,
+    row: &Row,
+    frames: &Frames<f64, J>,
+) -> Vector3<f64> {
     match row.extra.as_ref().and_then(|e| e.y) {
         Some(y) => y,
-        None if row.kind == RowKind::Absolute => {
-            row.measured - frames.point_m(&marker_m(markers, row))
-        }
+        None if row.kind == RowKind::Absolute => rigid_y(markers, tool, row, frames),
         None => row.measured,
+    }
+}
+
+/// An absolute row's left-hand side at `frames`, no joint law: the
+/// measured point minus the predicted, or a pose's orientation left
+/// ([`super::orientation::residual`], \[rad\]).
+fn rigid_y(
+    markers: &[Vector3<f64>],
+    tool: &Rotation3<f64>,
+    row: &Row,
+    frames: &Frames<f64, J>,
+) -> Vector3<f64> {
+    if row.orientation {
+        let predicted = frames.tip().rotation.to_rotation_matrix() * tool;
+        super::orientation::residual(&row.measured, &predicted)
+    } else {
+        row.measured - frames.point_m(&marker_m(markers, row))
     }
 }
 

@@ -171,6 +171,34 @@ impl Header {
             ));
         }
 
+        // `rx, ry, rz` come together, and `srx, sry, srz` only with them.
+        for (names, col, what) in [
+            (
+                ["rx", "ry", "rz"],
+                Col::Rot as fn(usize) -> Col,
+                "the orientation comes as three columns rx, ry, rz or none",
+            ),
+            (
+                ["srx", "sry", "srz"],
+                Col::SigmaRot,
+                "the orientation's σ comes as three columns srx, sry, srz or none",
+            ),
+        ] {
+            let n = (0..3).filter(|&k| cols.contains(&col(k))).count();
+            if n != 0 && n != 3 {
+                let missing = names[(0..3).find(|&k| !cols.contains(&col(k))).unwrap_or(0)];
+                return Err(cell_err(ErrorKind::MissingColumn, 1, missing, what.into()));
+            }
+        }
+        if cols.contains(&Col::SigmaRot(0)) && !cols.contains(&Col::Rot(0)) {
+            return Err(cell_err(
+                ErrorKind::MissingColumn,
+                1,
+                "rx",
+                "srx, sry, srz are the σ of an orientation: rx, ry, rz are missing".into(),
+            ));
+        }
+
         Ok(Self {
             record: header,
             cols,

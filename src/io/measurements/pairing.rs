@@ -180,6 +180,19 @@ pub(super) fn warnings(
                 .into(),
         );
     }
+    if units.angle == AngleUnit::Deg
+        && stats.max_rot_written > 0.0
+        && stats.max_rot_written <= std::f64::consts::PI
+    {
+        warn(
+            WarningKind::Units,
+            None,
+            None,
+            "every rx, ry, rz is within ±π although [units] angle = \"deg\": \
+             are the orientations in radians?"
+                .into(),
+        );
+    }
     if units.length == LengthUnit::Mm && stats.max_pos_written > 0.0 && stats.max_pos_written < 10.0
     {
         warn(
@@ -224,6 +237,8 @@ pub(super) struct Stats {
     pub(super) outside: Vec<Option<(usize, usize)>>,
     pub(super) max_angle_written: f64,
     pub(super) max_pos_written: f64,
+    /// Largest `|rx|, |ry|, |rz|` as written.
+    pub(super) max_rot_written: f64,
 }
 
 impl Stats {
@@ -232,6 +247,7 @@ impl Stats {
             outside: vec![None; dof],
             max_angle_written: 0.0,
             max_pos_written: 0.0,
+            max_rot_written: 0.0,
         }
     }
 
@@ -240,6 +256,7 @@ impl Stats {
     pub(super) fn merge(&mut self, later: Stats) {
         self.max_angle_written = self.max_angle_written.max(later.max_angle_written);
         self.max_pos_written = self.max_pos_written.max(later.max_pos_written);
+        self.max_rot_written = self.max_rot_written.max(later.max_rot_written);
         for (all, chunk) in self.outside.iter_mut().zip(later.outside) {
             *all = match (*all, chunk) {
                 (Some((n, first)), Some((m, _))) => Some((n + m, first)),

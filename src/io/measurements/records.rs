@@ -6,8 +6,8 @@ use std::path::Path;
 
 use crate::io::cells::{parse_int, parse_real, parse_real_written, Scale};
 use crate::io::measurements::{
-    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_TEMPERATURE_C,
-    MAX_TIME_S, MIN_TEMPERATURE_C,
+    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_SIGMA_RAD,
+    MAX_TEMPERATURE_C, MAX_TIME_S, MIN_TEMPERATURE_C,
 };
 use crate::io::setup::{AngleUnit, LengthUnit, Setup};
 use crate::io::urdf::{Robot, UrdfJointKind};
@@ -216,6 +216,61 @@ impl Layout<'_> {
                     }
                     o.sigma_m.get_or_insert([0.0; 3])[k] = v;
                 }
+                Col::Rot(k) => {
+                    let (written, v) =
+                        parse_real_written(cell, Scale::Angle(self.setup.units.angle))
+                            .map_err(|(k, m)| cerr(k, m))?;
+                    stats.max_rot_written = stats.max_rot_written.max(written.abs());
+                    o.r_rad.get_or_insert([0.0; 3])[k] = v;
+                }
+                Col::SigmaRot(k) => {
+                    let v = parse_real(cell, Scale::Angle(self.setup.units.angle))
+                        .map_err(|(k, m)| cerr(k, m))?;
+                    if !(0.0..=MAX_SIGMA_RAD).contains(&v) {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "σ {v:?} rad: the instrument's standard deviation of an \
+                                 orientation is an angle from 0 to {MAX_SIGMA_RAD:?} rad"
+                            ),
+                        ));
+                    }
+                    o.sigma_rad.get_or_insert([0.0; 3])[k] = v;
+                }
+            }
+        }
+        if let Some(r) = o.r_rad {
+            let rx = self
+                .header
+                .iter()
+                .position(|h| h.trim() == "rx")
+                .unwrap_or(0);
+            let name = self.header.get(rx).unwrap_or("rx");
+            let err = |kind, message: String| {
+                InputError::new(self.file, kind, message)
+                    .at_line(line)
+                    .in_column(name)
+            };
+            let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            if angle > std::f64::consts::PI + 1e-9 {
+                let hint = match self.setup.units.angle {
+                    AngleUnit::Rad => "degrees with [units] angle = \"rad\"?",
+                    AngleUnit::Deg => "not a rotation vector (axis times angle)?",
+                };
+                return Err(err(
+                    ErrorKind::Units,
+                    format!(
+                        "the rotation vector (rx, ry, rz) turns by {angle:.6} rad, more than π: {hint}"
+                    ),
+                ));
+            }
+            if !o.is_unloaded() {
+                return Err(err(
+                    ErrorKind::InvalidValue,
+                    "an orientation on a loaded row: a deflection is of positions only \
+                     (leave rx, ry, rz to the unloaded rows, in a file of their own)"
+                        .into(),
+                ));
             }
         }
         // Every joint has its column (checked with the header).
