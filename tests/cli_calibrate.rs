@@ -196,6 +196,59 @@ fn paper_model_needs_no_effect() {
     assert!(v["unexplained"].is_null());
 }
 
+/// The README's pose command: the KR-270's 6-D poses (generated with
+/// joint zeros and a tool frame off; `generate_kr270_poses` prints the
+/// truth). The orientations are reported apart in µrad; the tool's
+/// rotation is identified, the last joint's zero left out as the same
+/// turn; the estimates are the truth's within 3 σ.
+#[test]
+fn six_d_poses_identify_the_tool_frame() {
+    let v = json(&robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup-6d.toml",
+        "--data",
+        "data/kr270/poses-6d.csv",
+        "--json",
+    ]));
+    let o = &v["orientation"];
+    assert_eq!(o["poses"], 40);
+    let rms = o["rms_urad"].as_f64().unwrap();
+    assert!(rms > 30.0 && rms < 70.0, "{o}");
+    assert!(o["nominal_rms_urad"].as_f64().unwrap() > 1000.0, "{o}");
+    let rms_um = v["rms_um"].as_f64().unwrap();
+    assert!(rms_um > 20.0 && rms_um < 45.0, "{rms_um}");
+    // The truth the generator printed (mm, mrad).
+    let truth = [
+        ("tool.tx", -0.018_240),
+        ("tool.ty", -0.195_489),
+        ("tool.tz", -0.164_791),
+        ("tool.rx", -0.420_399),
+        ("tool.ry", 0.234_550),
+        ("tool.rz", 0.078_653),
+        ("a1.offset", -0.577_869),
+        ("a2.offset", 0.655_072),
+        ("a3.offset", 0.467_787),
+        ("a4.offset", 0.491_897),
+        ("a5.offset", 0.711_491),
+    ];
+    let params = v["parameters"].as_array().unwrap();
+    assert_eq!(params.len(), truth.len(), "{params:?}");
+    for (name, t) in truth {
+        let p = params
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        let z = (p["value"].as_f64().unwrap() - t) / p["std"].as_f64().unwrap();
+        assert!(z.abs() < 3.0, "{name}: {p}");
+    }
+    assert!(
+        v["identifiability"].to_string().contains("a6.offset"),
+        "{}",
+        v["identifiability"]
+    );
+}
+
 #[test]
 fn no_diagnose_ols_fits_the_declared_model_only() {
     let mut args = NAIVE.to_vec();

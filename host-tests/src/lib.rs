@@ -44,6 +44,7 @@ pub mod coverage;
 pub mod exact;
 pub mod fuzz_io;
 pub mod fuzz_ops;
+pub mod poses;
 
 /// Lossless widening of the scalar types under test to `f64`.
 pub trait ToF64: RealField + Copy {

@@ -39,7 +39,7 @@ impl Engine<'_> {
         let mut res = SquareSum::default();
         (self.progress)(&format!(
             "held-out RMS: {} fits, one without each configuration",
-            self.rows.configs.len()
+            self.rows.position_groups()
         ));
         // OLS: the closed form of `heldout` (exact at one linearisation);
         // a group no other can replace, and weighted fits, are refitted.
