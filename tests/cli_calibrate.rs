@@ -203,6 +203,7 @@ fn paper_model_needs_no_effect() {
 /// turn; the estimates are the truth's within 3 σ.
 #[test]
 fn six_d_poses_identify_the_tool_frame() {
+    let dir = temp_dir("six-d");
     let v = json(&robcal(&[
         "calibrate",
         "--setup",
@@ -210,7 +211,15 @@ fn six_d_poses_identify_the_tool_frame() {
         "--data",
         "data/kr270/poses-6d.csv",
         "--json",
+        "--output",
+        dir.to_str().unwrap(),
     ]));
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains("orientation of 40 poses"),
+        "no orientation in the report"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
     let o = &v["orientation"];
     assert_eq!(o["poses"], 40);
     let rms = o["rms_urad"].as_f64().unwrap();

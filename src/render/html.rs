@@ -180,6 +180,20 @@ fn summary(h: &mut String, r: &Report) {
         mean,
         max
     );
+    if let Some(o) = &r.orientation {
+        // Before `</section>`: the measured poses' orientations, apart.
+        h.truncate(h.len() - "</section>".len());
+        let _ = write!(
+            h,
+            "<table class=\"num\"><tr><th>orientation of {} poses</th><th>RMS [µrad]</th>\
+             <th>mean [µrad]</th><th>max [µrad]</th></tr>\
+             <tr><td>before calibration (nominal robot)</td><td>{:.1}</td><td></td><td></td></tr>\
+             <tr><td>after calibration (final model)</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>\
+             </table><p>Per pose, the angle of the rotation left between the measured and the \
+             predicted frame (<code>rx, ry, rz</code>); the points' errors above leave them out.</p></section>",
+            o.poses, o.nominal_rms_urad, o.rms_urad, o.mean_urad, o.max_urad
+        );
+    }
 }
 
 fn closed_loop(h: &mut String, r: &Report) {
