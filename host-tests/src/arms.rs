@@ -311,20 +311,22 @@ pub fn ur10_csv(urdf: &std::path::Path, poses: usize, seed: u64) -> String {
     ur10_csv_within(urdf, poses, seed, PI)
 }
 
+/// The UR10's movable joints (`shared/repro/ur10-offsets/ur10.urdf`), in
+/// chain order.
+pub const UR10_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
 /// As [`ur10_csv`], every joint within `[-range, range]` rad of its zero.
 pub fn ur10_csv_within(urdf: &std::path::Path, poses: usize, seed: u64, range: f64) -> String {
     let mut rng = SplitMix64::new(seed);
     let fk = Fk::new(urdf, "base_link", "flange");
-    let joints: Vec<String> = [
-        "shoulder_pan_joint",
-        "shoulder_lift_joint",
-        "elbow_joint",
-        "wrist_1_joint",
-        "wrist_2_joint",
-        "wrist_3_joint",
-    ]
-    .map(String::from)
-    .to_vec();
+    let joints: Vec<String> = UR10_JOINTS.map(String::from).to_vec();
     let truth = Truth {
         fk,
         offsets: vec![0.0, 0.0, 2e-3, 0.0, -1e-3, 0.0],

@@ -33,16 +33,7 @@ impl Arm {
     pub fn ur10(dir: &Path) -> Self {
         Self {
             fk: Fk::new(&dir.join("ur10.urdf"), "base_link", "flange"),
-            joints: [
-                "shoulder_pan_joint",
-                "shoulder_lift_joint",
-                "elbow_joint",
-                "wrist_1_joint",
-                "wrist_2_joint",
-                "wrist_3_joint",
-            ]
-            .map(String::from)
-            .to_vec(),
+            joints: super::arms::UR10_JOINTS.map(String::from).to_vec(),
             ranges: vec![(-3.0, 3.0); 6],
             marker_m: Vector3::new(0.0, 0.0, 0.1),
         }

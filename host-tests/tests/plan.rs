@@ -12,6 +12,7 @@
 
 use std::path::PathBuf;
 
+use host_tests::arms::UR10_JOINTS as JOINTS;
 use nalgebra::Vector3;
 use robcal::calibrate::outputs::validate::validate;
 use robcal::calibrate::plan::{choose, pool, random_candidates, Criterion, PlanSettings};
@@ -33,15 +34,6 @@ fn shared() -> Option<PathBuf> {
     }
     None
 }
-
-const JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
 
 /// Trace of the reported covariance (Σ σ², reported units) and the error
 /// of the calibrated model on the test poses \[µm\], of a recording at

@@ -207,7 +207,14 @@ impl Rows {
                 },
             ),
         };
-        let absolute_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
+        // An unloaded observation's row: its point (`measured` the point,
+        // `sigma` the point's σ) or a pose's orientation (the rotation
+        // vector and its σ, module `orientation`).
+        let observed = |o: &crate::io::measurements::Observation,
+                        measured: [f64; 3],
+                        sigma: Option<[f64; 3]>,
+                        orientation: bool,
+                        hint: &mut usize| {
             row(
                 RowKind::Absolute,
                 o.config,
@@ -216,29 +223,18 @@ impl Rows {
                 &o.q,
                 o.t_s.map(|t| t - t_mean),
                 o.temp_c.zip(temp_mean).map(|(t, m)| t - m),
-                o.p_m,
+                measured,
                 o.line,
-                o.sigma_m,
-                false,
+                sigma,
+                orientation,
                 hint,
             )
         };
-        // A pose's orientation: `measured` the rotation vector \[rad\].
+        let absolute_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
+            observed(o, o.p_m, o.sigma_m, false, hint)
+        };
         let orientation_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
-            row(
-                RowKind::Absolute,
-                o.config,
-                o.marker,
-                0.0,
-                &o.q,
-                o.t_s.map(|t| t - t_mean),
-                o.temp_c.zip(temp_mean).map(|(t, m)| t - m),
-                o.r_rad.unwrap_or_default(),
-                o.line,
-                o.sigma_rad,
-                true,
-                hint,
-            )
+            observed(o, o.r_rad.unwrap_or_default(), o.sigma_rad, true, hint)
         };
         // The deflections first: runs of rows on worker threads, joined in
         // order (one thread built a million rows in 0.3 s).
