@@ -443,6 +443,8 @@ pub fn run(
             .rigid_lhs_at(&g)
             .map_err(|err| CalibrationError::Core("forward kinematics", err))?,
     };
+    // The points' in µm; a pose's orientations (the last rows) apart, in rad.
+    let turned_nominal = nominal_um.split_off(e.rows.positions().min(nominal_um.len()));
     for y in &mut nominal_um {
         *y *= 1e6;
     }
@@ -509,11 +511,6 @@ pub fn run(
     let noise = ConfigNoises::new(configs.clone(), sigma, weights);
     let mut residuals = std::mem::take(&mut current.residuals);
     let turned = residuals.split_off(points.min(residuals.len()));
-    let turned_nominal: Vec<_> = nominal_um
-        .split_off(points.min(nominal_um.len()))
-        .into_iter()
-        .map(|y| y * 1e-6)
-        .collect();
     let orientation = crate::calibrate::report::OrientationErrors::of(&turned_nominal, &turned);
     let mut row_errors = RowErrors::new(
         configs,

@@ -731,6 +731,9 @@ impl Rows {
     /// The rows of points (deflections and absolute positions): the first
     /// ones, before every pose's orientation (module [`orientation`]).
     pub fn positions(&self) -> usize {
+        if self.orientation_groups == 0 {
+            return self.rows.len();
+        }
         self.rows
             .iter()
             .position(|r| r.orientation)

@@ -169,7 +169,7 @@ fn summary(h: &mut String, r: &Report) {
          <tr><td>after calibration (final model)</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>\
          </table><p>Per point, the norm of the 3-D position error over the calibration data \
          (a deflection row: the measured deflection before, its residual after). Held-out: \
-         each configuration predicted by the model fitted without it.</p></section>",
+         each configuration predicted by the model fitted without it.</p>",
         r.nominal.rms_um,
         r.rms_um,
         um(r.heldout_rms_um),
@@ -181,8 +181,7 @@ fn summary(h: &mut String, r: &Report) {
         max
     );
     if let Some(o) = &r.orientation {
-        // Before `</section>`: the measured poses' orientations, apart.
-        h.truncate(h.len() - "</section>".len());
+        // The measured poses' orientations, apart.
         let _ = write!(
             h,
             "<table class=\"num\"><tr><th>orientation of {} poses</th><th>RMS [µrad]</th>\
@@ -190,10 +189,11 @@ fn summary(h: &mut String, r: &Report) {
              <tr><td>before calibration (nominal robot)</td><td>{:.1}</td><td></td><td></td></tr>\
              <tr><td>after calibration (final model)</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>\
              </table><p>Per pose, the angle of the rotation left between the measured and the \
-             predicted frame (<code>rx, ry, rz</code>); the points' errors above leave them out.</p></section>",
+             predicted frame (<code>rx, ry, rz</code>); the points' errors above leave them out.</p>",
             o.poses, o.nominal_rms_urad, o.rms_urad, o.mean_urad, o.max_urad
         );
     }
+    h.push_str("</section>");
 }
 
 fn closed_loop(h: &mut String, r: &Report) {

@@ -61,6 +61,9 @@ impl Engine<'_> {
         // (`parallel`; bit for bit the serial loop's), unless the problem
         // is too small for threads to pay.
         let groups = self.rows.configs.len();
+        // The points' configurations: a pose's orientation (a group of its
+        // own, after them) is not predicted here, in µm.
+        let points = self.rows.position_groups();
         let settings = self.fit_settings;
         // Residuals in metres again ([`Rows::unscaled`]).
         let rows = &self.rows;
@@ -91,7 +94,7 @@ impl Engine<'_> {
             (Some(_), Some(f)) => {
                 let small = groups * cols.len() * cols.len() * cols.len() < 200_000;
                 let threads = if small { 1 } else { crate::parallel::threads() };
-                crate::parallel::map(groups, threads, |g| {
+                crate::parallel::map(points, threads, |g| {
                     let x = f.estimate(g).ok()?;
                     Some(
                         by.of(g)
@@ -104,7 +107,7 @@ impl Engine<'_> {
             (Some(m), None) => {
                 let small = groups * groups * cols.len() * cols.len() < 20_000;
                 let threads = if small { 1 } else { crate::parallel::threads() };
-                crate::parallel::map(groups, threads, |g| {
+                crate::parallel::map(points, threads, |g| {
                     // An error is left to the refit below, which decides as
                     // before (a column dropped, no held-out error, or the
                     // error).
@@ -119,13 +122,7 @@ impl Engine<'_> {
             }
             (None, _) => Vec::new(),
         };
-        // The points' configurations: a pose's orientation (a group of its
-        // own, after them) is not predicted here, in µm.
-        let points = self.rows.position_groups();
-        for g in 0..groups {
-            if g >= points {
-                break;
-            }
+        for g in 0..points {
             if let Some(f) = &fast {
                 if window.as_ref().is_none_or(|w| g >= w.first + w.ok.len()) {
                     window = Some(f.groups(&by, OlsHeldOut::window(&by, g, WINDOW_ROWS)));

@@ -240,16 +240,11 @@ impl Layout<'_> {
             }
         }
         if let Some(r) = o.r_rad {
-            let rx = self
-                .header
-                .iter()
-                .position(|h| h.trim() == "rx")
-                .unwrap_or(0);
-            let name = self.header.get(rx).unwrap_or("rx");
             let err = |kind, message: String| {
+                let rx = (self.header.iter()).position(|h| h.trim() == "rx");
                 InputError::new(self.file, kind, message)
                     .at_line(line)
-                    .in_column(name)
+                    .in_column(rx.and_then(|k| self.header.get(k)).unwrap_or("rx"))
             };
             let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
             if angle > std::f64::consts::PI + 1e-9 {
