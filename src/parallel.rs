@@ -27,7 +27,7 @@
 //!   positioned read a piece).
 //!
 //! The answers are therefore bit for bit those of the serial loop, whatever
-//! the number of threads (tests: `tests` below, and `tests/cli_threads.rs`
+//! the number of threads (tests: `tests` below, and `tests/cli/threads.rs`
 //! on the TIAGo runs).
 //!
 //! The number of threads is `ROBCAL_THREADS` (a positive integer; `1` runs

@@ -12,7 +12,7 @@
 //!   URDF text and a rigid registration by SVD (no robcal code) give the
 //!   product's registration-only error to 1 nm.
 //!
-//! The closed loop's protocol run is pinned in `tests/cli_tiago.rs`.
+//! The closed loop's protocol run is pinned in `tests/cli/tiago.rs`.
 //! Everything is deterministic (Gauss–Newton to a 1 nm / 1 µrad step), so
 //! the pinned numbers have a rounding tolerance only: [`TOL_MM`].
 

@@ -13,11 +13,11 @@ payload rule) or an entry of ``Calibration.warnings`` (the report).
 
 Each test's docstring names the command-line test it mirrors:
 
-- ``tests/cli_input_errors.rs`` (22 tests), every one;
-- ``tests/cli_hostile.rs`` (7 tests): the ``import`` subcommands have no
+- ``tests/cli/input_errors.rs`` (22 tests), every one;
+- ``tests/cli/hostile.rs`` (7 tests): the ``import`` subcommands have no
   Python path, ``--max-data-mib`` is ``Job._native.read_measurements(path,
   max_bytes)``, ``--output``/``--plots`` are ``Calibration.write(dir)``;
-- ``tests/cli_apply.rs``, the error cases: ``robcal predict``/``compensate``
+- ``tests/cli/apply.rs``, the error cases: ``robcal predict``/``compensate``
   are ``Model.predict``/``Model.compensate`` (numpy, SI units), a model
   file is ``Model.load``/``Model.from_json``;
 - the clap usage errors are the Python argument checks (``ValueError``).
@@ -198,12 +198,12 @@ def fifo(tmp_path):
 
 
 # --------------------------------------------------------------------------
-# tests/cli_input_errors.rs
+# tests/cli/input_errors.rs
 
 
 @both
 def test_degrees_read_as_radians_is_an_error_naming_the_cell(tmp_path, via):
-    """mirrors cli_input_errors::degrees_read_as_radians_is_an_error_naming_the_cell"""
+    """mirrors cli::input_errors::degrees_read_as_radians_is_an_error_naming_the_cell"""
     setup = setup_file(tmp_path, units='angle = "rad"\nlength = "mm"')
     data = data_csv(tmp_path)
     with pytest.raises(robcal.InputError) as e:
@@ -212,7 +212,7 @@ def test_degrees_read_as_radians_is_an_error_naming_the_cell(tmp_path, via):
 
 
 def test_radians_read_as_degrees_warns(tmp_path):
-    """mirrors cli_input_errors::radians_read_as_degrees_warns_on_stderr:
+    """mirrors cli::input_errors::radians_read_as_degrees_warns_on_stderr:
     the reader's warning, then the engine's refusal (the positions do not
     match the nominal robot read in degrees)."""
     setup = setup_file(tmp_path)
@@ -235,7 +235,7 @@ def test_radians_read_as_degrees_warns(tmp_path):
 
 @both
 def test_millimetres_read_as_metres_is_an_error_naming_the_cell(tmp_path, via):
-    """mirrors cli_input_errors::millimetres_read_as_metres_is_an_error_naming_the_cell"""
+    """mirrors cli::input_errors::millimetres_read_as_metres_is_an_error_naming_the_cell"""
     setup = setup_file(tmp_path, units='angle = "deg"\nlength = "m"')
     data = data_csv(tmp_path)
     with pytest.raises(robcal.InputError) as e:
@@ -244,7 +244,7 @@ def test_millimetres_read_as_metres_is_an_error_naming_the_cell(tmp_path, via):
 
 
 def test_metres_read_as_millimetres_warns(tmp_path):
-    """mirrors cli_input_errors::metres_read_as_millimetres_warns_on_stderr"""
+    """mirrors cli::input_errors::metres_read_as_millimetres_warns_on_stderr"""
     setup = setup_file(tmp_path)
 
     def to_m(_, c):
@@ -264,7 +264,7 @@ def test_metres_read_as_millimetres_warns(tmp_path):
 
 @both
 def test_unknown_joint_column_lists_the_chain_joints(tmp_path, via):
-    """mirrors cli_input_errors::unknown_joint_column_lists_the_chain_joints"""
+    """mirrors cli::input_errors::unknown_joint_column_lists_the_chain_joints"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path)
     data.write_text(data.read_text().replace("a3", "A3", 1))
@@ -279,7 +279,7 @@ def test_unknown_joint_column_lists_the_chain_joints(tmp_path, via):
 
 @both
 def test_unknown_marker_names_line_and_column(tmp_path, via):
-    """mirrors cli_input_errors::unknown_marker_names_line_and_column"""
+    """mirrors cli::input_errors::unknown_marker_names_line_and_column"""
     setup = setup_file(tmp_path)
 
     def marker4(line, c):
@@ -295,7 +295,7 @@ def test_unknown_marker_names_line_and_column(tmp_path, via):
 
 @both
 def test_unpaired_loaded_row_names_its_line(tmp_path, via):
-    """mirrors cli_input_errors::unpaired_loaded_row_names_its_line"""
+    """mirrors cli::input_errors::unpaired_loaded_row_names_its_line"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path, lambda line, c: c if line != 2 else None)
     with pytest.raises(robcal.InputError) as e:
@@ -309,7 +309,7 @@ def test_unpaired_loaded_row_names_its_line(tmp_path, via):
 @pytest.mark.parametrize("bad", ["nan", "inf", "-Infinity", "1e999"])
 @both
 def test_non_finite_value_names_line_and_column(tmp_path, bad, via):
-    """mirrors cli_input_errors::non_finite_value_names_line_and_column
+    """mirrors cli::input_errors::non_finite_value_names_line_and_column
     (a DataFrame holds the float pandas read, so its cell text is numpy's)"""
     setup = setup_file(tmp_path)
 
@@ -328,7 +328,7 @@ def test_non_finite_value_names_line_and_column(tmp_path, bad, via):
 
 
 def test_too_few_configurations_for_the_declared_model(tmp_path):
-    """mirrors cli_input_errors::too_few_configurations_for_the_declared_model"""
+    """mirrors cli::input_errors::too_few_configurations_for_the_declared_model"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path, lambda _, c: c if c[0] == "1" and c[2] == "1" else None)
     with pytest.raises(robcal.CalibrationError) as e:
@@ -342,7 +342,7 @@ def test_too_few_configurations_for_the_declared_model(tmp_path):
 
 
 def test_two_configurations_are_enough_for_the_paper_model(tmp_path):
-    """mirrors cli_input_errors::two_configurations_are_enough_for_the_paper_model"""
+    """mirrors cli::input_errors::two_configurations_are_enough_for_the_paper_model"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path, lambda _, c: c if int(c[0]) <= 2 else None)
     result = calibrate(setup, data)
@@ -352,7 +352,7 @@ def test_two_configurations_are_enough_for_the_paper_model(tmp_path):
 
 
 def test_a_compliance_without_loaded_rows_is_an_error_naming_it(tmp_path):
-    """mirrors cli_input_errors::a_compliance_without_loaded_rows_is_an_error_naming_it"""
+    """mirrors cli::input_errors::a_compliance_without_loaded_rows_is_an_error_naming_it"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path, lambda _, c: c if c[COL_LOAD] == "0" else None)
     with pytest.raises(robcal.CalibrationError) as e:
@@ -361,7 +361,7 @@ def test_a_compliance_without_loaded_rows_is_an_error_naming_it(tmp_path):
 
 
 def test_a_load_centre_of_mass_on_a_joint_axis_is_an_error_naming_the_compliance(tmp_path):
-    """mirrors cli_input_errors::a_load_centre_of_mass_on_a_joint_axis_is_an_error_naming_the_compliance"""
+    """mirrors cli::input_errors::a_load_centre_of_mass_on_a_joint_axis_is_an_error_naming_the_compliance"""
     setup = setup_file(tmp_path, replace=[("com = [0.25, 0.0, 0.30]", "com = [0.0, 0.0, 0.30]")])
     with pytest.raises(robcal.CalibrationError) as e:
         calibrate(setup, data_csv(tmp_path))
@@ -369,7 +369,7 @@ def test_a_load_centre_of_mass_on_a_joint_axis_is_an_error_naming_the_compliance
 
 
 def test_a_negative_compliance_beyond_three_sigma_is_an_error(tmp_path):
-    """mirrors cli_input_errors::a_negative_compliance_beyond_three_sigma_is_an_error"""
+    """mirrors cli::input_errors::a_negative_compliance_beyond_three_sigma_is_an_error"""
     setup = setup_file(tmp_path, replace=[("com = [0.25, 0.0, 0.30]", "com = [-0.25, 0.0, 0.30]")])
     with pytest.raises(robcal.CalibrationError) as e:
         calibrate(setup, data_csv(tmp_path))
@@ -377,7 +377,7 @@ def test_a_negative_compliance_beyond_three_sigma_is_an_error(tmp_path):
 
 
 def test_one_joint_column_in_radians_is_an_error_naming_the_column(tmp_path):
-    """mirrors cli_input_errors::one_joint_column_in_radians_is_an_error_naming_the_column"""
+    """mirrors cli::input_errors::one_joint_column_in_radians_is_an_error_naming_the_column"""
     setup = setup_file(tmp_path)
 
     def a3_rad(_, c):
@@ -390,7 +390,7 @@ def test_one_joint_column_in_radians_is_an_error_naming_the_column(tmp_path):
 
 
 def test_positions_in_centimetres_are_an_error(tmp_path):
-    """mirrors cli_input_errors::positions_in_centimetres_are_an_error"""
+    """mirrors cli::input_errors::positions_in_centimetres_are_an_error"""
     setup = setup_file(tmp_path)
 
     def to_cm(_, c):
@@ -403,7 +403,7 @@ def test_positions_in_centimetres_are_an_error(tmp_path):
 
 
 def test_validation_with_no_point_is_an_error(tmp_path):
-    """mirrors cli_input_errors::validation_with_no_point_is_an_error"""
+    """mirrors cli::input_errors::validation_with_no_point_is_an_error"""
     setup = setup_file(tmp_path)
     data = data_csv(tmp_path)
     unloaded = data_csv(tmp_path, lambda _, c: c if c[COL_LOAD] == "0" else None, name="unloaded.csv")
@@ -413,7 +413,7 @@ def test_validation_with_no_point_is_an_error(tmp_path):
 
 
 def test_validation_reports_points_mean_and_max(calibration, job):
-    """mirrors cli_input_errors::validation_reports_points_mean_and_max"""
+    """mirrors cli::input_errors::validation_reports_points_mean_and_max"""
     result = job.calibrate(DATA, diagnose=False, validate=DATA)
     val = result.validation
     assert val["points"] == 270
@@ -424,7 +424,7 @@ def test_validation_reports_points_mean_and_max(calibration, job):
 
 
 def test_a_fit_stopped_at_max_iter_says_so(job, calibration):
-    """mirrors cli_input_errors::a_fit_stopped_at_max_iter_says_so
+    """mirrors cli::input_errors::a_fit_stopped_at_max_iter_says_so
     (exit 1 is NotACalibrationError, the report kept in .result;
     --accept-unconverged is accept_unconverged=True)"""
     with pytest.raises(robcal.NotACalibrationError) as e:
@@ -445,7 +445,7 @@ def test_a_fit_stopped_at_max_iter_says_so(job, calibration):
 
 @both
 def test_absurd_numbers_name_the_value_and_where_in_the_data(tmp_path, via):
-    """mirrors cli_input_errors::absurd_numbers_name_the_value_and_where (the data's)"""
+    """mirrors cli::input_errors::absurd_numbers_name_the_value_and_where (the data's)"""
     setup = setup_file(tmp_path)
 
     def load(line, c):
@@ -483,7 +483,7 @@ ABSURD_SETUPS = [
 
 @pytest.mark.parametrize("edit", ABSURD_SETUPS, ids=["gravity", "marker"])
 def test_absurd_numbers_name_the_value_and_where_in_the_setup(tmp_path, edit):
-    """mirrors cli_input_errors::absurd_numbers_name_the_value_and_where (the setup's)"""
+    """mirrors cli::input_errors::absurd_numbers_name_the_value_and_where (the setup's)"""
     a, b, says = edit
     setup = setup_file(tmp_path, replace=[(a, b)])
     with pytest.raises(robcal.InputError) as e:
@@ -496,7 +496,7 @@ def test_absurd_numbers_name_the_value_and_where_in_the_setup(tmp_path, edit):
 
 
 def test_absurd_numbers_in_a_setup_dict_name_the_key():
-    """mirrors cli_input_errors::absurd_numbers_name_the_value_and_where
+    """mirrors cli::input_errors::absurd_numbers_name_the_value_and_where
     (a setup given as a dict: ``<setup>`` stands for the file)"""
     tomllib = pytest.importorskip("tomllib")
     urdf = URDF.read_text()
@@ -530,7 +530,7 @@ BAD_SETTINGS = [
     "settings,says", BAD_SETTINGS, ids=["lambda-negative", "lambda-nan", "max-iter-0", "method", "reregister"]
 )
 def test_a_bad_setting_is_a_value_error_naming_it(job, settings, says):
-    """mirrors cli_input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
+    """mirrors cli::input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
     (``--lambda -1``, ``--max-iter 0``; ``--method``, ``--reregister``
     without ``--validate``)"""
     with pytest.raises(ValueError) as e:
@@ -539,7 +539,7 @@ def test_a_bad_setting_is_a_value_error_naming_it(job, settings, says):
 
 
 def test_a_missing_or_unknown_argument_is_a_type_error():
-    """mirrors cli_input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
+    """mirrors cli::input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
     ("not provided: --data <DATA>", and an argument clap does not know)"""
     with pytest.raises(TypeError) as e:
         robcal.calibrate(SETUP)  # type: ignore[call-arg]
@@ -557,7 +557,7 @@ def test_a_missing_or_unknown_argument_is_a_type_error():
 
 @pytest.mark.parametrize("tolerance_um", [float("nan"), 0.0, -1.0, float("inf")])
 def test_a_bad_tolerance_is_a_value_error(model, tolerance_um):
-    """mirrors cli_input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
+    """mirrors cli::input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
     (``compensate --tolerance-um nan``: "must be a finite number > 0")"""
     p = model.predict(Q1, 250.0, COM, marker=1)
     with pytest.raises(ValueError) as e:
@@ -569,7 +569,7 @@ def test_a_bad_tolerance_is_a_value_error(model, tolerance_um):
 
 
 def test_a_load_on_the_joint_axis_is_named_as_such_not_as_no_load(tmp_path):
-    """mirrors cli_input_errors::a_load_on_the_joint_axis_is_named_as_such_not_as_no_load"""
+    """mirrors cli::input_errors::a_load_on_the_joint_axis_is_named_as_such_not_as_no_load"""
     setup = setup_file(tmp_path, replace=[("com = [0.25, 0.0, 0.30]\n", "")])
     with pytest.raises(robcal.CalibrationError) as e:
         calibrate(setup, data_csv(tmp_path))
@@ -581,7 +581,7 @@ def test_a_load_on_the_joint_axis_is_named_as_such_not_as_no_load(tmp_path):
 
 
 def test_several_loads_against_one_unloaded_point_are_warned_about(tmp_path):
-    """mirrors cli_input_errors::several_loads_against_one_unloaded_point_are_warned_about
+    """mirrors cli::input_errors::several_loads_against_one_unloaded_point_are_warned_about
     (the reader's warning, and the report's)"""
     setup = setup_file(tmp_path)
     out = []
@@ -605,11 +605,11 @@ def test_several_loads_against_one_unloaded_point_are_warned_about(tmp_path):
 
 
 # --------------------------------------------------------------------------
-# tests/cli_hostile.rs
+# tests/cli/hostile.rs
 
 
 def test_deep_urdf_nesting_is_an_error_not_an_abort(tmp_path):
-    """mirrors cli_hostile::deep_urdf_nesting_is_an_error_not_an_abort"""
+    """mirrors cli::hostile::deep_urdf_nesting_is_an_error_not_an_abort"""
     deep = "<x>" * 15_000 + "</x>" * 15_000
     u = urdf_with(tmp_path, "deep.urdf", deep)
     with pytest.raises(robcal.InputError) as e:
@@ -622,7 +622,7 @@ def test_deep_urdf_nesting_is_an_error_not_an_abort(tmp_path):
 
 
 def test_a_urdf_of_too_many_elements_is_refused(tmp_path):
-    """mirrors cli_hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
+    """mirrors cli::hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
     (30,000 fixed links: more than 100000 XML elements)"""
     chain = "".join(
         f'<link name="e{i}"/><joint name="f{i}" type="fixed"><parent link="{"tool0" if i == 0 else f"e{i - 1}"}"/>'
@@ -637,7 +637,7 @@ def test_a_urdf_of_too_many_elements_is_refused(tmp_path):
 
 
 def test_a_urdf_over_the_size_limit_is_refused_before_reading(tmp_path):
-    """mirrors cli_hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
+    """mirrors cli::hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
     (a 17 MiB file: over the limit)"""
     big = tmp_path / "big.urdf"
     with open(big, "wb") as f:
@@ -648,7 +648,7 @@ def test_a_urdf_over_the_size_limit_is_refused_before_reading(tmp_path):
 
 
 def test_a_large_valid_urdf_calibrates(tmp_path):
-    """mirrors cli_hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
+    """mirrors cli::hostile::large_urdfs_are_refused_early_and_large_valid_ones_parse_in_linear_time
     (20,000 side links are a valid robot)"""
     side = "".join(
         f'<link name="s{i}"/><joint name="g{i}" type="fixed"><parent link="base_link"/>'
@@ -663,7 +663,7 @@ def test_a_large_valid_urdf_calibrates(tmp_path):
 @pytest.mark.parametrize("kind", ["fifo", "device", "directory"])
 @pytest.mark.parametrize("role", ["data", "validate", "setup", "robot", "model"])
 def test_fifos_devices_and_directories_are_not_read(tmp_path, fifo, kind, role):
-    """mirrors cli_hostile::fifos_devices_and_directories_are_not_read
+    """mirrors cli::hostile::fifos_devices_and_directories_are_not_read
     (``--data``, ``--validate``, ``--setup``, the setup's robot; and the
     model file of ``predict``/``compensate``: ``Model.load``)"""
     path = {"fifo": fifo, "device": Path("/dev/zero"), "directory": tmp_path}[kind]
@@ -686,7 +686,7 @@ def test_fifos_devices_and_directories_are_not_read(tmp_path, fifo, kind, role):
 
 
 def test_a_data_file_over_the_limit_is_refused_before_reading(job):
-    """mirrors cli_hostile::a_data_file_over_the_limit_is_refused_before_reading
+    """mirrors cli::hostile::a_data_file_over_the_limit_is_refused_before_reading
     (``--max-data-mib 0``)"""
     with pytest.raises(robcal.InputError) as e:
         job._native.read_measurements(str(DATA), 0)
@@ -727,7 +727,7 @@ def _collide(tmp_path: Path, case: str):
     ["data named model.json", "setup named robot.urdf", "urdf named report.html", "validation data named model.json"],
 )
 def test_outputs_never_replace_inputs(tmp_path, case):
-    """mirrors cli_hostile::outputs_never_replace_inputs_links_fifos_or_devices
+    """mirrors cli::hostile::outputs_never_replace_inputs_links_fifos_or_devices
     ("in.csv: cannot write: is an input of this command"): ``write(dir)``
     into the directory holding an input named like an output"""
     result, out, inp = _collide(tmp_path, case)
@@ -740,7 +740,7 @@ def test_outputs_never_replace_inputs(tmp_path, case):
 
 
 def test_outputs_never_replace_an_input_by_another_spelling(tmp_path, monkeypatch):
-    """mirrors cli_hostile::outputs_never_replace_inputs_links_fifos_or_devices
+    """mirrors cli::hostile::outputs_never_replace_inputs_links_fifos_or_devices
     ("./in.csv: cannot write: is the input in.csv")"""
     (tmp_path / "sub").mkdir()
     shutil.copy(DATA, tmp_path / "model.json")
@@ -758,7 +758,7 @@ def test_outputs_never_replace_an_input_by_another_spelling(tmp_path, monkeypatc
 
 @pytest.mark.parametrize("kind", ["symlink", "fifo", "directory"])
 def test_outputs_never_replace_links_fifos_or_directories(tmp_path, calibration, kind):
-    """mirrors cli_hostile::outputs_never_replace_inputs_links_fifos_or_devices
+    """mirrors cli::hostile::outputs_never_replace_inputs_links_fifos_or_devices
     ("symbolic link", "refusing to replace")"""
     out = tmp_path / "out"
     out.mkdir()
@@ -786,7 +786,7 @@ def test_outputs_never_replace_links_fifos_or_directories(tmp_path, calibration,
 
 
 def test_plots_are_all_or_nothing(tmp_path):
-    """mirrors cli_hostile::plots_are_all_or_nothing (a directory named
+    """mirrors cli::hostile::plots_are_all_or_nothing (a directory named
     like the naive model's compensator figure in the way: nothing written)"""
     result = robcal.calibrate(KR / "setup-naive.toml", DATA)
     assert "01_compensator_a2.svg" in result.figures
@@ -802,7 +802,7 @@ def test_plots_are_all_or_nothing(tmp_path):
 
 
 def test_outputs_onto_an_input_file_are_refused(tmp_path):
-    """mirrors cli_hostile::plots_are_all_or_nothing (``--plots`` onto an
+    """mirrors cli::hostile::plots_are_all_or_nothing (``--plots`` onto an
     input file: exit 1, the input still a file)"""
     data = data_csv(tmp_path)
     before = data.read_bytes()
@@ -815,7 +815,7 @@ def test_outputs_onto_an_input_file_are_refused(tmp_path):
 
 
 def test_outputs_onto_an_input_file_say_why(tmp_path):
-    """mirrors cli_hostile::plots_are_all_or_nothing (the command's message
+    """mirrors cli::hostile::plots_are_all_or_nothing (the command's message
     for ``--output``/``--plots`` onto a file)"""
     data = data_csv(tmp_path)
     result = robcal.calibrate(SETUP, data, diagnose=False)
@@ -825,7 +825,7 @@ def test_outputs_onto_an_input_file_say_why(tmp_path):
 
 
 def test_errors_quote_little_and_say_where(tmp_path, job):
-    """mirrors cli_hostile::errors_quote_little_and_say_where"""
+    """mirrors cli::hostile::errors_quote_little_and_say_where"""
     lines = DATA.read_text().splitlines()
     cells = lines[1].split(",")
     cells[COL_X] = "7" * 1_000_000
@@ -845,7 +845,7 @@ def test_errors_quote_little_and_say_where(tmp_path, job):
 
 
 def test_a_table_quotes_little_and_says_where(job):
-    """mirrors cli_hostile::errors_quote_little_and_say_where (a column of
+    """mirrors cli::hostile::errors_quote_little_and_say_where (a column of
     text cells given as a mapping)"""
     pd = pytest.importorskip("pandas")
     df = pd.read_csv(DATA)
@@ -860,11 +860,11 @@ def test_a_table_quotes_little_and_says_where(job):
 
 
 # --------------------------------------------------------------------------
-# tests/cli_apply.rs: predict, compensate and the model file
+# tests/cli/apply.rs: predict, compensate and the model file
 
 
 def test_compensate_refuses_targets_of_the_wrong_width(model):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     ("bad.csv:1: column 'x_mm'": a target that is not x, y, z in m)"""
     with pytest.raises(ValueError) as e:
         model.compensate(np.zeros((3, 2)), Q3, LOADS3, COM, marker=1)
@@ -880,7 +880,7 @@ def test_compensate_refuses_targets_of_the_wrong_width(model):
     ids=["negative", "1e7"],
 )
 def test_compensate_refuses_an_impossible_load(model, load, says):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     ("column 'load_kg': negative mass", "1e7 kg is beyond 1e5 kg")"""
     p = model.predict(Q1, 250.0, COM, marker=1)
     with pytest.raises(ValueError) as e:
@@ -892,7 +892,7 @@ def test_compensate_refuses_an_impossible_load(model, load, says):
 
 
 def test_compensate_refuses_a_centre_of_mass_beyond_any_robot(model):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     ("column 'com_z_m': -2e4 m is beyond 1e4 m in magnitude")"""
     p = model.predict(Q1, 250.0, COM, marker=1)
     with pytest.raises(ValueError) as e:
@@ -901,7 +901,7 @@ def test_compensate_refuses_a_centre_of_mass_beyond_any_robot(model):
 
 
 def test_compensate_refuses_a_joint_beyond_any_robot(model):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     ("column 'a2_rad': 1e300 rad is beyond 1e4 rad in magnitude")"""
     p = model.predict(Q1, 250.0, COM, marker=1)
     q = Q1.copy()
@@ -912,8 +912,8 @@ def test_compensate_refuses_a_joint_beyond_any_robot(model):
 
 
 def test_a_joint_beyond_any_robot_is_quoted_short(model):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
-    and cli_hostile::errors_quote_little_and_say_where (1e300 rad, said short)"""
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
+    and cli::hostile::errors_quote_little_and_say_where (1e300 rad, said short)"""
     q = Q1.copy()
     q[1] = 1e300
     with pytest.raises(ValueError) as e:
@@ -923,7 +923,7 @@ def test_a_joint_beyond_any_robot_is_quoted_short(model):
 
 
 def test_a_target_out_of_reach_is_a_calibration_error(model):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     ("bad.csv:2: cannot reach the target": a target 10 m away)"""
     p = model.predict(Q1, 250.0, COM, marker=1)
     p[0] = 10.0
@@ -933,7 +933,7 @@ def test_a_target_out_of_reach_is_a_calibration_error(model):
 
 
 def test_a_report_json_is_not_a_model_file(tmp_path):
-    """mirrors cli_apply::compensated_commands_put_the_markers_on_their_targets
+    """mirrors cli::apply::compensated_commands_put_the_markers_on_their_targets
     (a report JSON: "no 'predictor' section")"""
     report = tmp_path / "report.json"
     report.write_text('{"rms_um": 1}')
@@ -970,7 +970,7 @@ EDITS = ["unit", "misspelt", "twice"]
 
 @pytest.mark.parametrize("edit", EDITS)
 def test_a_model_file_edited_out_of_its_format_is_refused(tmp_path, model_json, edit):
-    """mirrors cli_apply::a_model_file_edited_out_of_its_format_is_refused"""
+    """mirrors cli::apply::a_model_file_edited_out_of_its_format_is_refused"""
     compact = "".join(model_json.split())
     law = '"units":{"backlash":"rad","compliance":"rad/(N*m)"'
     assert law in compact, "the writer's units moved"
@@ -1002,7 +1002,7 @@ def test_a_model_file_edited_out_of_its_format_is_refused(tmp_path, model_json, 
 
 
 def test_a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning(model, model_json):
-    """mirrors cli_apply::a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning
+    """mirrors cli::apply::a_payload_far_beyond_the_calibrations_is_predicted_with_a_warning
     (the row is numbered from 0, not the file's line)"""
     assert '"heaviest_payload_kg": 275.8' in model_json, "the paper's load"
     with warnings.catch_warnings():
@@ -1087,7 +1087,7 @@ def test_predict_takes_integers_and_float32(model):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1e5])
 def test_predict_refuses_non_finite_joint_values_naming_the_cell(model, bad):
-    """numpy: mirrors cli_input_errors::non_finite_value_names_line_and_column
+    """numpy: mirrors cli::input_errors::non_finite_value_names_line_and_column
     for an array (the column and row of the value)"""
     q = Q3.copy()
     q[2, 4] = bad
@@ -1169,7 +1169,7 @@ def test_one_load_is_taken_for_every_row(model, call):
 
 
 def test_a_nan_in_joint_values_of_several_rows_is_named_with_the_default_load(model):
-    """numpy: mirrors cli_input_errors::non_finite_value_names_line_and_column
+    """numpy: mirrors cli::input_errors::non_finite_value_names_line_and_column
     (the NaN named, not the default load_kg)"""
     q = Q3.copy()
     q[2, 4] = np.nan
@@ -1180,7 +1180,7 @@ def test_a_nan_in_joint_values_of_several_rows_is_named_with_the_default_load(mo
 
 @pytest.mark.parametrize("call", ["calibrate-max_iter", "compensate-max_iter", "predict-marker"])
 def test_a_negative_count_is_a_value_error_naming_it(job, model, call):
-    """mirrors cli_input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
+    """mirrors cli::input_errors::a_missing_or_bad_argument_is_a_usage_error_named_on_its_one_line
     ("--max-iter: must be a whole number from 1 to"), for -1"""
     with pytest.raises(ValueError) as e:
         if call == "calibrate-max_iter":
@@ -1262,7 +1262,7 @@ def columns() -> dict:
 
 
 def test_a_dataframe_with_a_nan_cell_names_line_and_column(job, tmp_path):
-    """mirrors cli_input_errors::non_finite_value_names_line_and_column:
+    """mirrors cli::input_errors::non_finite_value_names_line_and_column:
     a NaN cell of a DataFrame is the CSV reader's error, line and column"""
     pd = pytest.importorskip("pandas")
     df = pd.read_csv(DATA)
@@ -1297,7 +1297,7 @@ def test_a_dataframe_with_a_nan_cell_names_line_and_column(job, tmp_path):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_a_mapping_with_a_non_finite_value_names_line_and_column(job, columns, bad):
-    """mirrors cli_input_errors::non_finite_value_names_line_and_column (a mapping of columns)"""
+    """mirrors cli::input_errors::non_finite_value_names_line_and_column (a mapping of columns)"""
     cols = dict(columns)
     y = cols["y"].copy()
     y[3] = bad
@@ -1378,7 +1378,7 @@ def test_an_empty_table_is_an_input_error(job, columns):
 
 
 def test_a_negative_load_in_a_table_names_the_cell(job, columns):
-    """numpy: mirrors cli_apply's "column 'load_kg': negative mass" for a table"""
+    """numpy: mirrors cli::apply's "column 'load_kg': negative mass" for a table"""
     cols = dict(columns)
     cols["load_kg"] = -cols["load_kg"]
     with pytest.raises(robcal.InputError) as e:
@@ -1405,7 +1405,7 @@ def test_a_datetime_column_is_refused(job, columns):
 
 @pytest.mark.parametrize("via", ["mapping", "csv"])
 def test_a_cell_with_a_line_end_is_still_a_one_line_error(job, columns, tmp_path, via):
-    """mirrors cli_hostile::errors_quote_little_and_say_where (one line
+    """mirrors cli::hostile::errors_quote_little_and_say_where (one line
     whatever the cell holds)"""
     if via == "mapping":
         cols = dict(columns)
@@ -1426,7 +1426,7 @@ def test_a_cell_with_a_line_end_is_still_a_one_line_error(job, columns, tmp_path
 
 
 # --------------------------------------------------------------------------
-# robcal.plan (mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written)
+# robcal.plan (mirrors cli::plan::what_cannot_be_planned_is_one_line_and_nothing_written)
 
 
 @pytest.mark.parametrize(
@@ -1448,14 +1448,14 @@ def test_a_cell_with_a_line_end_is_still_a_one_line_error(job, columns, tmp_path
     ],
 )
 def test_what_cannot_be_planned_is_one_line(kwargs, error, expect):
-    """mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written"""
+    """mirrors cli::plan::what_cannot_be_planned_is_one_line_and_nothing_written"""
     with pytest.raises(error) as e:
         robcal.plan(SETUP, **kwargs)
     message(e, expect)
 
 
 def test_a_pool_that_is_not_one_names_the_value():
-    """mirrors cli_plan::what_cannot_be_planned_is_one_line_and_nothing_written
+    """mirrors cli::plan::what_cannot_be_planned_is_one_line_and_nothing_written
     (the pool with a NaN)"""
     with pytest.raises(ValueError) as e:
         robcal.plan(SETUP, 1, pool=[[0, 0, 0, 0, float("nan"), 0]])

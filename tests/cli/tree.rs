@@ -11,8 +11,7 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 
-#[path = "common/round_trip.rs"]
-mod round_trip;
+use crate::round_trip;
 
 /// One joint of the reference model: name, parent link, child link, origin
 /// xyz \[m\], rpy \[rad\], axis (`None`: fixed).

@@ -4,8 +4,7 @@
 //! when the numbers only look suspicious (wrong units). Built from the
 //! KR-270 job (`data/kr270`), each case changing one thing.
 
-mod common;
-use common::Scratch;
+use crate::common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -7,8 +7,7 @@
 //! Skipped with the reason on a plain clone (no `../shared`); with
 //! `ROBCAL_REQUIRE_SHARED=1` (CI) a missing `../shared` fails.
 
-mod common;
-use common::Scratch;
+use crate::common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -3,9 +3,8 @@
 //! or hangs (a case that has not ended after `HANG_GUARD` fails instead of
 //! blocking the suite; it is a guard, not a speed measurement).
 
+use crate::common::Scratch;
 use std::io::Read;
-mod common;
-use common::Scratch;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
