@@ -511,7 +511,10 @@ pub fn run(
     let noise = ConfigNoises::new(configs.clone(), sigma, weights);
     let mut residuals = std::mem::take(&mut current.residuals);
     let turned = residuals.split_off(points.min(residuals.len()));
-    let orientation = crate::calibrate::report::OrientationErrors::of(&turned_nominal, &turned);
+    let mut orientation = crate::calibrate::report::OrientationErrors::of(&turned_nominal, &turned);
+    if let Some(o) = &mut orientation {
+        o.identified = e.identified_by_orientations(&current.params)?;
+    }
     let mut row_errors = RowErrors::new(
         configs,
         e.names.markers.iter().map(|m| m.0).collect(),

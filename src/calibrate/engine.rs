@@ -696,6 +696,42 @@ impl Engine<'_> {
             .collect())
     }
 
+    /// Of `params`, those the rows determine but the points alone would
+    /// leave out: what a pose's orientation adds (issue 53), by the one
+    /// independence test ([`crate::estimate::rank`]) on the unit-weight
+    /// sums of every row and of the points' rows alone (the orientations'
+    /// groups, the last ones, weighed 0). Empty without orientations.
+    ///
+    /// # Errors
+    /// As [`Engine::design`].
+    pub fn identified_by_orientations(
+        &self,
+        params: &[Param],
+    ) -> Result<Vec<String>, CalibrationError> {
+        let oriented = self.rows.orientation_groups;
+        if oriented == 0 || params.is_empty() {
+            return Ok(Vec::new());
+        }
+        let d = self.design(params)?;
+        let all: Vec<usize> = (0..params.len()).collect();
+        let Some(every) = d.identifiability(&[], &all) else {
+            return Ok(Vec::new());
+        };
+        let points = d.groups.saturating_sub(oriented);
+        let weights: Vec<nalgebra::Vector3<f64>> = (0..d.groups)
+            .map(|g| nalgebra::Vector3::repeat(if g < points { 1.0 } else { 0.0 }))
+            .collect();
+        let view = crate::calibrate::design::view::View::new(&d, &all, None, None);
+        let alone = crate::estimate::Reweightable::weighted(&view, &weights, None)
+            .ok()
+            .and_then(|acc| acc.identifiable().ok());
+        Ok(all
+            .iter()
+            .filter(|&&i| every.kept[i] && alone.as_ref().is_none_or(|a| !a.kept[i]))
+            .map(|&i| self.names.name(&params[i]))
+            .collect())
+    }
+
     /// The report's parameters of `f`: geometric ones as their values in
     /// the model (the base as its pose in the measurement frame).
     pub fn parameters(&self, f: &Fitted) -> Vec<Parameter> {

@@ -245,7 +245,7 @@ impl Nominal {
 /// of each pose's rotation left \[µrad\], before calibration (the nominal
 /// robot, as [`Nominal`]) and after. The points' errors ([`Nominal`],
 /// [`Report::rms_um`]) leave them out.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct OrientationErrors {
     /// Poses with an orientation.
     pub poses: usize,
@@ -257,6 +257,9 @@ pub struct OrientationErrors {
     pub mean_urad: f64,
     /// Largest after \[µrad\].
     pub max_urad: f64,
+    /// The parameters the points alone would leave out and the
+    /// orientations determine ([`crate::calibrate::engine::Engine::identified_by_orientations`]).
+    pub identified: Vec<String>,
 }
 
 impl OrientationErrors {
@@ -276,6 +279,7 @@ impl OrientationErrors {
             rms_urad: a.rms_um,
             mean_urad: a.mean_um,
             max_urad: a.max_um,
+            identified: Vec::new(),
         })
     }
 }
@@ -286,7 +290,15 @@ impl fmt::Display for OrientationErrors {
             f,
             "{} poses: RMS {:.1} urad before, {:.1} urad after (mean {:.1}, max {:.1} urad)",
             self.poses, self.nominal_rms_urad, self.rms_urad, self.mean_urad, self.max_urad
-        )
+        )?;
+        if !self.identified.is_empty() {
+            write!(
+                f,
+                "; they determine {}, which the points alone leave out",
+                self.identified.join(", ")
+            )?;
+        }
+        Ok(())
     }
 }
 

@@ -192,6 +192,14 @@ fn summary(h: &mut String, r: &Report) {
              predicted frame (<code>rx, ry, rz</code>); the points' errors above leave them out.</p>",
             o.poses, o.nominal_rms_urad, o.rms_urad, o.mean_urad, o.max_urad
         );
+        if !o.identified.is_empty() {
+            let names: Vec<String> = o.identified.iter().map(|n| esc(n)).collect();
+            let _ = write!(
+                h,
+                "<p>The orientations determine {}, which the points alone leave out.</p>",
+                names.join(", ")
+            );
+        }
     }
     h.push_str("</section>");
 }

@@ -29,7 +29,7 @@ pub struct ReportJson<'a> {
     /// The measured poses' orientations (`rx, ry, rz`; an extension):
     /// absent for points alone.
     #[serde(skip_serializing_if = "Option::is_none")]
-    orientation: Option<OrientationJson>,
+    orientation: Option<OrientationJson<'a>>,
     parameters: Vec<ParameterJson<'a>>,
     rms_um: f64,
     heldout_rms_um: Option<f64>,
@@ -71,12 +71,15 @@ struct NominalJson {
 }
 
 #[derive(Serialize)]
-struct OrientationJson {
+struct OrientationJson<'a> {
     poses: usize,
     nominal_rms_urad: f64,
     rms_urad: f64,
     mean_urad: f64,
     max_urad: f64,
+    /// The parameters the points alone would leave out and the
+    /// orientations determine.
+    identified: &'a [String],
 }
 
 #[derive(Serialize)]
@@ -175,12 +178,13 @@ impl<'a> ReportJson<'a> {
                 mean_um: r.nominal.mean_um,
                 max_um: r.nominal.max_um,
             },
-            orientation: r.orientation.map(|o| OrientationJson {
+            orientation: r.orientation.as_ref().map(|o| OrientationJson {
                 poses: o.poses,
                 nominal_rms_urad: o.nominal_rms_urad,
                 rms_urad: o.rms_urad,
                 mean_urad: o.mean_urad,
                 max_urad: o.max_urad,
+                identified: &o.identified,
             }),
             parameters: r
                 .parameters
