@@ -247,7 +247,7 @@ pub fn run_poses(data: &[u8]) {
         return;
     };
     for split in [None, Some("cal".to_owned())] {
-        let options = robcal::io::poses::ImportOptions { split };
+        let options = robcal::io::poses::ImportOptions { split, euler: None };
         match robcal::io::poses::convert_poses(text, POSES_FILE, &options) {
             Ok((csv, summary)) => {
                 let mut lines = csv.lines();

@@ -251,6 +251,7 @@ fn a_urdf_that_models_the_marker_gets_its_own_marker_calibrated() {
         let out = std::env::temp_dir().join(format!("robcal-ctu-{s}-{}.csv", std::process::id()));
         let options = robcal::io::poses::ImportOptions {
             split: Some(s.into()),
+            ..Default::default()
         };
         robcal::io::poses::import_poses(
             shared.join("datasets/ctu_motoman/ctu_motoman.csv"),

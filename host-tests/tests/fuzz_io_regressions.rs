@@ -243,7 +243,7 @@ fn structured_pose_files_keep_the_invariants() {
             text.push('\n');
         }
         run_poses(text.as_bytes());
-        let options = robcal::io::poses::ImportOptions { split: None };
+        let options = robcal::io::poses::ImportOptions::default();
         match robcal::io::poses::convert_poses(&text, "f.csv", &options) {
             Ok(_) => ok += 1,
             Err(_) => err += 1,

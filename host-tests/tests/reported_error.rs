@@ -73,6 +73,7 @@ fn real(data: &Path, set: &str, split: &str, setup: &str) -> (Job, Measurements)
     let out = dir.join(format!("{set}-{split}.csv"));
     let options = robcal::io::poses::ImportOptions {
         split: Some(split.to_owned()),
+        ..Default::default()
     };
     robcal::io::poses::import_poses(data.join(set).join(format!("{set}.csv")), &out, &options)
         .unwrap();

@@ -506,11 +506,24 @@ def import_figaroh_mocap(input: PathLike, output: PathLike, job: Optional[Job] =
     )
 
 
-def import_poses(input: PathLike, output: PathLike, split: Optional[str] = None) -> tuple[int, int]:
-    """``robcal import poses INPUT OUTPUT [--split NAME]``: the real data
-    sets' wide pose CSV into the contract's CSV (rad, m). Returns
-    ``(poses, rows)``."""
-    return _robcal.import_poses(os.fspath(input), os.fspath(output), split)
+def import_poses(
+    input: PathLike,
+    output: PathLike,
+    split: Optional[str] = None,
+    euler: Optional[str] = None,
+) -> tuple[int, int]:
+    """``robcal import poses INPUT OUTPUT [--split NAME] [--euler CONVENTION]``:
+    the real data sets' wide pose CSV, or a 6-D export (a marker's
+    orientation as ``qw<i>, qx<i>, qy<i>, qz<i>`` or Euler angles
+    ``rx<i>_deg, ry<i>_deg, rz<i>_deg``), into the contract's CSV (rad, m;
+    an orientation as the rotation vector ``rx, ry, rz``). ``euler`` names
+    the Euler convention: ``"fixed-xyz"`` (R = Rz Ry Rx) or ``"moving-xyz"``
+    (R = Rx Ry Rz). Plausibility findings (gimbal lock, radians in a
+    ``_deg`` column) are ``RobcalWarning``s. Returns ``(poses, rows)``."""
+    poses, rows, found = _robcal.import_poses(os.fspath(input), os.fspath(output), split, euler)
+    for w in found:
+        _warnings.warn(w, RobcalWarning, stacklevel=2)
+    return poses, rows
 
 
 # --------------------------------------------------------------------------

@@ -1074,22 +1074,29 @@ fn import_figaroh_mocap(
     Ok((r.postures, r.rows))
 }
 
-/// `robcal import poses`: the real data sets' wide pose CSV into the
-/// contract CSV at `output` (rad, m), only the rows of `split` when given;
-/// `output` untouched on error. Returns `(poses, rows)`.
+/// `robcal import poses`: the real data sets' wide pose CSV (and 6-D
+/// exports: quaternion or Euler columns per marker) into the contract CSV
+/// at `output` (rad, m), only the rows of `split` when given; `euler`
+/// names the Euler columns' convention (`"fixed-xyz"`, `"moving-xyz"`, …);
+/// `output` untouched on error. Returns `(poses, rows, warnings)`.
 #[pyfunction]
-#[pyo3(signature = (input, output, split = None))]
+#[pyo3(signature = (input, output, split = None, euler = None))]
 fn import_poses(
     py: Python<'_>,
     input: PathBuf,
     output: PathBuf,
     split: Option<String>,
-) -> PyResult<(usize, usize)> {
-    let options = robcal::io::poses::ImportOptions { split };
+    euler: Option<String>,
+) -> PyResult<(usize, usize, Vec<String>)> {
+    let euler = euler
+        .map(|e| e.parse::<robcal::io::poses::Euler>())
+        .transpose()
+        .map_err(pyo3::exceptions::PyValueError::new_err)?;
+    let options = robcal::io::poses::ImportOptions { split, euler };
     let r = py
         .detach(|| robcal::io::poses::import_poses(&input, &output, &options))
         .map_err(input_error)?;
-    Ok((r.poses, r.rows))
+    Ok((r.poses, r.rows, r.warnings))
 }
 
 /// The native module.

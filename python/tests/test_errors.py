@@ -1528,3 +1528,29 @@ def test_huge_limits_are_said_short():
         robcal.plan(SETUP, 4, load_kg=[250.0], limits={"a1": (-1e300, 1e300)})
     message(e, "-1e300")
     assert len(str(e.value)) < 200
+
+
+def test_six_d_exports_import_with_their_convention(tmp_path):
+    """mirrors host-tests poses::hostile_six_d_exports: Euler angles need
+    their convention; gimbal lock is a warning; a quaternion off unit norm
+    is an error naming line and column"""
+    euler = tmp_path / "euler.csv"
+    euler.write_text(
+        "j1_rad,x1_m,y1_m,z1_m,rx1_deg,ry1_deg,rz1_deg\n"
+        "0.1,1,2,3,10,20,30\n0.2,1,2,3,10,89.99,30\n"
+    )
+    out = tmp_path / "out.csv"
+    with pytest.raises(robcal.InputError) as e:
+        robcal.import_poses(euler, out)
+    message(e, "--euler")
+    with pytest.raises(ValueError) as e:
+        robcal.import_poses(euler, out, euler="xyz")
+    message(e, "fixed-xyz")
+    with pytest.warns(robcal.RobcalWarning, match="gimbal lock"):
+        assert robcal.import_poses(euler, out, euler="fixed-xyz") == (2, 2)
+    assert out.read_text().splitlines()[0].endswith(",x,y,z,rx,ry,rz")
+    quat = tmp_path / "quat.csv"
+    quat.write_text("j1_rad,x1_m,y1_m,z1_m,qw1,qx1,qy1,qz1\n0.1,1,2,3,0.9,0.1,0,0\n")
+    with pytest.raises(robcal.InputError) as e:
+        robcal.import_poses(quat, out)
+    message(e, "quat.csv:2: column 'qw1'")

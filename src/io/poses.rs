@@ -16,7 +16,12 @@
 //!   written as the contract's `sx, sy, sz` (7.2);
 //! - `pose_id` (integer): the contract's `config`; without it the 1-based
 //!   row number;
-//! - `split`: kept or not by [`ImportOptions::split`].
+//! - `split`: kept or not by [`ImportOptions::split`];
+//! - 6-D exports: marker `i`'s orientation as a unit quaternion `qw<i>,
+//!   qx<i>, qy<i>, qz<i>` (a motion-capture rigid body) or as Euler angles
+//!   `rx<i>_deg, ry<i>_deg, rz<i>_deg` (or `_rad`; a laser tracker's 6-D
+//!   probe), composed as [`ImportOptions::euler`] names ([`Euler`]);
+//!   written as the contract's rotation vector `rx, ry, rz` \[rad\].
 //!
 //! Every other column (`test_set`, `toolbox_excluded`, a total uncertainty
 //! `u<i>_m`, a temperature, …) is not needed by the model: it is left out
@@ -37,7 +42,13 @@
 //! wrong length, a joint cell that is empty or not a finite number, a
 //! marker with some but not all of its three cells, a negative or
 //! non-finite uncertainty, a `pose_id` that is not an integer or repeats,
-//! `--split` without a `split` column, and no point left to write. Nothing
+//! `--split` without a `split` column, and no point left to write; for
+//! orientations, a quaternion whose norm is off 1 by more than
+//! [`QUATERNION_NORM_TOLERANCE`], some of a marker's orientation columns or
+//! cells but not all, two orientations of one marker, Euler angles without
+//! a convention, an orientation without its point, an angle beyond ±2π in a
+//! `_rad` column. Warnings ([`ImportedPoses::warnings`]): Euler angles near
+//! gimbal lock ([`GIMBAL_LOCK_RAD`]), `_deg` columns all within ±π. Nothing
 //! is written when the input is rejected.
 
 use std::collections::HashSet;
@@ -45,12 +56,76 @@ use std::path::{Path, PathBuf};
 
 use crate::io::{error::ErrorKind, error::InputError};
 
-/// What to keep.
+/// What to keep, and how to read it.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ImportOptions {
     /// Keep only the rows whose `split` column equals this; `None`: all rows.
     pub split: Option<String>,
+    /// How the Euler angle columns compose; required when the file has
+    /// them (there is no default: a convention guessed is the classic
+    /// error of a 6-D export).
+    pub euler: Option<Euler>,
 }
+
+/// How the Euler angle columns `rx<i>_deg, ry<i>_deg, rz<i>_deg` (or
+/// `_rad`) make a rotation. Each angle turns about the axis its column
+/// names; the convention is their order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Euler {
+    /// `R = Rz(rz) Ry(ry) Rx(rx)`: about the fixed x, then y, then z
+    /// (the same rotation as about the moving z, y′, x″). URDF's `rpy`,
+    /// SpatialAnalyzer's "Fixed XYZ" (a Leica T-Mac's usual export), KUKA's
+    /// A, B, C (A = rz, B = ry, C = rx). Names: `fixed-xyz`, `moving-zyx`.
+    FixedXyz,
+    /// `R = Rx(rx) Ry(ry) Rz(rz)`: about the moving x, y′, z″ (the same
+    /// rotation as about the fixed z, then y, then x). Names: `moving-xyz`,
+    /// `fixed-zyx`.
+    MovingXyz,
+}
+
+impl core::str::FromStr for Euler {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "fixed-xyz" | "moving-zyx" => Ok(Self::FixedXyz),
+            "moving-xyz" | "fixed-zyx" => Ok(Self::MovingXyz),
+            _ => Err(format!(
+                "'{s}' is not an Euler convention: fixed-xyz (= moving-zyx: R = Rz Ry Rx) \
+                 or moving-xyz (= fixed-zyx: R = Rx Ry Rz)"
+            )),
+        }
+    }
+}
+
+impl Euler {
+    /// The rotation vector (axis × angle, \[rad\], angle in \[0, π\]) of
+    /// the angles `[rx, ry, rz]` \[rad\] about x, y and z.
+    pub fn rotation_vector(self, [rx, ry, rz]: [f64; 3]) -> [f64; 3] {
+        use nalgebra::{UnitQuaternion, Vector3};
+        let about = |axis: Vector3<f64>, a: f64| {
+            UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), a)
+        };
+        let (x, y, z) = (
+            about(Vector3::x(), rx),
+            about(Vector3::y(), ry),
+            about(Vector3::z(), rz),
+        );
+        let r = match self {
+            Self::FixedXyz => z * y * x,
+            Self::MovingXyz => x * y * z,
+        };
+        r.scaled_axis().into()
+    }
+}
+
+/// Euler angles whose middle angle `ry` is within this of ±90° \[rad\]
+/// (0.1°) are near gimbal lock: `rx` and `rz` turn about nearly one axis,
+/// and the exporter's split between them is ill-conditioned (a warning).
+pub const GIMBAL_LOCK_RAD: f64 = 0.1 * core::f64::consts::PI / 180.0;
+
+/// A quaternion whose norm is farther than this from 1 is not a rotation
+/// (an error); closer, it is normalised (an export's rounding).
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
 /// Summary of an import.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -65,8 +140,14 @@ pub struct ImportedPoses {
     pub joints: Vec<String>,
     /// Whether `sx, sy, sz` were written.
     pub has_sigma: bool,
+    /// Rows written with an orientation (`rx, ry, rz`, a rotation vector in
+    /// rad).
+    pub orientations: usize,
     /// Columns not needed by the model, in file order.
     pub left_out: Vec<String>,
+    /// Plausibility findings that did not stop the import (gimbal lock,
+    /// radians in a `_deg` column), one line each.
+    pub warnings: Vec<String>,
 }
 
 /// How a header cell is read.
@@ -78,19 +159,47 @@ enum Col {
     /// Marker index into `markers`, axis 0..3.
     Pos(usize, usize),
     Sigma(usize, usize),
+    /// Quaternion component `w, x, y, z` (0..4).
+    Quat(usize, usize),
+    /// Euler angle about `x, y, z` (0..3); `true`: in degrees.
+    Euler(usize, usize, bool),
     Other,
+}
+
+/// `qw3` → (0, 3) … `qz3` → (3, 3).
+fn quaternion_marker(name: &str) -> Option<(usize, u32)> {
+    let rest = name.strip_prefix('q')?;
+    let c = ["w", "x", "y", "z"]
+        .iter()
+        .position(|a| rest.starts_with(a))?;
+    Some((c, marker_id(&rest[1..])?))
+}
+
+/// `rx3_deg` → (0, 3, true); `rz3_rad` → (2, 3, false).
+fn euler_marker(name: &str) -> Option<(usize, u32, bool)> {
+    let rest = name.strip_prefix('r')?;
+    let axis = ["x", "y", "z"].iter().position(|a| rest.starts_with(a))?;
+    let (digits, deg) = match rest[1..].strip_suffix("_deg") {
+        Some(d) => (d, true),
+        None => (rest[1..].strip_suffix("_rad")?, false),
+    };
+    Some((axis, marker_id(digits)?, deg))
+}
+
+/// A marker id of 1 to 6 digits, not 0.
+fn marker_id(digits: &str) -> Option<u32> {
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 6 {
+        return None;
+    }
+    let id: u32 = digits.parse().ok()?;
+    (id > 0).then_some(id)
 }
 
 /// `x3_m` → (0, 3); `std_y12_m` → (1, 12) with `prefix = "std_"`.
 fn axis_marker(name: &str, prefix: &str) -> Option<(usize, u32)> {
     let rest = name.strip_prefix(prefix)?.strip_suffix("_m")?;
     let axis = ["x", "y", "z"].iter().position(|a| rest.starts_with(a))?;
-    let digits = &rest[1..];
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 6 {
-        return None;
-    }
-    let id: u32 = digits.parse().ok()?;
-    (id > 0).then_some((axis, id))
+    Some((axis, marker_id(&rest[1..])?))
 }
 
 fn is_total_uncertainty(name: &str) -> bool {
@@ -191,6 +300,10 @@ pub fn convert_poses(
             axis_marker(name, "u").or_else(|| axis_marker(name, "std_"))
         {
             Col::Sigma(marker_slot(&mut markers, id), axis)
+        } else if let Some((c, id)) = quaternion_marker(name) {
+            Col::Quat(marker_slot(&mut markers, id), c)
+        } else if let Some((axis, id, deg)) = euler_marker(name) {
+            Col::Euler(marker_slot(&mut markers, id), axis, deg)
         } else if is_total_uncertainty(name) {
             Col::Other
         } else if let Some(joint) = name
@@ -273,6 +386,65 @@ pub fn convert_poses(
             "no marker column (x<i>_m, y<i>_m, z<i>_m)".into(),
         ));
     }
+    // Every marker's orientation: a quaternion or Euler angles, all their
+    // columns or none.
+    let mut rot_cols = Vec::with_capacity(markers.len());
+    for (k, &id) in markers.iter().enumerate() {
+        let quat: Vec<Option<usize>> = (0..4)
+            .map(|c| cols.iter().position(|&col| col == Col::Quat(k, c)))
+            .collect();
+        let euler: Vec<Option<(usize, bool)>> = (0..3)
+            .map(|a| {
+                cols.iter().enumerate().find_map(|(i, &col)| match col {
+                    Col::Euler(m, axis, deg) if m == k && axis == a => Some((i, deg)),
+                    _ => None,
+                })
+            })
+            .collect();
+        let has_quat = quat.iter().any(Option::is_some);
+        let has_euler = euler.iter().any(Option::is_some);
+        let missing = |what: String| err(ErrorKind::MissingColumn, 1, what);
+        let rot = match (has_quat, has_euler) {
+            (false, false) => None,
+            (true, true) => {
+                return Err(missing(format!(
+                    "marker {id} has both a quaternion (q*{id}) and Euler angles (r*{id}_deg): \
+                     give one orientation"
+                )))
+            }
+            (true, false) => {
+                let all: Option<Vec<usize>> = quat.into_iter().collect();
+                let all = all.ok_or_else(|| {
+                    missing(format!(
+                        "marker {id} has not all of qw{id}, qx{id}, qy{id}, qz{id}"
+                    ))
+                })?;
+                Some(Rot::Quat([all[0], all[1], all[2], all[3]]))
+            }
+            (false, true) => {
+                let all: Option<Vec<(usize, bool)>> = euler.into_iter().collect();
+                let all = all.ok_or_else(|| {
+                    missing(format!(
+                        "marker {id} has not all of rx{id}, ry{id}, rz{id} (_deg or _rad)"
+                    ))
+                })?;
+                let convention = options.euler.ok_or_else(|| {
+                    missing(format!(
+                        "marker {id} has Euler angles: name their convention with --euler \
+                         (fixed-xyz: R = Rz Ry Rx, or moving-xyz: R = Rx Ry Rz)"
+                    ))
+                    .in_column(header[all[0].0].clone())
+                })?;
+                Some(Rot::Euler(
+                    convention,
+                    [all[0].0, all[1].0, all[2].0],
+                    [all[0].1, all[1].1, all[2].1],
+                ))
+            }
+        };
+        rot_cols.push(rot);
+    }
+    let has_rot = rot_cols.iter().any(Option::is_some);
     let has_sigma = sigma_cols.iter().any(Option::is_some);
     let split_col = cols.iter().position(|&c| c == Col::Split);
     let id_col = cols.iter().position(|&c| c == Col::PoseId);
@@ -293,7 +465,13 @@ pub fn convert_poses(
     if has_sigma {
         out.push_str(",sx,sy,sz");
     }
+    if has_rot {
+        out.push_str(",rx,ry,rz");
+    }
     out.push('\n');
+    let mut gimbal: Option<(usize, usize)> = None;
+    let mut deg_max = vec![0.0_f64; header.len()];
+    let mut orientations = 0;
     let mut seen_ids = HashSet::new();
     let mut seen_markers = vec![false; markers.len()];
     let (mut poses, mut rows) = (0, 0);
@@ -371,9 +549,45 @@ pub fn convert_poses(
                 number(pos_cols[k][1])?,
                 number(pos_cols[k][2])?,
             ];
+            let r = match rot_cols[k] {
+                None => None,
+                Some(rot) => {
+                    let columns = rot.columns();
+                    let cells = (columns.iter())
+                        .map(|&c| number(c))
+                        .collect::<Result<Vec<_>, _>>()?;
+                    match cells.iter().position(Option::is_none) {
+                        Some(_) if cells.iter().all(Option::is_none) => None,
+                        Some(i) => {
+                            return Err(err(
+                                ErrorKind::Syntax,
+                                line,
+                                format!(
+                                    "marker {id}: some of its orientation's cells empty, not all"
+                                ),
+                            )
+                            .in_column(header[columns[i]].clone()))
+                        }
+                        None => {
+                            let values: Vec<f64> = cells.into_iter().flatten().collect();
+                            let r = rot.rotation_vector(&values).map_err(|(i, kind, why)| {
+                                err(kind, line, why).in_column(header[columns[i]].clone())
+                            })?;
+                            Some(r)
+                        }
+                    }
+                }
+            };
             let p = match p {
                 [Some(x), Some(y), Some(z)] => [x, y, z],
-                [None, None, None] => continue,
+                [None, None, None] if r.is_none() => continue,
+                [None, None, None] => {
+                    return Err(err(
+                        ErrorKind::Syntax,
+                        line,
+                        format!("marker {id}: an orientation without its point (x, y, z empty)"),
+                    ))
+                }
                 _ => {
                     return Err(err(
                         ErrorKind::Syntax,
@@ -417,6 +631,29 @@ pub fn convert_poses(
                 };
                 let _ = write!(out, ",{},{},{}", sigma[0], sigma[1], sigma[2]);
             }
+            if has_rot {
+                match r {
+                    Some(r) => {
+                        let _ = write!(out, ",{},{},{}", r[0], r[1], r[2]);
+                        orientations += 1;
+                    }
+                    None => out.push_str(",,,"),
+                }
+            }
+            if let Some(Rot::Euler(_, c, deg)) = rot_cols[k] {
+                for (&c, &deg) in c.iter().zip(&deg) {
+                    if let (true, Some(v)) = (deg, number(c)?) {
+                        deg_max[c] = deg_max[c].max(v.abs());
+                    }
+                }
+                if let Some(ry) = number(c[1])? {
+                    let ry = if deg[1] { ry.to_radians() } else { ry };
+                    if ry.cos().abs() < GIMBAL_LOCK_RAD.sin() {
+                        let g = gimbal.get_or_insert((0, line));
+                        g.0 += 1;
+                    }
+                }
+            }
             out.push('\n');
             rows += 1;
             any = true;
@@ -440,6 +677,26 @@ pub fn convert_poses(
         .map(|(&m, _)| m)
         .collect();
     used.sort_unstable();
+    let mut warnings = Vec::new();
+    if let Some((n, line)) = gimbal {
+        warnings.push(format!(
+            "{}: {n} orientation(s) with ry within 0.1° of ±90° (the first on line {line}): \
+             at gimbal lock rx and rz turn about one axis, and an exporter's split between \
+             them is ill-conditioned; the rotations are written as the angles give them",
+            file.display()
+        ));
+    }
+    let small: Vec<&str> = (header.iter().zip(&deg_max))
+        .filter(|&(h, &m)| euler_marker(h).is_some_and(|e| e.2) && m <= core::f64::consts::PI)
+        .map(|(h, _)| h.as_str())
+        .collect();
+    if !small.is_empty() && orientations >= 3 {
+        warnings.push(format!(
+            "{}: every value of {} is within ±π: radians in a _deg column?",
+            file.display(),
+            small.join(", ")
+        ));
+    }
     Ok((
         out,
         ImportedPoses {
@@ -448,9 +705,75 @@ pub fn convert_poses(
             markers: used,
             joints,
             has_sigma,
+            orientations,
             left_out,
+            warnings,
         },
     ))
+}
+
+/// Where a marker's orientation is in a row.
+#[derive(Debug, Clone, Copy)]
+enum Rot {
+    /// Columns of `w, x, y, z`.
+    Quat([usize; 4]),
+    /// The convention, the columns about `x, y, z`, and whether each is in
+    /// degrees.
+    Euler(Euler, [usize; 3], [bool; 3]),
+}
+
+impl Rot {
+    /// Its columns, in the order [`Rot::rotation_vector`] takes the values.
+    fn columns(self) -> Vec<usize> {
+        match self {
+            Self::Quat(c) => c.to_vec(),
+            Self::Euler(_, c, _) => c.to_vec(),
+        }
+    }
+
+    /// The rotation vector \[rad\] of a row's values (in the order of
+    /// [`Rot::columns`]).
+    ///
+    /// # Errors
+    /// `(index of the value, kind, why)`: a quaternion whose norm is off 1
+    /// by more than [`QUATERNION_NORM_TOLERANCE`]; an angle in a `_rad`
+    /// column beyond ±2π.
+    fn rotation_vector(self, v: &[f64]) -> Result<[f64; 3], (usize, ErrorKind, String)> {
+        match self {
+            Self::Quat(_) => {
+                let q = nalgebra::Quaternion::new(v[0], v[1], v[2], v[3]);
+                let norm = q.norm();
+                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                    return Err((
+                        0,
+                        ErrorKind::InvalidValue,
+                        format!(
+                            "(qw, qx, qy, qz) has norm {norm:.6}: not a unit quaternion \
+                             (a rotation's norm is 1; within {QUATERNION_NORM_TOLERANCE} it is \
+                             normalised)"
+                        ),
+                    ));
+                }
+                Ok(nalgebra::UnitQuaternion::from_quaternion(q)
+                    .scaled_axis()
+                    .into())
+            }
+            Self::Euler(convention, _, deg) => {
+                let mut a = [0.0; 3];
+                for (i, (a, (&v, &deg))) in a.iter_mut().zip(v.iter().zip(&deg)).enumerate() {
+                    if !deg && v.abs() > core::f64::consts::TAU + 1e-9 {
+                        return Err((
+                            i,
+                            ErrorKind::Units,
+                            format!("{v} rad is beyond ±2π: degrees in a _rad column?"),
+                        ));
+                    }
+                    *a = if deg { v.to_radians() } else { v };
+                }
+                Ok(convention.rotation_vector(a))
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -460,6 +783,7 @@ mod tests {
     fn opts(split: Option<&str>) -> ImportOptions {
         ImportOptions {
             split: split.map(str::to_owned),
+            euler: None,
         }
     }
 

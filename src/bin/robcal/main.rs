@@ -102,7 +102,10 @@ enum ImportCommand {
     /// The wide one-row-per-pose layout of the real data sets
     /// (`<urdf joint>_rad`/`_m`, `x<i>_m, y<i>_m, z<i>_m` per marker,
     /// optional `pose_id`, `split`, per-axis uncertainty `ux<i>_m` or
-    /// `std_x<i>_m`): one row per measured point, SI units (rad, m).
+    /// `std_x<i>_m`) and 6-D exports (a marker's orientation as a
+    /// quaternion `qw<i>, qx<i>, qy<i>, qz<i>` or Euler angles
+    /// `rx<i>_deg, ry<i>_deg, rz<i>_deg`): one row per measured point, SI
+    /// units (rad, m), an orientation as the rotation vector `rx, ry, rz`.
     Poses {
         /// Pose CSV.
         input: PathBuf,
@@ -111,6 +114,12 @@ enum ImportCommand {
         /// Keep only the rows whose `split` column is NAME.
         #[arg(long, value_name = "NAME")]
         split: Option<String>,
+        /// How Euler angle columns compose: `fixed-xyz` (= `moving-zyx`:
+        /// R = Rz Ry Rx; URDF rpy, SpatialAnalyzer/T-Mac "Fixed XYZ", KUKA
+        /// A B C) or `moving-xyz` (= `fixed-zyx`: R = Rx Ry Rz). Required
+        /// with Euler columns.
+        #[arg(long, value_name = "CONVENTION")]
+        euler: Option<robcal::io::poses::Euler>,
     },
 }
 
@@ -310,10 +319,14 @@ fn main() -> ExitCode {
             input,
             output,
             split,
+            euler,
         }) => {
-            let options = robcal::io::poses::ImportOptions { split };
+            let options = robcal::io::poses::ImportOptions { split, euler };
             robcal::io::poses::import_poses(&input, &output, &options)
                 .map(|n| {
+                    for w in &n.warnings {
+                        eprintln!("robcal: warning: {w}");
+                    }
                     if !n.left_out.is_empty() {
                         eprintln!(
                             "robcal: left out (not needed by the model): {}",
@@ -326,7 +339,12 @@ fn main() -> ExitCode {
                         n.poses,
                         n.rows,
                         markers.join(", "),
-                        if n.has_sigma { "; with sx, sy, sz" } else { "" },
+                        match (n.has_sigma, n.orientations) {
+                            (false, 0) => String::new(),
+                            (true, 0) => "; with sx, sy, sz".into(),
+                            (false, r) => format!("; {r} with rx, ry, rz"),
+                            (true, r) => format!("; with sx, sy, sz; {r} with rx, ry, rz"),
+                        },
                         output.display()
                     );
                 })

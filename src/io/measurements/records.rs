@@ -57,6 +57,9 @@ impl Layout<'_> {
             marker: self.markers.first().copied().unwrap_or(1),
             ..Observation::default()
         };
+        // Empty orientation cells: all of a row's (a point without its
+        // orientation) or none.
+        let (mut empty_rot, mut empty_sigma_rot) = (Vec::new(), Vec::new());
         for ((&cell, &col), name) in record.iter().zip(self.cols).zip(self.header.iter()) {
             let cerr = |kind, message: String| {
                 InputError::new(self.file, kind, message)
@@ -67,7 +70,12 @@ impl Layout<'_> {
                 continue;
             }
             if cell.is_empty() {
-                return Err(cerr(ErrorKind::Syntax, "empty cell".into()));
+                match col {
+                    Col::Rot(_) => empty_rot.push(name),
+                    Col::SigmaRot(_) => empty_sigma_rot.push(name),
+                    _ => return Err(cerr(ErrorKind::Syntax, "empty cell".into())),
+                }
+                continue;
             }
             match col {
                 Col::Ignored => {}
@@ -238,6 +246,35 @@ impl Layout<'_> {
                     o.sigma_rad.get_or_insert([0.0; 3])[k] = v;
                 }
             }
+        }
+        if let Some(&name) = empty_rot.first().filter(|_| o.r_rad.is_some()) {
+            return Err(InputError::new(
+                self.file,
+                ErrorKind::Syntax,
+                "empty cell: a row's rx, ry, rz are all given (a pose) or all empty (a point)",
+            )
+            .at_line(line)
+            .in_column(name));
+        }
+        let sigma_empty = empty_sigma_rot.first();
+        if let Some(&name) = sigma_empty.filter(|_| o.r_rad.is_some() || o.sigma_rad.is_some()) {
+            return Err(InputError::new(
+                self.file,
+                ErrorKind::Syntax,
+                "empty cell: srx, sry, srz go with an orientation, all three",
+            )
+            .at_line(line)
+            .in_column(name));
+        }
+        if o.r_rad.is_none() && o.sigma_rad.is_some() {
+            let srx = (self.header.iter()).position(|h| h.trim() == "srx");
+            return Err(InputError::new(
+                self.file,
+                ErrorKind::Syntax,
+                "srx, sry, srz without an orientation (rx, ry, rz empty)",
+            )
+            .at_line(line)
+            .in_column(srx.and_then(|k| self.header.get(k)).unwrap_or("srx")));
         }
         if let Some(r) = o.r_rad {
             let err = |kind, message: String| {
