@@ -443,3 +443,46 @@ fn hostile_six_d_exports() {
         .expect_err("two orientations of one marker");
     assert!(e.to_string().contains("one orientation"), "{e}");
 }
+
+/// `--validate` on pose files (issue 53): the orientations of the
+/// training poses as the report gives them (the model's prediction, not
+/// the fit's residuals, within 1 %), and those of new poses of the same
+/// robot at the instrument's noise (√3 · 30 µrad = 52 µrad).
+#[test]
+fn validation_reports_the_orientations() {
+    let Some((arm, job)) = ur10() else {
+        return;
+    };
+    let mut rng = Rng::new(0x7661_6c69);
+    let truth = Truth::draw(&mut rng, 6);
+    let read = |text: String| {
+        parse_measurements(text.as_bytes(), "poses.csv", &job.robot, &job.setup).expect("parse")
+    };
+    let train = read(csv(&arm, &truth, INSTRUMENT, 40, true, &mut rng));
+    let test = read(csv(&arm, &truth, INSTRUMENT, 200, true, &mut rng));
+    let settings = Settings {
+        diagnose: false,
+        heldout: false,
+        ..Settings::default()
+    };
+    let r = calibrate::calibrate(&job, &train, &settings, &mut |_| {}).expect("calibrate");
+    let own = calibrate::validate(&r.model, &job, &train).expect("validate");
+    let (fit, own) = (
+        r.orientation.expect("orientation"),
+        own.orientation.expect("poses"),
+    );
+    eprintln!("poses: validation on the training poses {own:?}, the fit's {fit}");
+    assert_eq!(own.poses, 40);
+    assert!(
+        (own.rms_urad / fit.rms_urad - 1.0).abs() < 0.01,
+        "{own:?} vs {fit}"
+    );
+    let new = calibrate::validate(&r.model, &job, &test).expect("validate");
+    let o = new.orientation.expect("poses");
+    eprintln!(
+        "poses: validation on 200 new poses {o:?}, points {:.4} mm",
+        new.rms_mm
+    );
+    assert_eq!(o.poses, 200);
+    assert!((40.0..65.0).contains(&o.rms_urad), "{o:?}");
+}

@@ -160,6 +160,26 @@ pub struct Validation {
     /// Whether the errors above are those after the re-registration
     /// (`--reregister`), not those as measured.
     pub reregistered: bool,
+    /// The file's measured orientations (6-D poses, `rx, ry, rz`) against
+    /// the model's, as measured (a re-registration moves the points);
+    /// `None` without orientations.
+    pub orientation: Option<OrientationValidation>,
+}
+
+/// A validation file's measured orientations against the calibrated
+/// model's ([`crate::calibrate::outputs::predict::Predictor::predict_marker_rotation`]):
+/// the angle of each pose's rotation left, `|log(R_meas R_predᵀ)|`
+/// \[µrad\].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OrientationValidation {
+    /// Poses with an orientation.
+    pub poses: usize,
+    /// RMS \[µrad\].
+    pub rms_urad: f64,
+    /// Mean \[µrad\].
+    pub mean_urad: f64,
+    /// Largest \[µrad\].
+    pub max_urad: f64,
 }
 
 /// The measurement frame of a validation file re-fitted, everything of the
@@ -762,6 +782,14 @@ impl fmt::Display for Report {
                     g.rms_mm,
                     g.shift_mm(),
                     g.turn_mrad()
+                )?;
+            }
+            if let Some(o) = &v.orientation {
+                writeln!(
+                    f,
+                    "validation: orientation of {} poses: RMS {:.1} urad, mean {:.1} urad, \
+                     max {:.1} urad",
+                    o.poses, o.rms_urad, o.mean_urad, o.max_urad
                 )?;
             }
             if v.interpolated_points > 0 {

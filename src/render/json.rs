@@ -129,6 +129,18 @@ struct ValidationJson<'a> {
     /// fixed; absent with fewer than three absolute points.
     #[serde(skip_serializing_if = "Option::is_none")]
     reregistration: Option<ReregistrationJson<'a>>,
+    /// (An extension.) The file's measured orientations against the
+    /// model's, µrad; absent without `rx, ry, rz`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orientation: Option<ValidationOrientationJson>,
+}
+
+#[derive(Serialize)]
+struct ValidationOrientationJson {
+    poses: usize,
+    rms_urad: f64,
+    mean_urad: f64,
+    max_urad: f64,
 }
 
 #[derive(Serialize)]
@@ -273,6 +285,12 @@ impl<'a> ValidationJson<'a> {
                 translation_std_mm: g.translation_std_mm,
                 rotation_mrad: g.rotation_mrad,
                 rotation_std_mrad: g.rotation_std_mrad,
+            }),
+            orientation: v.orientation.map(|o| ValidationOrientationJson {
+                poses: o.poses,
+                rms_urad: o.rms_urad,
+                mean_urad: o.mean_urad,
+                max_urad: o.max_urad,
             }),
         }
     }

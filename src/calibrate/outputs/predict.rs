@@ -97,6 +97,12 @@ pub struct Predictor {
     /// model), not under the payload alone: `false` for a model file
     /// written before (its geometry absorbed that bending).
     bending_own_weight: bool,
+    /// The identified tool frame's rotation ([`Geometry::tool_rotation`]):
+    /// a pose's measured frame is the marker's link frame turned by it
+    /// (identity for a model file, which does not hold it).
+    ///
+    /// [`Geometry::tool_rotation`]: crate::calibrate::params::geometry::Geometry::tool_rotation
+    tool_rotation: nalgebra::Rotation3<f64>,
 }
 
 /// The equilibrium settings of a prediction (the rows' own).
@@ -158,6 +164,7 @@ impl Predictor {
                 .zip(model.temperature_ref_c)
                 .map(|((p, v), t)| (v * model.names.unit(p).si, t)),
             bending_own_weight: true,
+            tool_rotation: g.tool_rotation.to_rotation_matrix(),
         }
     }
 
@@ -191,6 +198,7 @@ impl Predictor {
             heaviest_payload_kg: None,
             thermal: None,
             bending_own_weight: true,
+            tool_rotation: nalgebra::Rotation3::identity(),
         }
     }
 
@@ -331,6 +339,7 @@ impl Predictor {
             heaviest_payload_kg: self.heaviest_payload_kg,
             thermal: self.thermal,
             bending_own_weight: self.bending_own_weight,
+            tool_rotation: self.tool_rotation,
         }
     }
 
@@ -608,6 +617,39 @@ impl Predictor {
         let (chain, tool) = self.marker_chain(m)?;
         Ok(self.predict_on(chain, &tool, q, Some(payload), false)?
             - self.predict_on(chain, &tool, q, None, false)?)
+    }
+
+    /// The orientation of marker index `m`'s link frame, turned by the
+    /// identified tool frame, at command `q` \[measurement frame\]: what
+    /// a 6-D instrument measures beside [`Self::predict_marker`]'s point.
+    /// The robot at its equilibrium under its own weight, the links'
+    /// bending turning the frame to first order (its turn read from the
+    /// bending at the point and at two probes 1 m away, as the
+    /// calibration's orientation rows read every column's:
+    /// [`crate::calibrate::rows::orientation::turn`]).
+    ///
+    /// # Errors
+    /// As [`Self::predict_marker`].
+    pub fn predict_marker_rotation(
+        &self,
+        m: usize,
+        q: &[f64],
+    ) -> Result<nalgebra::Rotation3<f64>, Error> {
+        use crate::calibrate::rows::orientation::{turn, PROBES};
+        let (chain, tool) = self.marker_chain(m)?;
+        self.check_q(q)?;
+        let loading = self.loading(None)?;
+        let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
+        let p = eq.frames.point_m(&tool);
+        let bent = |d: Vector3<f64>| self.bending_m(chain, &eq.frames, &(p + d), &loading);
+        let w = turn(
+            &bent(Vector3::zeros())?,
+            &bent(PROBES[0])?,
+            &bent(PROBES[1])?,
+        );
+        Ok(nalgebra::Rotation3::new(w)
+            * eq.frames.tip().rotation.to_rotation_matrix()
+            * self.tool_rotation)
     }
 
     fn marker_chain(&self, m: usize) -> Result<(&Chain<f64, J>, Vector3<f64>), Error> {

@@ -13,7 +13,11 @@
 //! expansion predicts an absolute point at the temperature the file gives
 //! it ([`Predictor::at_temperature`]); a deflection at the reference (its
 //! loaded and unloaded points are measured moments apart: the
-//! temperature's change between them is not carried over).
+//! temperature's change between them is not carried over). A 6-D pose's
+//! orientation is validated apart, in µrad
+//! ([`crate::calibrate::report::OrientationValidation`]): the frame
+//! [`Predictor::predict_marker_rotation`] predicts against the measured
+//! one, as measured.
 //!
 //! **Re-registration.** A file measured with the tracker set up elsewhere
 //! differs from the calibration's frame by a rigid transform, which moves
@@ -39,7 +43,7 @@ use crate::calibrate::fit::residuals::rms_um;
 use crate::calibrate::outputs::predict::{Payload, Predictor};
 use crate::calibrate::params::geometry::{Geometry, J};
 use crate::calibrate::report::calibrated::CalibratedModel;
-use crate::calibrate::report::{Reregistration, Validation};
+use crate::calibrate::report::{OrientationValidation, Reregistration, Validation};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
@@ -81,8 +85,12 @@ pub fn validate_with(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
-    // The points (a pose's orientation is not validated here: module
-    // `rows::orientation`).
+    // The points; a pose's orientation apart (module `rows::orientation`),
+    // when the calibration took absolute rows.
+    let poses: Vec<_> = (rows.rows.iter())
+        .filter(|r| r.orientation && model.kinds.absolute)
+        .map(|r| (usize::from(r.marker), r.q.clone(), r.measured, r.line()))
+        .collect();
     rows.rows.retain(|r| match r.kind {
         RowKind::Deflection => model.kinds.deflections,
         RowKind::Absolute => model.kinds.absolute && !r.orientation,
@@ -155,6 +163,28 @@ pub fn validate_with(
             }
         )));
     }
+    // Each pose's rotation left [rad]: the measured frame against the
+    // model's, as measured.
+    let turned = (poses.iter())
+        .map(|(m, q, measured, line)| {
+            let predicted = robot.predict_marker_rotation(*m, q).map_err(|e| {
+                CalibrationError::NoEquilibrium(format!(
+                    "{}:{line}: the calibrated model cannot predict this orientation ({e})",
+                    data.file.display(),
+                ))
+            })?;
+            Ok(crate::calibrate::rows::orientation::residual(measured, &predicted).norm())
+        })
+        .collect::<Result<Vec<f64>, CalibrationError>>()?;
+    let orientation = (!turned.is_empty()).then(|| {
+        let n = turned.len() as f64;
+        OrientationValidation {
+            poses: turned.len(),
+            rms_urad: (turned.iter().map(|t| t * t).sum::<f64>() / n).sqrt() * 1e6,
+            mean_urad: turned.iter().sum::<f64>() / n * 1e6,
+            max_urad: turned.iter().fold(0.0, |a: f64, &t| a.max(t)) * 1e6,
+        }
+    });
     let (rms_mm, per_marker_rms_mm, per_marker_mean_mm, per_marker_max_mm) = summary(&all, &per);
     let reregistration = reregistration(&job.robot.chain, &points).map(|(_, g)| g);
     let mut v = Validation {
@@ -167,6 +197,7 @@ pub fn validate_with(
         as_measured_rms_mm: rms_mm,
         reregistration,
         reregistered: false,
+        orientation,
     };
     if let (true, Some(g)) = (reregister, &v.reregistration) {
         v.rms_mm = g.rms_mm;
