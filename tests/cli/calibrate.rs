@@ -218,8 +218,47 @@ fn six_d_poses_identify_the_tool_frame() {
         html.contains("orientation of 40 poses"),
         "no orientation in the report"
     );
+    // `robcal predict` from model.json alone: each pose's frame within the
+    // instrument's noise of the measured one, as the report's RMS says.
+    let data = std::fs::read_to_string("data/kr270/poses-6d.csv").unwrap();
+    let mut poses = String::from("marker,a1_rad,a2_rad,a3_rad,a4_rad,a5_rad,a6_rad\n");
+    let mut measured = Vec::new();
+    for line in data.lines().skip(1) {
+        let c: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        let q: Vec<String> = c[1..7].iter().map(f64::to_string).collect();
+        poses += &format!("1,{}\n", q.join(","));
+        measured.push(nalgebra::Vector3::new(c[13], c[14], c[15]));
+    }
+    let poses_csv = dir.join("poses.csv");
+    std::fs::write(&poses_csv, poses).unwrap();
+    let model = dir.join("model.json");
+    let out = robcal(&[
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--poses",
+        poses_csv.to_str().unwrap(),
+        "--orientation",
+    ]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let rx = header.iter().position(|h| *h == "rx_rad").expect("rx_rad");
+    let mut sq = 0.0;
+    for (line, m) in text.lines().skip(1).zip(&measured) {
+        let c: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        let predicted =
+            nalgebra::Rotation3::new(nalgebra::Vector3::new(c[rx], c[rx + 1], c[rx + 2]));
+        let left = nalgebra::Rotation3::new(*m) * predicted.transpose();
+        sq += left.angle().powi(2);
+    }
+    let predicted_rms_urad = (sq / measured.len() as f64).sqrt() * 1e6;
     let _ = std::fs::remove_dir_all(&dir);
     let o = &v["orientation"];
+    let reported = o["rms_urad"].as_f64().unwrap();
+    assert!(
+        (predicted_rms_urad / reported - 1.0).abs() < 0.01,
+        "predict {predicted_rms_urad} urad, reported {reported} urad"
+    );
     assert_eq!(o["poses"], 40);
     let rms = o["rms_urad"].as_f64().unwrap();
     assert!(rms > 30.0 && rms < 70.0, "{o}");

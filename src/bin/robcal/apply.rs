@@ -30,6 +30,12 @@ pub struct PredictArgs {
     /// lengths hold).
     #[arg(long = "temperature-c", allow_negative_numbers = true)]
     temperature_c: Option<f64>,
+    /// Add each pose's orientation, `rx_rad, ry_rad, rz_rad` after
+    /// `x_m, y_m, z_m`: the marker's link frame turned by the identified
+    /// tool frame (rotation vector, measurement frame), as a 6-D instrument
+    /// measures it.
+    #[arg(long)]
+    orientation: bool,
 }
 
 /// `robcal compensate`.
@@ -242,19 +248,27 @@ fn load_model_at(path: &Path, temperature_c: Option<f64>) -> Result<Predictor, S
 pub fn run_predict(a: &PredictArgs) -> Result<(), String> {
     let robot = load_model_at(&a.model, a.temperature_c)?;
     let rows = read_points(&robot, &a.poses, false)?;
-    let mut out = header(&robot, &rows[0], false) + "\n";
+    let mut out = header(&robot, &rows[0], false);
+    if a.orientation {
+        out += ",rx_rad,ry_rad,rz_rad";
+    }
+    out.push('\n');
     for row in &rows {
         let (id, tool, payload, robot) = tool_and_payload(&robot, row, &a.poses)?;
-        let p = robot
-            .predict(&tool, &row.q, payload.as_ref())
-            .map_err(|e| format!("{}:{}: cannot predict: {e}", a.poses.display(), row.line))?;
-        let _ = writeln!(
+        let at = |e| format!("{}:{}: cannot predict: {e}", a.poses.display(), row.line);
+        let p = robot.predict(&tool, &row.q, payload.as_ref()).map_err(at)?;
+        let _ = write!(
             out,
             "{},{},{}",
             lead(row, id),
             join(&row.q),
             join(p.as_slice())
         );
+        if a.orientation {
+            let r = robot.predict_rotation(&tool, &row.q, payload.as_ref());
+            let _ = write!(out, ",{}", join(r.map_err(at)?.scaled_axis().as_slice()));
+        }
+        out.push('\n');
     }
     emit(&out, a.output.as_deref(), &[&a.model, &a.poses])?;
     warn_payloads(&robot, &rows, &a.poses);

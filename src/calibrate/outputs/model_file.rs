@@ -25,7 +25,8 @@
 //!                  "gravity_compliance_a": x_a, "gravity_compliance_b": x_b}, ..],
 //!   "link_compliance": [{"joint": "a3", "value": k, "unit": "rad/(N*m)"}],
 //!   "link_compliance_own_weight": true,   // with link_compliance: the own weight bends them too
-//!   "thermal_expansion": {"alpha_per_k": a, "reference_c": t}  // when identified
+//!   "thermal_expansion": {"alpha_per_k": a, "reference_c": t}, // when identified
+//!   "tool_quaternion_xyzw": [..]  // the tool frame's rotation, when identified
 //! }
 //! ```
 //!
@@ -230,6 +231,11 @@ pub struct ModelFile {
     /// The links' thermal expansion (absent without one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub thermal_expansion: Option<ThermalRecord>,
+    /// The identified tool frame's rotation, `[x, y, z, w]`: a 6-D
+    /// instrument's measured frame is the marker's link frame turned by it
+    /// (absent when none was identified: the identity).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool_quaternion_xyzw: Option<[f64; 4]>,
 }
 
 fn quat(q: &UnitQuaternion<f64>) -> [f64; 4] {
@@ -357,6 +363,8 @@ impl ModelFile {
                     reference_c,
                 }
             }),
+            tool_quaternion_xyzw: (*p.tool_rotation() != nalgebra::Rotation3::identity())
+                .then(|| quat(&UnitQuaternion::from_rotation_matrix(p.tool_rotation()))),
         }
     }
 
@@ -527,6 +535,10 @@ impl ModelFile {
             });
         }
         finite("load_com_shift_m", &self.load_com_shift_m)?;
+        let tool_rotation = match &self.tool_quaternion_xyzw {
+            Some(q) => Some(rotation("tool_quaternion_xyzw", q)?.to_rotation_matrix()),
+            None => None,
+        };
         let joint = |name: &str| {
             names
                 .iter()
@@ -646,6 +658,10 @@ impl ModelFile {
         .map(|p| p.with_bending_own_weight(self.link_compliance_own_weight.unwrap_or(false)))
         .map(|p| match &self.thermal_expansion {
             Some(t) => p.with_thermal_expansion(t.alpha_per_k, t.reference_c),
+            None => p,
+        })
+        .map(|p| match tool_rotation {
+            Some(r) => p.with_tool_rotation(r),
             None => p,
         })
         .map_err(|e| format!("markers: {e}"))

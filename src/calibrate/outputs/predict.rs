@@ -635,12 +635,38 @@ impl Predictor {
         m: usize,
         q: &[f64],
     ) -> Result<nalgebra::Rotation3<f64>, Error> {
-        use crate::calibrate::rows::orientation::{turn, PROBES};
         let (chain, tool) = self.marker_chain(m)?;
+        self.rotation_on(chain, &tool, q, None)
+    }
+
+    /// The orientation of the tip frame, turned by the identified tool
+    /// frame, at command `q` with `payload` \[measurement frame\]: what a
+    /// 6-D instrument at the point `tool_m` (tip frame) measures beside
+    /// [`Self::predict`]'s point (see [`Self::predict_marker_rotation`]).
+    ///
+    /// # Errors
+    /// As [`Self::predict`].
+    pub fn predict_rotation(
+        &self,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<nalgebra::Rotation3<f64>, Error> {
+        self.rotation_on(&self.chain, tool_m, q, payload)
+    }
+
+    fn rotation_on(
+        &self,
+        chain: &Chain<f64, J>,
+        tool_m: &Vector3<f64>,
+        q: &[f64],
+        payload: Option<&Payload>,
+    ) -> Result<nalgebra::Rotation3<f64>, Error> {
+        use crate::calibrate::rows::orientation::{turn, PROBES};
         self.check_q(q)?;
-        let loading = self.loading(None)?;
+        let loading = self.loading(payload)?;
         let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
-        let p = eq.frames.point_m(&tool);
+        let p = eq.frames.point_m(tool_m);
         let bent = |d: Vector3<f64>| self.bending_m(chain, &eq.frames, &(p + d), &loading);
         let w = turn(
             &bent(Vector3::zeros())?,
@@ -650,6 +676,20 @@ impl Predictor {
         Ok(nalgebra::Rotation3::new(w)
             * eq.frames.tip().rotation.to_rotation_matrix()
             * self.tool_rotation)
+    }
+
+    /// The identified tool frame's rotation a pose's measured frame is
+    /// turned by (identity when none was identified).
+    pub fn tool_rotation(&self) -> &nalgebra::Rotation3<f64> {
+        &self.tool_rotation
+    }
+
+    /// This predictor with the tool frame's rotation `r` (a model file's
+    /// `tool_quaternion_xyzw`).
+    #[must_use]
+    pub fn with_tool_rotation(mut self, r: nalgebra::Rotation3<f64>) -> Self {
+        self.tool_rotation = r;
+        self
     }
 
     fn marker_chain(&self, m: usize) -> Result<(&Chain<f64, J>, Vector3<f64>), Error> {
