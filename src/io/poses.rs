@@ -102,13 +102,10 @@ impl Euler {
     /// the angles `[rx, ry, rz]` \[rad\] about x, y and z.
     pub fn rotation_vector(self, [rx, ry, rz]: [f64; 3]) -> [f64; 3] {
         use nalgebra::{UnitQuaternion, Vector3};
-        let about = |axis: Vector3<f64>, a: f64| {
-            UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), a)
-        };
         let (x, y, z) = (
-            about(Vector3::x(), rx),
-            about(Vector3::y(), ry),
-            about(Vector3::z(), rz),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), rx),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), ry),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rz),
         );
         let r = match self {
             Self::FixedXyz => z * y * x,
@@ -573,6 +570,23 @@ pub fn convert_poses(
                             let r = rot.rotation_vector(&values).map_err(|(i, kind, why)| {
                                 err(kind, line, why).in_column(header[columns[i]].clone())
                             })?;
+                            // Euler angles: the largest in each `_deg`
+                            // column, and gimbal lock (`ry` near ±90°).
+                            if let Rot::Euler(_, c, deg) = rot {
+                                for ((&c, &deg), v) in c.iter().zip(&deg).zip(&values) {
+                                    if deg {
+                                        deg_max[c] = deg_max[c].max(v.abs());
+                                    }
+                                }
+                                let ry = if deg[1] {
+                                    values[1].to_radians()
+                                } else {
+                                    values[1]
+                                };
+                                if ry.cos().abs() < GIMBAL_LOCK_RAD.sin() {
+                                    gimbal.get_or_insert((0, line)).0 += 1;
+                                }
+                            }
                             Some(r)
                         }
                     }
@@ -638,20 +652,6 @@ pub fn convert_poses(
                         orientations += 1;
                     }
                     None => out.push_str(",,,"),
-                }
-            }
-            if let Some(Rot::Euler(_, c, deg)) = rot_cols[k] {
-                for (&c, &deg) in c.iter().zip(&deg) {
-                    if let (true, Some(v)) = (deg, number(c)?) {
-                        deg_max[c] = deg_max[c].max(v.abs());
-                    }
-                }
-                if let Some(ry) = number(c[1])? {
-                    let ry = if deg[1] { ry.to_radians() } else { ry };
-                    if ry.cos().abs() < GIMBAL_LOCK_RAD.sin() {
-                        let g = gimbal.get_or_insert((0, line));
-                        g.0 += 1;
-                    }
                 }
             }
             out.push('\n');

@@ -36,7 +36,7 @@ use crate::error::Error;
 use crate::io::job::Job;
 use crate::model::{Param, Sample};
 use crate::robot::{
-    compensate, compensate_pose, equilibrium, Chain, CompensateSettings, Compensation,
+    compensate, compensate_pose, equilibrium, Chain, CompensateSettings, Compensation, Equilibrium,
     EquilibriumSettings, Loading, PointLoad,
 };
 pub mod payload;
@@ -663,9 +663,7 @@ impl Predictor {
         payload: Option<&Payload>,
     ) -> Result<nalgebra::Rotation3<f64>, Error> {
         use crate::calibrate::rows::orientation::{turn, PROBES};
-        self.check_q(q)?;
-        let loading = self.loading(payload)?;
-        let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
+        let (eq, loading) = self.settled(chain, q, payload, true)?;
         let p = eq.frames.point_m(tool_m);
         let bent = |d: Vector3<f64>| self.bending_m(chain, &eq.frames, &(p + d), &loading);
         let w = turn(
@@ -726,14 +724,28 @@ impl Predictor {
         payload: Option<&Payload>,
         own_weight: bool,
     ) -> Result<Vector3<f64>, Error> {
+        let (eq, loading) = self.settled(chain, q, payload, own_weight)?;
+        let p = eq.frames.point_m(tool_m);
+        Ok(p + self.bending_m(chain, &eq.frames, &p, &loading)?)
+    }
+
+    /// The robot on `chain` at command `q` under `payload` (and its own
+    /// weight when `own_weight`): its equilibrium under the calibrated
+    /// joint law, and that loading.
+    fn settled(
+        &self,
+        chain: &Chain<f64, J>,
+        q: &[f64],
+        payload: Option<&Payload>,
+        own_weight: bool,
+    ) -> Result<(Equilibrium<f64, J>, Loading<f64>), Error> {
         self.check_q(q)?;
         let mut loading = self.loading(payload)?;
         if !own_weight {
             loading.own_weight_mps2 = None;
         }
         let eq = equilibrium(chain, q, q, &loading, &self.law_at(q), &EQUILIBRIUM)?;
-        let p = eq.frames.point_m(tool_m);
-        Ok(p + self.bending_m(chain, &eq.frames, &p, &loading)?)
+        Ok((eq, loading))
     }
 
     /// The calibrated joint law at command `q`, the gravity compliance's

@@ -43,7 +43,7 @@ use crate::calibrate::fit::residuals::rms_um;
 use crate::calibrate::outputs::predict::{Payload, Predictor};
 use crate::calibrate::params::geometry::{Geometry, J};
 use crate::calibrate::report::calibrated::CalibratedModel;
-use crate::calibrate::report::{OrientationValidation, Reregistration, Validation};
+use crate::calibrate::report::{Nominal, OrientationValidation, Reregistration, Validation};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
@@ -173,16 +173,19 @@ pub fn validate_with(
                     data.file.display(),
                 ))
             })?;
-            Ok(crate::calibrate::rows::orientation::residual(measured, &predicted).norm())
+            Ok(crate::calibrate::rows::orientation::residual(
+                measured, &predicted,
+            ))
         })
-        .collect::<Result<Vec<f64>, CalibrationError>>()?;
+        .collect::<Result<Vec<_>, CalibrationError>>()?;
+    // The statistics of the points' errors, of rad as of m (×1e6: µrad).
     let orientation = (!turned.is_empty()).then(|| {
-        let n = turned.len() as f64;
+        let n = Nominal::of(&turned);
         OrientationValidation {
             poses: turned.len(),
-            rms_urad: (turned.iter().map(|t| t * t).sum::<f64>() / n).sqrt() * 1e6,
-            mean_urad: turned.iter().sum::<f64>() / n * 1e6,
-            max_urad: turned.iter().fold(0.0, |a: f64, &t| a.max(t)) * 1e6,
+            rms_urad: n.rms_um,
+            mean_urad: n.mean_um,
+            max_urad: n.max_um,
         }
     });
     let (rms_mm, per_marker_rms_mm, per_marker_mean_mm, per_marker_max_mm) = summary(&all, &per);
