@@ -168,7 +168,7 @@ impl Design {
         // sum is not finite (the core's checks decide). (With the view's
         // former column-by-column copy the blocks were faster past one copy
         // of rows; 10⁶ rows: the blocks 0.17 s on one thread.)
-        if let Some(acc) = View::new(self, &cols, None, None).information() {
+        if let Some(acc) = View::new(self, &cols, &[], None).information() {
             return self.identifiability_of(&cols, &acc);
         }
         let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(n));

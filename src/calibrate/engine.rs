@@ -721,7 +721,7 @@ impl Engine<'_> {
         let weights: Vec<nalgebra::Vector3<f64>> = (0..d.groups)
             .map(|g| nalgebra::Vector3::repeat(if g < points { 1.0 } else { 0.0 }))
             .collect();
-        let view = crate::calibrate::design::view::View::new(&d, &all, None, None);
+        let view = crate::calibrate::design::view::View::new(&d, &all, &[], None);
         let alone = crate::estimate::Reweightable::weighted(&view, &weights, None)
             .ok()
             .and_then(|acc| acc.identifiable().ok());

@@ -80,20 +80,16 @@ pub struct Step {
     pub change: f64,
 }
 
-/// Fits the columns `cols` of `d` (all rows, or all but group `skip_group`)
-/// by the method of `s`.
+/// Fits the columns `cols` of `d` (all rows, or all but the groups `skip`:
+/// a configuration left out, [`crate::calibrate::rows::Rows::fold`]) by the
+/// method of `s`.
 ///
 /// # Errors
 /// From the solve ([`Error::NotIdentifiable`], …).
-pub fn fit(
-    d: &Design,
-    cols: &[usize],
-    skip_group: Option<usize>,
-    s: &FitSettings,
-) -> Result<FitOut, Error> {
+pub fn fit(d: &Design, cols: &[usize], skip: &[usize], s: &FitSettings) -> Result<FitOut, Error> {
     let instrument = d.instrument_sigma.as_deref();
     let floor = instrument.filter(|_| s.weighting == Weighting::Both);
-    let view = View::new(d, cols, skip_group, floor);
+    let view = View::new(d, cols, skip, floor);
     fit_source(&view, cols, instrument, s)
 }
 
@@ -130,7 +126,7 @@ pub fn fit_with_residuals(
 ) -> Result<(FitOut, Option<Residuals>), Error> {
     let instrument = d.instrument_sigma.as_deref();
     let floor = instrument.filter(|_| s.weighting == Weighting::Both);
-    let view = View::new(d, cols, None, floor).capturing();
+    let view = View::new(d, cols, &[], floor).capturing();
     let view = match known {
         Some(known) => view.knowing(known),
         None => view,
@@ -147,7 +143,7 @@ pub fn fit_with_residuals(
 /// # Errors
 /// As [`fit`] (a sum that is not finite).
 pub fn information(d: &Design, cols: &[usize]) -> Result<Accumulator<f64, Dyn>, Error> {
-    View::new(d, cols, None, None).weighted(&vec![Vector3::repeat(1.0); d.groups], None)
+    View::new(d, cols, &[], None).weighted(&vec![Vector3::repeat(1.0); d.groups], None)
 }
 
 /// The sums of the leading `n` columns of `acc` (`Λ`'s leading block, `η`'s
@@ -177,7 +173,7 @@ pub fn columns_of(acc: &Accumulator<f64, Dyn>, cols: &[usize]) -> Accumulator<f6
 }
 
 /// [`fit`] of all the columns of `m` (the moments of the columns `cols` of
-/// `d`, [`DesignMoments::new`]) without the configuration `skip_group`: the
+/// `d`, [`DesignMoments::new`]) without the groups `skip` (as [`fit`]): the
 /// same fit from the moments per configuration and axis, equal to the
 /// row-by-row one up to rounding ([`crate::calibrate::fit::moments`]).
 ///
@@ -187,14 +183,11 @@ pub fn fit_moments(
     m: &DesignMoments,
     d: &Design,
     cols: &[usize],
-    skip_group: Option<usize>,
+    skip: &[usize],
     s: &FitSettings,
 ) -> Result<FitOut, Error> {
     let instrument = d.instrument_sigma.as_deref();
-    let source = m.without(
-        skip_group,
-        instrument.filter(|_| s.weighting == Weighting::Both),
-    );
+    let source = m.without(skip, instrument.filter(|_| s.weighting == Weighting::Both));
     fit_source(&source, cols, instrument, s)
 }
 
@@ -306,7 +299,7 @@ pub fn test(
 ) -> Result<NestedTest, Error> {
     let mut cols = model.to_vec();
     cols.extend_from_slice(candidate);
-    let view = View::new(d, &cols, None, None);
+    let view = View::new(d, &cols, &[], None);
     test_sums(&view.weighted(weights, None)?, model.len())
 }
 
@@ -351,7 +344,7 @@ mod tests {
             v.extend(f.covariance.iter().map(|v| v.to_bits()));
             v
         };
-        let made = fit(&d, &cols, None, &s).expect("fit");
+        let made = fit(&d, &cols, &[], &s).expect("fit");
         let known = information(&d, &cols).expect("sums");
         let given = fit_known(&d, &cols, known, &s).expect("fit");
         assert_eq!(bits(&given), bits(&made));

@@ -744,4 +744,19 @@ impl Rows {
     pub fn position_groups(&self) -> usize {
         self.configs.len() - self.orientation_groups
     }
+
+    /// The groups a configuration left out takes with it (the held-out
+    /// error's folds, [`crate::calibrate::Engine::heldout`]): its points'
+    /// group `g` and, when it is a measured pose, its orientations' group —
+    /// the same configuration, measured by the same instrument in the same
+    /// pose. A group past the points' is its own fold.
+    pub fn fold(&self, g: usize) -> Vec<usize> {
+        let points = self.position_groups();
+        let orientation = (g < points)
+            .then(|| self.configs.get(g))
+            .flatten()
+            .and_then(|c| self.configs[points..].binary_search(c).ok())
+            .map(|k| points + k);
+        core::iter::once(g).chain(orientation).collect()
+    }
 }

@@ -137,7 +137,7 @@ fn rows_and_design_do_not_depend_on_the_threads() {
         assert_eq!(fused.unit_sums.is_some(), threads == 1);
         if let Some(sums) = &fused.unit_sums {
             let cols: Vec<usize> = (0..params.len()).collect();
-            let view = crate::calibrate::design::view::View::new(&d, &cols, None, None)
+            let view = crate::calibrate::design::view::View::new(&d, &cols, &[], None)
                 .information()
                 .expect("finite");
             assert_eq!(

@@ -98,7 +98,7 @@ mod tests {
         let (m, n) = (3 * BLOCK_ROWS + 100, 5);
         let d = design(m, 1, n, 3);
         let cols: Vec<usize> = (0..n).collect();
-        let want = View::new(&d, &cols, None, None)
+        let want = View::new(&d, &cols, &[], None)
             .information()
             .expect("finite");
         for per in [BLOCK_ROWS, 2 * BLOCK_ROWS, m] {

@@ -159,26 +159,27 @@ pub(in crate::calibrate) const BLOCK_ROWS: usize = 4096;
 const LEVERAGE_CHUNK: usize = 1 << 15;
 
 impl<'a> View<'a> {
-    /// The rows of `d` on the columns `cols`, without group `skip_group`.
+    /// The rows of `d` on the columns `cols`, without the groups `skip`
+    /// (a configuration left out: [`crate::calibrate::rows::Rows::fold`]).
     pub(in crate::calibrate) fn new(
         d: &'a Design,
         cols: &'a [usize],
-        skip_group: Option<usize>,
+        skip: &[usize],
         floor: Option<&'a [Vector3<f64>]>,
     ) -> Self {
-        Self::blocked(d, cols, skip_group, floor, BLOCK_ROWS)
+        Self::blocked(d, cols, skip, floor, BLOCK_ROWS)
     }
 
     /// [`View::new`], copying `block` rows at a time (rounded up to even).
     fn blocked(
         d: &'a Design,
         cols: &'a [usize],
-        skip_group: Option<usize>,
+        skip: &[usize],
         floor: Option<&'a [Vector3<f64>]>,
         block: usize,
     ) -> Self {
         let rows: Vec<usize> = (0..d.rows())
-            .filter(|&i| Some(d.group[i]) != skip_group)
+            .filter(|&i| !skip.contains(&d.group[i]))
             .collect();
         let block = block.max(2).next_multiple_of(2);
         let mut view = Self {

@@ -21,9 +21,11 @@ use crate::estimate::robust_weights;
 
 impl Engine<'_> {
     /// Leave-one-configuration-out prediction RMS \[µm\] of `fitted`: each
-    /// configuration predicted by a fit (same method, same linearisation)
-    /// without it. Parameters the other configurations cannot identify are
-    /// held at zero (their error then shows in the prediction).
+    /// configuration's points predicted by a fit (same method, same
+    /// linearisation) without it — without a pose's orientation too
+    /// ([`crate::calibrate::rows::Rows::fold`]). Parameters the other
+    /// configurations cannot identify are held at zero (their error then
+    /// shows in the prediction).
     ///
     /// # Errors
     /// [`CalibrationError::Core`] from the estimator.
@@ -47,7 +49,11 @@ impl Engine<'_> {
             return Ok(None);
         };
         let ols = self.fit_settings.method == Method::Ols;
-        let fast = ols
+        // A pose's fold leaves out two groups (its points' and its
+        // orientations'): OLS then downdates the unit-weight sums of both
+        // (`FixedFolds` at weight 1), not the one group's closed form.
+        let poses = self.rows.orientation_groups > 0;
+        let fast = (ols && !poses)
             .then(|| ols_heldout(&d, &cols, fitted.information.as_ref()))
             .flatten();
         // Its residuals a window of groups (`WINDOW_ROWS` rows) at a time.
@@ -55,8 +61,7 @@ impl Engine<'_> {
         // Weighted fits: each fold from the moments per configuration and
         // axis, built once (`moments`); a fold that leaves a parameter
         // unidentified is refitted from the rows below.
-        let moments =
-            (self.fit_settings.method != Method::Ols).then(|| DesignMoments::new(&d, &cols));
+        let moments = (!ols || poses).then(|| DesignMoments::new(&d, &cols));
         // The folds from the moments are independent: on worker threads
         // (`parallel`; bit for bit the serial loop's), unless the problem
         // is too small for threads to pay.
@@ -78,14 +83,18 @@ impl Engine<'_> {
             && groups > self.policy.heldout_refit_groups
             && fitted.fit.weights.len() == groups)
             .then(|| fitted.fit.weights.clone());
-        let fixed_weights: Option<Vec<Vector3<f64>>> = instrument
-            .filter(|_| settings.weighting == Weighting::Instrument)
-            .and_then(|sigma| {
-                let mut w = vec![Vector3::zeros(); sigma.len()];
-                robust_weights(sigma, &settings.weight, &mut w).ok()?;
-                Some(w)
-            })
-            .or(held);
+        let fixed_weights: Option<Vec<Vector3<f64>>> = if ols {
+            poses.then(|| vec![Vector3::repeat(1.0); groups])
+        } else {
+            instrument
+                .filter(|_| settings.weighting == Weighting::Instrument)
+                .and_then(|sigma| {
+                    let mut w = vec![Vector3::zeros(); sigma.len()];
+                    robust_weights(sigma, &settings.weight, &mut w).ok()?;
+                    Some(w)
+                })
+                .or(held)
+        };
         let fixed = match (&moments, &fixed_weights) {
             (Some(m), Some(w)) => m.fixed_folds(w).ok(),
             _ => None,
@@ -95,7 +104,7 @@ impl Engine<'_> {
                 let small = groups * cols.len() * cols.len() * cols.len() < 200_000;
                 let threads = if small { 1 } else { crate::parallel::threads() };
                 crate::parallel::map(points, threads, |g| {
-                    let x = f.estimate(g).ok()?;
+                    let x = f.estimate(&rows.fold(g)).ok()?;
                     Some(
                         by.of(g)
                             .iter()
@@ -111,7 +120,7 @@ impl Engine<'_> {
                     // An error is left to the refit below, which decides as
                     // before (a column dropped, no held-out error, or the
                     // error).
-                    let out = fit_moments(m, &d, &cols, Some(g), &settings).ok()?;
+                    let out = fit_moments(m, &d, &cols, &rows.fold(g), &settings).ok()?;
                     Some(
                         by.of(g)
                             .iter()
@@ -140,7 +149,7 @@ impl Engine<'_> {
             }
             let mut use_cols = cols.clone();
             let out = loop {
-                match fit(&d, &use_cols, Some(g), &self.fit_settings) {
+                match fit(&d, &use_cols, &self.rows.fold(g), &self.fit_settings) {
                     Ok(f) => break Some(f),
                     Err(Error::NotIdentifiable { column, .. }) if column < use_cols.len() => {
                         use_cols.remove(column);

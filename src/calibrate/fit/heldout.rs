@@ -405,7 +405,7 @@ mod tests {
                 for g in 0..groups {
                     assert!(fast.ok[g], "identifiable without the group");
                     let res = &fast.res[by.range(g)];
-                    let f = fit(&d, &cols, Some(g), &ols()).expect("refit");
+                    let f = fit(&d, &cols, &[g], &ols()).expect("refit");
                     let refit: Vec<_> = (0..d.rows())
                         .filter(|&i| d.group[i] == g)
                         .map(|i| d.residual(&cols, &f.x, i))

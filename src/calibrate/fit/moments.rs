@@ -99,12 +99,12 @@ impl DesignMoments {
         self.groups
     }
 
-    /// These moments without configuration `skip` (all of them with
-    /// `None`), σ floored at `floor` per configuration and axis (the
+    /// These moments without the groups `skip` (all of them with none), σ
+    /// floored at `floor` per configuration and axis (the
     /// instrument's, [`crate::calibrate::fit::Weighting::Both`]).
     pub fn without<'a>(
         &'a self,
-        skip: Option<usize>,
+        skip: &'a [usize],
         floor: Option<&'a [Vector3<f64>]>,
     ) -> Folded<'a> {
         Folded {
@@ -198,16 +198,17 @@ impl DesignMoments {
 }
 
 impl FixedFolds<'_> {
-    /// The estimate of the fit without configuration `g`.
+    /// The estimate of the fit without the groups `skip` (a configuration
+    /// left out: [`crate::calibrate::rows::Rows::fold`]).
     ///
     /// # Errors
-    /// [`Error::OutOfRange`] for a configuration that is not one;
+    /// [`Error::OutOfRange`] for a group that is not one;
     /// [`Error::TooFewEquations`] when the others have fewer rows than
     /// parameters; [`crate::estimate::Factor::new`]'s errors (a parameter
     /// the others cannot identify: the caller refits, leaving it out).
-    pub fn estimate(&self, g: usize) -> Result<DVector<f64>, Error> {
+    pub fn estimate(&self, skip: &[usize]) -> Result<DVector<f64>, Error> {
         let (n, m) = (self.m.n, self.m);
-        if g >= m.groups {
+        if let Some(&g) = skip.iter().find(|&&g| g >= m.groups) {
             return Err(Error::OutOfRange {
                 what: "configuration",
                 index: g,
@@ -217,12 +218,14 @@ impl FixedFolds<'_> {
         let mut upper = self.upper.clone();
         let mut eta = self.eta.clone();
         let mut equations = self.equations;
-        for (a, &w) in self.weights[g].iter().enumerate() {
-            let c = 3 * g + a;
-            if let Some(w2) = moment_weight(w, None, m.rows[c])? {
-                axpy(&mut upper, m.s(c), -w2);
-                axpy(&mut eta, m.u(c), -w2);
-                equations -= m.rows[c];
+        for &g in skip {
+            for (a, &w) in self.weights[g].iter().enumerate() {
+                let c = 3 * g + a;
+                if let Some(w2) = moment_weight(w, None, m.rows[c])? {
+                    axpy(&mut upper, m.s(c), -w2);
+                    axpy(&mut eta, m.u(c), -w2);
+                    equations -= m.rows[c];
+                }
             }
         }
         if equations < n {
@@ -261,15 +264,15 @@ impl FixedFolds<'_> {
 #[derive(Debug, Clone, Copy)]
 pub struct Folded<'a> {
     m: &'a DesignMoments,
-    skip: Option<usize>,
+    skip: &'a [usize],
     floor: Option<&'a [Vector3<f64>]>,
 }
 
-impl Folded<'_> {
+impl<'a> Folded<'a> {
     /// The configurations that enter the fit.
-    fn groups(&self) -> impl Iterator<Item = usize> {
+    fn groups(&self) -> impl Iterator<Item = usize> + 'a {
         let skip = self.skip;
-        (0..self.m.groups).filter(move |g| Some(*g) != skip)
+        (0..self.m.groups).filter(move |g| !skip.contains(g))
     }
 
     /// The fit with `weights` (as [`Reweightable::fit_weighted`]; `estimated`:
@@ -416,7 +419,7 @@ impl Reweightable<f64, Dyn> for Folded<'_> {
             }
         }
         for g in 0..m.groups {
-            if Some(g) == self.skip {
+            if self.skip.contains(&g) {
                 // No rows: as the row-by-row source, σ = 0 and ν = 0.
                 sigma[g] = Vector3::repeat(group_sigma(0.0, 0, 0.0));
                 dof[g] = Vector3::repeat(group_dof(0, 0.0));
@@ -574,8 +577,8 @@ mod tests {
         robust_weights(d.instrument_sigma.as_deref().unwrap(), &s.weight, &mut w).unwrap();
         let folds = m.fixed_folds(&w).unwrap();
         for g in 0..d.groups {
-            let refit = fit_moments(&m, &d, &cols, Some(g), &s).unwrap();
-            let x = folds.estimate(g).unwrap();
+            let refit = fit_moments(&m, &d, &cols, &[g], &s).unwrap();
+            let x = folds.estimate(&[g]).unwrap();
             let scale = refit.x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
             close(x.as_slice(), &refit.x, 10.0 * scale);
         }
@@ -591,16 +594,16 @@ mod tests {
         let s = settings(Method::Irls, Weighting::Instrument);
         let mut w = vec![Vector3::zeros(); d.groups];
         robust_weights(d.instrument_sigma.as_deref().unwrap(), &s.weight, &mut w).unwrap();
-        assert!(m0.fixed_folds(&w).unwrap().estimate(0).is_ok());
+        assert!(m0.fixed_folds(&w).unwrap().estimate(&[0]).is_ok());
         // Column 3 a hundred times larger in group 0's rows alone.
         let d = design_with(12, 4, 5, 7, true, Some((0, 3, 100.0)));
         let m = DesignMoments::new(&d, &cols);
         let folds = m.fixed_folds(&w).unwrap();
         assert!(matches!(
-            folds.estimate(0),
+            folds.estimate(&[0]),
             Err(Error::NotIdentifiable { column: 3, .. })
         ));
-        assert!(folds.estimate(1).is_ok());
+        assert!(folds.estimate(&[1]).is_ok());
     }
 
     #[test]
@@ -617,7 +620,7 @@ mod tests {
             let cols: Vec<usize> = (0..6).collect();
             let m = DesignMoments::new(&d, &cols);
             let s = settings(method, weighting);
-            for skip in [None, Some(0), Some(7)] {
+            for skip in [&[][..], &[0], &[7], &[0, 7]] {
                 let rows = fit(&d, &cols, skip, &s).expect("row fit");
                 let mom = fit_moments(&m, &d, &cols, skip, &s).expect("moment fit");
                 let scale = rows.x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -687,8 +690,8 @@ mod tests {
         let cols: Vec<usize> = (0..4).collect();
         let m = DesignMoments::new(&d, &cols);
         let s = settings(Method::Irls, Weighting::Estimated);
-        let rows = fit(&d, &cols, Some(0), &s).map(|_| ());
-        let mom = fit_moments(&m, &d, &cols, Some(0), &s).map(|_| ());
+        let rows = fit(&d, &cols, &[0], &s).map(|_| ());
+        let mom = fit_moments(&m, &d, &cols, &[0], &s).map(|_| ());
         assert_eq!(rows, mom);
     }
 }
