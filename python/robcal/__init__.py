@@ -763,6 +763,29 @@ class Model:
         p = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
         return p[0] if one else p
 
+    def predict_orientation(
+        self,
+        q: Any,
+        load_kg: Any = 0.0,
+        com_m: Any = (0.0, 0.0, 0.0),
+        marker: Optional[int] = None,
+    ) -> np.ndarray:
+        """The orientation a 6-D instrument measures beside ``predict``'s
+        point: the tip frame turned by the identified tool frame, at the
+        robot's equilibrium, as a rotation vector (axis × angle) [rad,
+        measurement frame], ``robcal predict --orientation``'s ``rx_rad,
+        ry_rad, rz_rad``. Arguments as ``predict``'s: (3,) or (n, 3)."""
+        q = _joints(q, self.joint_names, self._native.joint_is_angular, "q")
+        rows, one = _rows(q, self.dof, "q", "joint values")
+        n = rows.shape[0]
+        load = _per_row(load_kg, n, 1, "load_kg")
+        com = _per_row(com_m, n, 3, "com_m")
+        marker = None if marker is None else _int(marker, "marker")
+        out = self._native.predict_orientation(rows.tobytes(), load, com, marker)
+        self._warn_payload(load if len(load) == n else load * n)
+        r = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
+        return r[0] if one else r
+
     def compensate(
         self,
         targets_m: Any,

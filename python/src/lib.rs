@@ -631,6 +631,43 @@ impl Model {
         }
         Ok(q.len() / dof)
     }
+
+    /// `f(robot, tool, q, payload)` (three values) for each row of joint
+    /// values `q` (`f64` bytes) with its payload, at marker `marker`: `f64`
+    /// bytes, three per row; the GIL released. An error names its row.
+    fn per_pose<'py>(
+        &self,
+        py: Python<'py>,
+        q: &[u8],
+        load_kg: &[f64],
+        com_m: &[f64],
+        marker: Option<i64>,
+        f: impl Fn(
+                &Predictor,
+                &Vector3<f64>,
+                &[f64],
+                Option<&Payload>,
+            ) -> Result<Vector3<f64>, robcal::Error>
+            + Sync,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let marker = marker_id(marker)?;
+        let q = floats(q, "q")?;
+        let n = self.rows(&q)?;
+        self.check_q(&q, "q")?;
+        let payloads = self.payloads(n, load_kg, com_m)?;
+        let (_, tool, robot) = self.inner.at_marker(marker).map_err(calibration_error)?;
+        let dof = robot.dof();
+        let out = py.detach(|| {
+            let mut out = Vec::with_capacity(3 * n);
+            for (r, payload) in payloads.iter().enumerate() {
+                let p = f(&robot, &tool, &q[r * dof..(r + 1) * dof], payload.as_ref())
+                    .map_err(|e| format!("row {r}: cannot predict: {e}"))?;
+                out.extend_from_slice(p.as_slice());
+            }
+            Ok::<_, String>(out)
+        });
+        Ok(to_bytes(py, &out.map_err(calibration_error)?))
+    }
 }
 
 #[pymethods]
@@ -704,24 +741,43 @@ impl Model {
         com_m: Vec<f64>,
         marker: Option<i64>,
     ) -> PyResult<Bound<'py, PyBytes>> {
-        let marker = marker_id(marker)?;
-        let q = floats(q, "q")?;
-        let n = self.rows(&q)?;
-        self.check_q(&q, "q")?;
-        let payloads = self.payloads(n, &load_kg, &com_m)?;
-        let (_, tool, robot) = self.inner.at_marker(marker).map_err(calibration_error)?;
-        let dof = robot.dof();
-        let out = py.detach(|| {
-            let mut out = Vec::with_capacity(3 * n);
-            for (r, payload) in payloads.iter().enumerate() {
-                let p = robot
-                    .predict(&tool, &q[r * dof..(r + 1) * dof], payload.as_ref())
-                    .map_err(|e| format!("row {r}: cannot predict: {e}"))?;
-                out.extend_from_slice(p.as_slice());
-            }
-            Ok::<_, String>(out)
-        });
-        Ok(to_bytes(py, &out.map_err(calibration_error)?))
+        self.per_pose(
+            py,
+            q,
+            &load_kg,
+            &com_m,
+            marker,
+            |robot, tool, q, payload| robot.predict(tool, q, payload),
+        )
+    }
+
+    /// The orientation a 6-D instrument measures beside [`Model::predict`]'s
+    /// point: the tip frame turned by the identified tool frame, at the
+    /// robot's equilibrium, as a rotation vector \[rad, measurement frame\]
+    /// (`robcal predict --orientation`'s `rx_rad, ry_rad, rz_rad`); the
+    /// arguments as [`Model::predict`]'s: `f64` bytes, three per row.
+    /// Releases the GIL.
+    #[pyo3(signature = (q, load_kg, com_m, marker = None))]
+    fn predict_orientation<'py>(
+        &self,
+        py: Python<'py>,
+        q: &[u8],
+        load_kg: Vec<f64>,
+        com_m: Vec<f64>,
+        marker: Option<i64>,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        self.per_pose(
+            py,
+            q,
+            &load_kg,
+            &com_m,
+            marker,
+            |robot, tool, q, payload| {
+                robot
+                    .predict_rotation(tool, q, payload)
+                    .map(|r| r.scaled_axis())
+            },
+        )
     }
 
     /// The joint commands whose loaded, deflected robot puts the marker on

@@ -137,6 +137,28 @@ def test_predict_and_compensate_are_the_commands(cli, repo, tmp_path):
     assert np.array_equal(result.model.predict(q, 250.0, com, marker=1), model.predict(q, 250.0, com, marker=1))
 
 
+def test_a_poses_orientation_is_the_commands(cli, repo, tmp_path):
+    """Model.predict_orientation is ``robcal predict --orientation``'s
+    rx_rad, ry_rad, rz_rad, to the bit, on the README's 6-D pose job."""
+    out = tmp_path / "out"
+    run(cli, "calibrate", "--setup", "data/kr270/setup-6d.toml", "--data", "data/kr270/poses-6d.csv",
+        "--output", str(out))
+    model = robcal.Model.load(out / "model.json")
+    data = pd.read_csv(repo / "data/kr270/poses-6d.csv")
+    cols = [f"{j}_rad" for j in model.joint_names]
+    poses = tmp_path / "poses.csv"
+    data[model.joint_names].set_axis(cols, axis=1).assign(marker=1)[["marker"] + cols].to_csv(
+        poses, index=False, float_format="%.17g")
+    want = pd.read_csv(pd.io.common.StringIO(
+        run(cli, "predict", "--model", str(out / "model.json"), "--poses", str(poses), "--orientation")))
+    q = want[cols].to_numpy()
+    got = model.predict_orientation(q)
+    assert got.shape == (len(data), 3)
+    assert np.array_equal(got, want[["rx_rad", "ry_rad", "rz_rad"]].to_numpy())
+    assert np.array_equal(model.predict(q), want[["x_m", "y_m", "z_m"]].to_numpy())
+    assert model.predict_orientation(q[0]).shape == (3,)
+
+
 def test_the_robot_at_a_temperature_is_the_commands(cli, repo, tmp_path):
     out = tmp_path / "out"
     run(cli, "calibrate", "--setup", KR270, "--data", KR270_DATA, "--no-diagnose", "--output", str(out))
