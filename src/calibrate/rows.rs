@@ -746,7 +746,7 @@ impl Rows {
     }
 
     /// The groups a configuration left out takes with it (the held-out
-    /// error's folds, [`crate::calibrate::Engine::heldout`]): its points'
+    /// error's folds, [`crate::calibrate::engine::Engine::heldout`]): its points'
     /// group `g` and, when it is a measured pose, its orientations' group —
     /// the same configuration, measured by the same instrument in the same
     /// pose. A group past the points' is its own fold.
