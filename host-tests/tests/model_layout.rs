@@ -531,3 +531,115 @@ fn an_excluded_column_is_left_out_with_its_absorbers() {
         Err(Error::Mismatch { .. })
     ));
 }
+
+/// The rotation of the tip frame of `robot` at `q` under `pert`, with the
+/// tool's small rotation `tool_rad` (tip frame) after it.
+fn tip_rotation(
+    robot: &RefRobot,
+    q: &[f64],
+    pert: &Perturb,
+    tool_rad: Vector3<f64>,
+) -> nalgebra::Matrix3<f64> {
+    let (_, tip) = robot.frames(q, pert);
+    tip.fixed_view::<3, 3>(0, 0).into_owned()
+        * nalgebra::Rotation3::from_scaled_axis(tool_rad).into_inner()
+}
+
+/// The turn `ω` [rad per unit] of the frame `r(h)` at `h = 0`, by central
+/// differences: `[ω]× = ṙ rᵀ`.
+fn turn_fd(r: impl Fn(f64) -> nalgebra::Matrix3<f64>) -> Vector3<f64> {
+    const H: f64 = 1e-6;
+    let w = (r(H) - r(-H)) / (2.0 * H) * r(0.0).transpose();
+    Vector3::new(
+        w[(2, 1)] - w[(1, 2)],
+        w[(0, 2)] - w[(2, 0)],
+        w[(1, 0)] - w[(0, 1)],
+    ) * 0.5
+}
+
+fn orientation_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
+    let chain: Chain<f64, J> = robot.chain();
+    let n = robot.joints.len();
+    let mut layout = Layout::<32>::new();
+    for joint in 0..n as u8 {
+        layout.push(&chain, Param::JointOffset { joint }).unwrap();
+    }
+    for axis in 0..6 {
+        layout
+            .push(&chain, Param::JointFrame { joint: 1, axis })
+            .unwrap();
+        layout.push(&chain, Param::Base { axis }).unwrap();
+        layout.push(&chain, Param::Tool { axis }).unwrap();
+    }
+    for axis in 0..3 {
+        layout
+            .push(&chain, Param::Marker { marker: 0, axis })
+            .unwrap();
+    }
+    layout.push(&chain, Param::Compliance { joint: 2 }).unwrap();
+    let marker = Marker {
+        index: 0,
+        xyz_m: Vector3::new(0.12, -0.07, 0.2),
+    };
+    let zero = Perturb::zero(n);
+    for q in poses {
+        let b: SMatrix<f64, 3, 32> = layout.orientation_block(&chain, q, &marker, &v(G)).unwrap();
+        let frames = chain.frames(q).unwrap();
+        let mut tau = [0.0; J];
+        robcal::robot::gravity_torques(&chain, &frames, &v(G), &mut tau).unwrap();
+        let offset = |j: usize| {
+            turn_fd(|h| {
+                let mut qq = q.clone();
+                qq[j] += h;
+                tip_rotation(robot, &qq, &zero, Vector3::zeros())
+            })
+        };
+        for (i, c) in layout.columns().iter().enumerate() {
+            let perturbed = |f: &dyn Fn(&mut Perturb, f64)| {
+                turn_fd(|h| {
+                    let mut pert = Perturb::zero(n);
+                    f(&mut pert, h);
+                    tip_rotation(robot, q, &pert, Vector3::zeros())
+                })
+            };
+            let want = match c.param {
+                Param::JointOffset { joint } => offset(usize::from(joint)),
+                Param::JointFrame { joint, axis } => perturbed(&|p, h| {
+                    p.frame[usize::from(joint)][usize::from(axis)] = h;
+                }),
+                Param::Base { axis } => perturbed(&|p, h| p.base[usize::from(axis)] = h),
+                Param::Tool { axis } if axis >= 3 => turn_fd(|h| {
+                    let mut w = Vector3::zeros();
+                    w[usize::from(axis) - 3] = h;
+                    tip_rotation(robot, q, &zero, w)
+                }),
+                Param::Tool { .. } | Param::Marker { .. } => Vector3::zeros(),
+                // δqⱼ = kⱼ τⱼ (eq. 3): the offset's turn per unit of yield.
+                Param::Compliance { joint } => offset(usize::from(joint)) * tau[usize::from(joint)],
+                p => panic!("no reference for {p:?}"),
+            } * c.unit.si;
+            let got = b.column(i).into_owned();
+            assert!(
+                (got - want).norm() <= 1e-8 * want.norm().max(c.unit.si),
+                "{:?} at {q:?}: {got} vs {want}",
+                c.param
+            );
+        }
+    }
+}
+
+/// A 6-D pose's orientation rows on the device (`Layout::orientation_block`)
+/// are the turn of the tip frame (turned by the tool's) per unit of each
+/// parameter, against central differences of the independent 4×4 model:
+/// joint offsets, a joint's frame errors, the base, the tool's rotation, a
+/// compliance's yield under the own weight; a marker's position and the
+/// tool's translation turn nothing. KR-270 at the paper's configurations,
+/// and a 7-joint arm.
+#[test]
+fn orientation_rows_are_the_turn_of_the_frame() {
+    orientation_case::<6>(
+        &kr270(),
+        &PAPER_Q_DEG.iter().map(|q| rad(q)).collect::<Vec<_>>(),
+    );
+    orientation_case::<7>(&arm7(), &arm7_poses());
+}

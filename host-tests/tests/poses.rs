@@ -30,7 +30,13 @@ fn job(arm: &Arm, urdf: &std::path::Path, tip: &str, tag: &str) -> Job {
         m.y,
         m.z
     );
-    let path = std::env::temp_dir().join(format!("robcal-poses-{}-{tag}.toml", std::process::id()));
+    // One file per call: the tests run side by side in one process.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let k = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!(
+        "robcal-poses-{}-{tag}-{k}.toml",
+        std::process::id()
+    ));
     std::fs::write(&path, text).expect("setup");
     let job = Job::load(&path).expect("setup");
     let _ = std::fs::remove_file(&path);

@@ -81,6 +81,20 @@ use crate::error::Error;
 use crate::robot::load::check_len;
 use crate::robot::{Frames, JointFrame, JointKind};
 
+/// The turn `ω` of an affine column `c(p) = v + W p`, `W` a rotation's
+/// `[ω]×` plus a stretch `s I`, from its values at `p` (`c0`), `p + eₓ`
+/// (`cx`) and `p + e_y` (`cy`): `W eₓ = (s, ω_z, −ω_y)`,
+/// `W e_y = (−ω_z, s, ω_x)`. What a parameter does to a 6-D pose's
+/// orientation ([`crate::model::Layout::orientation_block`], and the host's
+/// orientation rows): a rigid motion turns the frame by `ω`, a stretch and
+/// a marker's position turn nothing.
+pub fn turn<T: RealField + Copy>(c0: &Vector3<T>, cx: &Vector3<T>, cy: &Vector3<T>) -> Vector3<T> {
+    let a = cx - c0;
+    let b = cy - c0;
+    let half: T = nalgebra::convert(0.5);
+    Vector3::new(b.z, -a.z, (a.y - b.x) * half)
+}
+
 impl Param {
     /// The column `∂p/∂x` \[m per reported unit\] of this parameter at
     /// `sample` (see the [module docs](self)); zero where the parameter

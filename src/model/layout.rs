@@ -28,6 +28,7 @@ use nalgebra::allocator::Allocator;
 use nalgebra::storage::StorageMut;
 use nalgebra::{DefaultAllocator, Dim, DimName, Matrix, OMatrix, RealField, Vector3, U3};
 
+use super::columns::turn;
 use super::param::{Param, Unit, BIN_TOLERANCE_RAD};
 use super::sample::Sample;
 use crate::error::Error;
@@ -242,6 +243,64 @@ impl<const N: usize> Layout<N> {
         let mut b = OMatrix::<T, U3, D>::zeros();
         self.fill(&sample, &mut b)?;
         Ok(b)
+    }
+
+    /// `B` of the **orientation** of a 6-D pose (data contract extension
+    /// `rx, ry, rz`): the turn `∂θ/∂x` of the marker's link frame per unit
+    /// of each parameter \[rad per unit, measurement frame\], at joint
+    /// values `q` under the robot's own weight as in
+    /// [`Layout::absolute_block`]. A pose is the two blocks: this one's
+    /// `Δθ = log(R_meas R_predᵀ)` \[rad\] (`R_pred` the tip frame's rotation
+    /// turned by the tool's) beside `absolute_block`'s `Δp`, each a
+    /// [`crate::Block`] of three rows with its own weights (its σ in rad),
+    /// so that a device takes a pose as it takes a point: the layout and the
+    /// accumulator are the same, and nothing is built for a device that
+    /// measures points only.
+    ///
+    /// Every column is affine in the point it is taken at, `c(p) = v + W p`
+    /// (`W = [ω]×` for a rigid motion of the frame: a joint's offset or
+    /// yield, a frame error, the base, the tool; a marker's position moves
+    /// no frame), so `ω` is read from the columns at the marker's point and
+    /// 1 m beside it along x and y ([`turn`], the host's rule for its
+    /// orientation rows).
+    ///
+    /// # Errors
+    /// As [`Layout::absolute_block`].
+    pub fn orientation_block<T: RealField + Copy, const J: usize, D: DimName>(
+        &self,
+        chain: &Chain<T, J>,
+        q: &[T],
+        marker: &Marker<T>,
+        gravity_mps2: &Vector3<T>,
+    ) -> Result<OMatrix<T, U3, D>, Error>
+    where
+        DefaultAllocator: Allocator<U3, D>,
+    {
+        let frames = chain.frames(q)?;
+        let mut tau = [T::zero(); J];
+        gravity_torques(chain, &frames, gravity_mps2, &mut tau)?;
+        let point = frames.point_m(&marker.xyz_m);
+        let tau = &tau[..frames.dof()];
+        let at = |p: Vector3<T>| {
+            let sample = Sample::absolute(&frames, p, marker.index, tau);
+            let mut b = OMatrix::<T, U3, D>::zeros();
+            self.fill(&sample, &mut b).map(|()| b)
+        };
+        let (c, cx, cy) = (
+            at(point)?,
+            at(point + Vector3::x())?,
+            at(point + Vector3::y())?,
+        );
+        let mut out = OMatrix::<T, U3, D>::zeros();
+        for j in 0..out.ncols() {
+            let w = turn(
+                &c.column(j).into(),
+                &cx.column(j).into(),
+                &cy.column(j).into(),
+            );
+            out.set_column(j, &w);
+        }
+        Ok(out)
     }
 }
 

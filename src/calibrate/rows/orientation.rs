@@ -28,15 +28,10 @@ use nalgebra::{Rotation3, Vector3};
 /// itself).
 pub const PROBES: [Vector3<f64>; 2] = [Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 1.0, 0.0)];
 
-/// The turn `ω` of an affine column `c(p) = v + W p`, `W` a rotation's
-/// `[ω]×` plus a stretch `s I`, from its values at `p` (`c0`),
-/// `p + eₓ` (`cx`) and `p + e_y` (`cy`) ([`PROBES`]): `W eₓ = (s, ω_z, −ω_y)`,
-/// `W e_y = (−ω_z, s, ω_x)`.
-pub fn turn(c0: &Vector3<f64>, cx: &Vector3<f64>, cy: &Vector3<f64>) -> Vector3<f64> {
-    let a = cx - c0;
-    let b = cy - c0;
-    Vector3::new(b.z, -a.z, 0.5 * (a.y - b.x))
-}
+/// The turn of a column from its values at the point and at [`PROBES`]:
+/// the core's rule, which a device's pose rows use too
+/// ([`crate::model::Layout::orientation_block`]).
+pub use crate::model::turn;
 
 /// The rotation left between a measured orientation (rotation vector
 /// `measured_rad`) and the predicted `predicted`, in the measurement frame:
