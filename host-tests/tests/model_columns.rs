@@ -30,14 +30,6 @@ fn fd(f: impl Fn(f64) -> Vector3<f64>) -> Vector3<f64> {
     (f(H) - f(-H)) / (2.0 * H)
 }
 
-fn vee(w: &Matrix3<f64>) -> Vector3<f64> {
-    Vector3::new(
-        w[(2, 1)] - w[(1, 2)],
-        w[(0, 2)] - w[(2, 0)],
-        w[(1, 0)] - w[(0, 1)],
-    ) * 0.5
-}
-
 fn geometric_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {
     let chain: Chain<f64, J> = robot.chain();
     let n = robot.joints.len();

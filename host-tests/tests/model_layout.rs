@@ -549,12 +549,7 @@ fn tip_rotation(
 /// differences: `[ω]× = ṙ rᵀ`.
 fn turn_fd(r: impl Fn(f64) -> nalgebra::Matrix3<f64>) -> Vector3<f64> {
     const H: f64 = 1e-6;
-    let w = (r(H) - r(-H)) / (2.0 * H) * r(0.0).transpose();
-    Vector3::new(
-        w[(2, 1)] - w[(1, 2)],
-        w[(0, 2)] - w[(2, 0)],
-        w[(1, 0)] - w[(0, 1)],
-    ) * 0.5
+    vee(&((r(H) - r(-H)) / (2.0 * H) * r(0.0).transpose()))
 }
 
 fn orientation_case<const J: usize>(robot: &RefRobot, poses: &[Vec<f64>]) {

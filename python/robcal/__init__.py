@@ -752,16 +752,7 @@ class Model:
         ``q`` ((dof,) or (n, dof)) with the payload ``load_kg`` (one, or one
         per row) at ``com_m`` [m, tip frame] ((3,) or (n, 3)): (3,) or
         (n, 3). ``marker`` may be left out when the model has one."""
-        q = _joints(q, self.joint_names, self._native.joint_is_angular, "q")
-        rows, one = _rows(q, self.dof, "q", "joint values")
-        n = rows.shape[0]
-        load = _per_row(load_kg, n, 1, "load_kg")
-        com = _per_row(com_m, n, 3, "com_m")
-        marker = None if marker is None else _int(marker, "marker")
-        out = self._native.predict(rows.tobytes(), load, com, marker)
-        self._warn_payload(load if len(load) == n else load * n)
-        p = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
-        return p[0] if one else p
+        return self._predict(q, load_kg, com_m, marker, False)
 
     def predict_orientation(
         self,
@@ -775,16 +766,19 @@ class Model:
         robot's equilibrium, as a rotation vector (axis × angle) [rad,
         measurement frame], ``robcal predict --orientation``'s ``rx_rad,
         ry_rad, rz_rad``. Arguments as ``predict``'s: (3,) or (n, 3)."""
+        return self._predict(q, load_kg, com_m, marker, True)
+
+    def _predict(self, q: Any, load_kg: Any, com_m: Any, marker: Optional[int], orientation: bool) -> np.ndarray:
         q = _joints(q, self.joint_names, self._native.joint_is_angular, "q")
         rows, one = _rows(q, self.dof, "q", "joint values")
         n = rows.shape[0]
         load = _per_row(load_kg, n, 1, "load_kg")
         com = _per_row(com_m, n, 3, "com_m")
         marker = None if marker is None else _int(marker, "marker")
-        out = self._native.predict_orientation(rows.tobytes(), load, com, marker)
+        out = self._native.predict(rows.tobytes(), load, com, marker, orientation)
         self._warn_payload(load if len(load) == n else load * n)
-        r = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
-        return r[0] if one else r
+        p = np.frombuffer(out, dtype=np.float64).reshape(n, 3).copy()
+        return p[0] if one else p
 
     def compensate(
         self,

@@ -631,43 +631,6 @@ impl Model {
         }
         Ok(q.len() / dof)
     }
-
-    /// `f(robot, tool, q, payload)` (three values) for each row of joint
-    /// values `q` (`f64` bytes) with its payload, at marker `marker`: `f64`
-    /// bytes, three per row; the GIL released. An error names its row.
-    fn per_pose<'py>(
-        &self,
-        py: Python<'py>,
-        q: &[u8],
-        load_kg: &[f64],
-        com_m: &[f64],
-        marker: Option<i64>,
-        f: impl Fn(
-                &Predictor,
-                &Vector3<f64>,
-                &[f64],
-                Option<&Payload>,
-            ) -> Result<Vector3<f64>, robcal::Error>
-            + Sync,
-    ) -> PyResult<Bound<'py, PyBytes>> {
-        let marker = marker_id(marker)?;
-        let q = floats(q, "q")?;
-        let n = self.rows(&q)?;
-        self.check_q(&q, "q")?;
-        let payloads = self.payloads(n, load_kg, com_m)?;
-        let (_, tool, robot) = self.inner.at_marker(marker).map_err(calibration_error)?;
-        let dof = robot.dof();
-        let out = py.detach(|| {
-            let mut out = Vec::with_capacity(3 * n);
-            for (r, payload) in payloads.iter().enumerate() {
-                let p = f(&robot, &tool, &q[r * dof..(r + 1) * dof], payload.as_ref())
-                    .map_err(|e| format!("row {r}: cannot predict: {e}"))?;
-                out.extend_from_slice(p.as_slice());
-            }
-            Ok::<_, String>(out)
-        });
-        Ok(to_bytes(py, &out.map_err(calibration_error)?))
-    }
 }
 
 #[pymethods]
@@ -731,8 +694,13 @@ impl Model {
     /// Where the marker settles \[m, measurement frame\] for each row of
     /// joint values `q` (`f64` bytes, rows of `dof`, rad or m) with the
     /// payload `load_kg` (kg; one or one per row) at `com_m` (m, tip frame;
-    /// one or one per row): `f64` bytes, three per row. Releases the GIL.
-    #[pyo3(signature = (q, load_kg, com_m, marker = None))]
+    /// one or one per row): `f64` bytes, three per row. With `orientation`,
+    /// the orientation a 6-D instrument measures there instead: the tip
+    /// frame turned by the identified tool frame, at the robot's
+    /// equilibrium, as a rotation vector \[rad, measurement frame\]
+    /// (`robcal predict --orientation`'s `rx_rad, ry_rad, rz_rad`).
+    /// Releases the GIL.
+    #[pyo3(signature = (q, load_kg, com_m, marker = None, orientation = false))]
     fn predict<'py>(
         &self,
         py: Python<'py>,
@@ -740,44 +708,34 @@ impl Model {
         load_kg: Vec<f64>,
         com_m: Vec<f64>,
         marker: Option<i64>,
+        orientation: bool,
     ) -> PyResult<Bound<'py, PyBytes>> {
-        self.per_pose(
-            py,
-            q,
-            &load_kg,
-            &com_m,
-            marker,
-            |robot, tool, q, payload| robot.predict(tool, q, payload),
-        )
-    }
-
-    /// The orientation a 6-D instrument measures beside [`Model::predict`]'s
-    /// point: the tip frame turned by the identified tool frame, at the
-    /// robot's equilibrium, as a rotation vector \[rad, measurement frame\]
-    /// (`robcal predict --orientation`'s `rx_rad, ry_rad, rz_rad`); the
-    /// arguments as [`Model::predict`]'s: `f64` bytes, three per row.
-    /// Releases the GIL.
-    #[pyo3(signature = (q, load_kg, com_m, marker = None))]
-    fn predict_orientation<'py>(
-        &self,
-        py: Python<'py>,
-        q: &[u8],
-        load_kg: Vec<f64>,
-        com_m: Vec<f64>,
-        marker: Option<i64>,
-    ) -> PyResult<Bound<'py, PyBytes>> {
-        self.per_pose(
-            py,
-            q,
-            &load_kg,
-            &com_m,
-            marker,
-            |robot, tool, q, payload| {
-                robot
-                    .predict_rotation(tool, q, payload)
-                    .map(|r| r.scaled_axis())
-            },
-        )
+        let marker = marker_id(marker)?;
+        let q = floats(q, "q")?;
+        let n = self.rows(&q)?;
+        self.check_q(&q, "q")?;
+        let payloads = self.payloads(n, &load_kg, &com_m)?;
+        let (_, tool, robot) = self.inner.at_marker(marker).map_err(calibration_error)?;
+        let dof = robot.dof();
+        let out = py.detach(|| {
+            let mut out = Vec::with_capacity(3 * n);
+            for (r, payload) in payloads.iter().enumerate() {
+                let (q, payload) = (&q[r * dof..(r + 1) * dof], payload.as_ref());
+                let p = if orientation {
+                    robot
+                        .predict_rotation(&tool, q, payload)
+                        .map(|r| r.scaled_axis())
+                } else {
+                    robot.predict(&tool, q, payload)
+                };
+                out.extend_from_slice(
+                    p.map_err(|e| format!("row {r}: cannot predict: {e}"))?
+                        .as_slice(),
+                );
+            }
+            Ok::<_, String>(out)
+        });
+        Ok(to_bytes(py, &out.map_err(calibration_error)?))
     }
 
     /// The joint commands whose loaded, deflected robot puts the marker on

@@ -32,7 +32,7 @@ use super::columns::turn;
 use super::param::{Param, Unit, BIN_TOLERANCE_RAD};
 use super::sample::Sample;
 use crate::error::Error;
-use crate::robot::{gravity_torques, joint_torques, Chain, JointKind, PointLoad};
+use crate::robot::{gravity_torques, joint_torques, Chain, Frames, JointKind, PointLoad};
 
 /// One column of a layout: the parameter and its unit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -235,9 +235,7 @@ impl<const N: usize> Layout<N> {
     where
         DefaultAllocator: Allocator<U3, D>,
     {
-        let frames = chain.frames(q)?;
-        let mut tau = [T::zero(); J];
-        gravity_torques(chain, &frames, gravity_mps2, &mut tau)?;
+        let (frames, tau) = own_weight(chain, q, gravity_mps2)?;
         let point = frames.point_m(&marker.xyz_m);
         let sample = Sample::absolute(&frames, point, marker.index, &tau[..frames.dof()]);
         let mut b = OMatrix::<T, U3, D>::zeros();
@@ -276,9 +274,7 @@ impl<const N: usize> Layout<N> {
     where
         DefaultAllocator: Allocator<U3, D>,
     {
-        let frames = chain.frames(q)?;
-        let mut tau = [T::zero(); J];
-        gravity_torques(chain, &frames, gravity_mps2, &mut tau)?;
+        let (frames, tau) = own_weight(chain, q, gravity_mps2)?;
         let point = frames.point_m(&marker.xyz_m);
         let tau = &tau[..frames.dof()];
         let at = |p: Vector3<T>| {
@@ -302,6 +298,19 @@ impl<const N: usize> Layout<N> {
         }
         Ok(out)
     }
+}
+
+/// The frames at `q` and the joint torques of the robot's own weight under
+/// `gravity_mps2` there: what an absolute measurement's columns are taken at.
+fn own_weight<T: RealField + Copy, const J: usize>(
+    chain: &Chain<T, J>,
+    q: &[T],
+    gravity_mps2: &Vector3<T>,
+) -> Result<(Frames<T, J>, [T; J]), Error> {
+    let frames = chain.frames(q)?;
+    let mut tau = [T::zero(); J];
+    gravity_torques(chain, &frames, gravity_mps2, &mut tau)?;
+    Ok((frames, tau))
 }
 
 /// A [`Column`] for `param`, checking its joint (`kind(j)`, `None` past the

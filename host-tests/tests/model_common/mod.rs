@@ -286,3 +286,12 @@ pub fn assert_close(a: Vector3<f64>, b: Vector3<f64>, tol: f64, what: &str) {
         (a - b).norm()
     );
 }
+
+/// The vector `ω` of the skew part of `w` (`[ω]×` for a skew `w`).
+pub fn vee(w: &Matrix3<f64>) -> Vector3<f64> {
+    Vector3::new(
+        w[(2, 1)] - w[(1, 2)],
+        w[(0, 2)] - w[(2, 0)],
+        w[(1, 0)] - w[(0, 1)],
+    ) * 0.5
+}
