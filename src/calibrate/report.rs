@@ -280,6 +280,9 @@ pub struct OrientationErrors {
     /// The parameters the points alone would leave out and the
     /// orientations determine ([`crate::calibrate::engine::Engine::identified_by_orientations`]).
     pub identified: Vec<String>,
+    /// The rotation left of each orientation row after calibration
+    /// \[µrad\], in row order (what `--robust` weighs them by).
+    pub residuals_urad: Vec<nalgebra::Vector3<f64>>,
 }
 
 impl OrientationErrors {
@@ -300,6 +303,7 @@ impl OrientationErrors {
             mean_urad: a.mean_um,
             max_urad: a.max_um,
             identified: Vec::new(),
+            residuals_urad: fitted.iter().map(|r| r * 1e6).collect(),
         })
     }
 }

@@ -39,32 +39,79 @@
 //!
 //! The σ the report gives are the sandwich's of the weighted fit (eq. 8,
 //! 11) with these weights held: the rows weighted down count for less.
+//!
+//! The kinds are three: absolute positions, deflections, and a 6-D pose's
+//! orientations (their residuals in µrad, their σ in rad: a pose's point
+//! and its orientation are weighted each by its own residual, so that an
+//! orientation the instrument lost does not take its good point with it).
 
 use nalgebra::Vector3;
 
-use crate::calibrate::report::RowErrors;
+use crate::calibrate::params::names::Names;
+use crate::calibrate::report::{OrientationErrors, RowErrors};
 use crate::calibrate::rows::{RowKind, Rows};
 
 /// The consistency factor of the median absolute deviation for a normal
 /// distribution: `1 / Φ⁻¹(3/4)`.
 const MAD_NORMAL: f64 = 1.482_602_218_505_602;
 
-/// What the robust loss needs of a row: its kind and its instrument's σ
-/// \[m\] (taken before the rows go to the fit).
+/// What the robust loss needs of a row: its configuration, kind and
+/// instrument's σ (taken before the rows go to the fit).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowNoise {
-    /// Whether the row is a deflection.
-    pub deflection: bool,
-    /// The instrument's σ per axis \[m\], when the row has one.
+    /// `config` as in the CSV.
+    pub config: i64,
+    /// Marker id.
+    pub marker: u32,
+    /// Its kind ([`RowNoise::kind`]).
+    pub kind: NoiseKind,
+    /// The instrument's σ per axis (\[m\]; an orientation's \[rad\]), when
+    /// the row has one.
     pub sigma_m: Option<Vector3<f64>>,
 }
 
-/// [`RowNoise`] of every row of `rows`, in row order.
-pub fn noise_of(rows: &Rows) -> Vec<RowNoise> {
+/// The kinds of rows the robust loss scales apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum NoiseKind {
+    /// An absolute position.
+    Position = 0,
+    /// A deflection (loaded minus unloaded position).
+    Deflection = 1,
+    /// A 6-D pose's orientation.
+    Orientation = 2,
+}
+
+impl NoiseKind {
+    /// As the report's notes name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            NoiseKind::Position => "position",
+            NoiseKind::Deflection => "deflection",
+            NoiseKind::Orientation => "orientation",
+        }
+    }
+}
+
+/// The kinds, in [`NoiseKind`]'s order.
+const KINDS: [NoiseKind; 3] = [
+    NoiseKind::Position,
+    NoiseKind::Deflection,
+    NoiseKind::Orientation,
+];
+
+/// [`RowNoise`] of every row of `rows` (markers named by `names`), in row
+/// order.
+pub fn noise_of(rows: &Rows, names: &Names) -> Vec<RowNoise> {
     rows.rows
         .iter()
         .map(|r| RowNoise {
-            deflection: r.kind == RowKind::Deflection,
+            config: rows.configs.get(r.group()).copied().unwrap_or_default(),
+            marker: names.markers.get(usize::from(r.marker)).map_or(0, |m| m.0),
+            kind: match (r.orientation, r.kind) {
+                (true, _) => NoiseKind::Orientation,
+                (false, RowKind::Deflection) => NoiseKind::Deflection,
+                (false, RowKind::Absolute) => NoiseKind::Position,
+            },
             sigma_m: r.sigma(),
         })
         .collect()
@@ -95,51 +142,55 @@ fn scale(r: &[Vector3<f64>]) -> Vector3<f64> {
     })
 }
 
+/// The final residuals of every row (µm; an orientation's µrad), in row
+/// order: the points' ([`RowErrors`]), then the poses' orientations'
+/// ([`OrientationErrors::residuals_urad`]).
+pub fn residuals(errors: &RowErrors, orientation: Option<&OrientationErrors>) -> Vec<Vector3<f64>> {
+    let turned = orientation.map_or(&[][..], |o| &o.residuals_urad[..]);
+    errors
+        .iter()
+        .map(|e| e.final_um)
+        .chain(turned.iter().copied())
+        .collect()
+}
+
 /// Huber's weight of every row (in `(0, 1]`, row order) from the final
-/// residuals of `errors` (one per row of `noise`, the same order), with
-/// threshold `k`, each standardised as the module says (`group_rows`: the
-/// fewest other rows of a configuration and kind whose σ standardises a
-/// row). A row whose standardised residual cannot be formed (a scale of
-/// zero on an axis: a fit that reproduces the rows) keeps weight 1.
-pub fn huber(noise: &[RowNoise], errors: &RowErrors, k: f64, group_rows: usize) -> Vec<f64> {
-    let rows: Vec<(i64, Vector3<f64>)> = errors.iter().map(|e| (e.config, e.final_um)).collect();
-    let kind_scale = |deflection: bool| {
-        let r: Vec<Vector3<f64>> = (noise.iter().zip(&rows))
-            .filter(|(n, _)| n.deflection == deflection)
-            .map(|(_, r)| r.1)
-            .collect();
-        scale(&r)
-    };
-    let scales = [kind_scale(false), kind_scale(true)];
+/// residuals `res` (µm or µrad, one per row of `noise`, the same order:
+/// [`residuals`]), with threshold `k`, each standardised as the module
+/// says (`group_rows`: the fewest other rows of a configuration and kind
+/// whose σ standardises a row). A row whose standardised residual cannot
+/// be formed (a scale of zero on an axis: a fit that reproduces the rows)
+/// keeps weight 1.
+pub fn huber(noise: &[RowNoise], res: &[Vector3<f64>], k: f64, group_rows: usize) -> Vec<f64> {
+    let of_kind = |kind: NoiseKind| (noise.iter().zip(res)).filter(move |(n, _)| n.kind == kind);
+    let scales = KINDS.map(|kind| scale(&of_kind(kind).map(|(_, r)| *r).collect::<Vec<_>>()));
     // Per kind, the robust scale of the residuals over the instrument's σ.
-    let over_sigma = |deflection: bool| {
-        let z: Vec<Vector3<f64>> = (noise.iter().zip(&rows))
-            .filter(|(n, _)| n.deflection == deflection)
-            .filter_map(|(n, r)| n.sigma_m.map(|s| r.1.component_div(&(s * 1e6))))
+    let levels = KINDS.map(|kind| {
+        let z: Vec<Vector3<f64>> = of_kind(kind)
+            .filter_map(|(n, r)| n.sigma_m.map(|s| r.component_div(&(s * 1e6))))
             .collect();
         scale(&z)
-    };
-    let levels = [over_sigma(false), over_sigma(true)];
+    });
     // Per configuration and kind: the sum of squares per axis and the rows.
-    let mut sums: std::collections::HashMap<(i64, bool), (Vector3<f64>, usize)> =
+    let mut sums: std::collections::HashMap<(i64, NoiseKind), (Vector3<f64>, usize)> =
         std::collections::HashMap::new();
-    for (n, (config, r)) in noise.iter().zip(&rows) {
+    for (n, r) in noise.iter().zip(res) {
         let e = sums
-            .entry((*config, n.deflection))
+            .entry((n.config, n.kind))
             .or_insert((Vector3::zeros(), 0));
         e.0 += r.component_mul(r);
         e.1 += 1;
     }
     noise
         .iter()
-        .zip(&rows)
-        .map(|(n, (config, r))| {
-            let s = match (n.sigma_m, sums.get(&(*config, n.deflection))) {
-                (Some(s), _) => (s * 1e6).component_mul(&levels[usize::from(n.deflection)]),
+        .zip(res)
+        .map(|(n, r)| {
+            let s = match (n.sigma_m, sums.get(&(n.config, n.kind))) {
+                (Some(s), _) => (s * 1e6).component_mul(&levels[n.kind as usize]),
                 (None, Some((ss, m))) if *m > group_rows.max(1) => {
                     ((ss - r.component_mul(r)) / (m - 1) as f64).map(|v| v.max(0.0).sqrt())
                 }
-                _ => scales[usize::from(n.deflection)],
+                _ => scales[n.kind as usize],
             };
             if !s.iter().all(|&x| x > 0.0 && x.is_finite()) {
                 return 1.0;
@@ -198,15 +249,16 @@ mod tests {
             .map(|i| Vector3::repeat(if i % 2 == 0 { -1e-6 } else { 1e-6 }))
             .collect();
         res[3].y = 4e-3;
-        let noise = vec![
-            RowNoise {
-                deflection: false,
+        let noise: Vec<RowNoise> = (0..12)
+            .map(|config| RowNoise {
+                config,
+                marker: 1,
+                kind: NoiseKind::Position,
                 sigma_m: Some(Vector3::repeat(10e-6)),
-            };
-            12
-        ];
+            })
+            .collect();
         let errors = RowErrors::new(configs, vec![1], (0..12).map(|i| (i, 0u8, false)), res);
-        let w = huber(&noise, &errors, 3.37, 4);
+        let w = huber(&noise, &residuals(&errors, None), 3.37, 4);
         let d: f64 = Vector3::new(1.0_f64, 4000.0, 1.0).norm() / MAD_NORMAL;
         assert!(
             (w[3] - 3.37 / d).abs() < 1e-9 * w[3],

@@ -65,14 +65,7 @@ fn robustly(
     let mut fits = 0;
     loop {
         let (mut rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), policy)?;
-        if rows.orientation_groups > 0 {
-            return Err(CalibrationError::Data(format!(
-                "{}: the robust loss weighs points; it does not take a pose's orientation \
-                 (rx, ry, rz) yet: calibrate without --robust, or from the points alone",
-                data.file.display()
-            )));
-        }
-        let noise = robust::noise_of(&rows);
+        let noise = robust::noise_of(&rows, &names);
         if let Some(w) = &used {
             let scales: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
             (rows.set_robust(&scales)).map_err(|e| CalibrationError::Core("robust weights", e))?;
@@ -80,12 +73,8 @@ fn robustly(
         let mut report =
             calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?;
         fits += 1;
-        let next = robust::huber(
-            &noise,
-            &report.row_errors,
-            policy.huber_k,
-            policy.robust_group_rows,
-        );
+        let res = robust::residuals(&report.row_errors, report.orientation.as_ref());
+        let next = robust::huber(&noise, &res, policy.huber_k, policy.robust_group_rows);
         let change = match &used {
             Some(w) => (w.iter().zip(&next)).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs())),
             None => next.iter().fold(0.0_f64, |m, b| m.max(1.0 - b)),
@@ -104,14 +93,19 @@ fn robustly(
             .collect();
         down.sort_by(|a, b| a.1.total_cmp(&b.1));
         let list: Vec<String> = (down.iter().take(5))
-            .filter_map(|&(i, w)| report.row_errors.get(i).map(|r| (r, w)))
-            .map(|(r, w)| {
+            .filter_map(|&(i, w)| Some((noise.get(i)?, res.get(i)?, w)))
+            .map(|(n, r, w)| {
+                let unit = if n.kind == robust::NoiseKind::Orientation {
+                    "urad"
+                } else {
+                    "um"
+                };
                 format!(
-                    "config {} marker {} ({}, weight {w:.3}, {:.1} um)",
-                    r.config,
-                    r.marker,
-                    r.kind_name(),
-                    r.final_um.norm()
+                    "config {} marker {} ({}, weight {w:.3}, {:.1} {unit})",
+                    n.config,
+                    n.marker,
+                    n.kind.name(),
+                    r.norm()
                 )
             })
             .collect();
