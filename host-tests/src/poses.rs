@@ -133,41 +133,75 @@ pub fn csv(
     orientation: bool,
     rng: &mut SplitMix64,
 ) -> String {
-    let (sm, sr) = (instrument.sigma_m, instrument.sigma_rad);
-    let mut out = format!("config,{},x,y,z,sx,sy,sz", arm.joints.join(","));
-    if orientation {
-        out += ",rx,ry,rz,srx,sry,srz";
-    }
-    out.push('\n');
-    let tool = Rotation3::new(truth.tool_r);
+    let mut out = header(arm, orientation);
     for c in 0..n {
         let q: Vec<f64> = arm
             .ranges
             .iter()
             .map(|&(lo, hi)| rng.range(lo, hi))
             .collect();
-        let theta: Vec<f64> = q.iter().zip(&truth.offsets).map(|(q, o)| q + o).collect();
-        let pose = arm.fk.pose(&theta);
-        let r_tip =
-            Rotation3::from_matrix_unchecked(Matrix3::from(pose.tip.fixed_view::<3, 3>(0, 0)));
-        let p_tip = pose.tip.fixed_view::<3, 1>(0, 3).into_owned();
-        let p = p_tip + r_tip * (truth.tool_t + tool * arm.marker_m);
-        let p = p + Vector3::from_fn(|_, _| rng.normal() * sm);
-        let qs: Vec<String> = q.iter().map(|v| format!("{v:.9}")).collect();
-        out += &format!(
-            "{},{},{:.9},{:.9},{:.9},{sm},{sm},{sm}",
-            c + 1,
-            qs.join(","),
-            p.x,
-            p.y,
-            p.z
-        );
-        if orientation {
-            let noise = Rotation3::new(Vector3::from_fn(|_, _| rng.normal() * sr));
-            let r = (noise * r_tip * tool).scaled_axis();
-            out += &format!(",{:.12},{:.12},{:.12},{sr},{sr},{sr}", r.x, r.y, r.z);
-        }
-        out.push('\n');
+        out += &line(arm, truth, instrument, c + 1, &q, orientation, rng);
     }
+    out
+}
+
+/// [`csv`] at the joint values `poses` \[rad\], one configuration each.
+pub fn csv_at(
+    arm: &Arm,
+    truth: &Truth,
+    instrument: Instrument,
+    poses: &[Vec<f64>],
+    orientation: bool,
+    rng: &mut SplitMix64,
+) -> String {
+    let mut out = header(arm, orientation);
+    for (c, q) in poses.iter().enumerate() {
+        out += &line(arm, truth, instrument, c + 1, q, orientation, rng);
+    }
+    out
+}
+
+/// [`csv`]'s header.
+fn header(arm: &Arm, orientation: bool) -> String {
+    let mut out = format!("config,{},x,y,z,sx,sy,sz", arm.joints.join(","));
+    if orientation {
+        out += ",rx,ry,rz,srx,sry,srz";
+    }
+    out.push('\n');
+    out
+}
+
+/// [`csv`]'s line of configuration `config` at joint values `q`.
+fn line(
+    arm: &Arm,
+    truth: &Truth,
+    instrument: Instrument,
+    config: usize,
+    q: &[f64],
+    orientation: bool,
+    rng: &mut SplitMix64,
+) -> String {
+    let (sm, sr) = (instrument.sigma_m, instrument.sigma_rad);
+    let tool = Rotation3::new(truth.tool_r);
+    let theta: Vec<f64> = q.iter().zip(&truth.offsets).map(|(q, o)| q + o).collect();
+    let pose = arm.fk.pose(&theta);
+    let r_tip = Rotation3::from_matrix_unchecked(Matrix3::from(pose.tip.fixed_view::<3, 3>(0, 0)));
+    let p_tip = pose.tip.fixed_view::<3, 1>(0, 3).into_owned();
+    let p = p_tip + r_tip * (truth.tool_t + tool * arm.marker_m);
+    let p = p + Vector3::from_fn(|_, _| rng.normal() * sm);
+    let qs: Vec<String> = q.iter().map(|v| format!("{v:.9}")).collect();
+    let mut out = format!(
+        "{config},{},{:.9},{:.9},{:.9},{sm},{sm},{sm}",
+        qs.join(","),
+        p.x,
+        p.y,
+        p.z
+    );
+    if orientation {
+        let noise = Rotation3::new(Vector3::from_fn(|_, _| rng.normal() * sr));
+        let r = (noise * r_tip * tool).scaled_axis();
+        out += &format!(",{:.12},{:.12},{:.12},{sr},{sr},{sr}", r.x, r.y, r.z);
+    }
+    out.push('\n');
     out
 }

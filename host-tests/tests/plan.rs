@@ -103,7 +103,7 @@ fn planned_poses_determine_the_ur10_as_well_as_twice_as_many_random_ones() {
         ..PlanSettings::default()
     };
     let candidates = random_candidates(&job, &settings).unwrap();
-    let p = pool(&job, candidates, &Default::default()).unwrap();
+    let p = pool(&job, candidates, None, &Default::default()).unwrap();
     let mut table = String::from(
         "| K | trace: D plan | I plan | condition plan | K random | 2K random | error µm: D plan | I plan | condition plan | K random | 2K random |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
@@ -258,6 +258,7 @@ fn planned_payload_poses_determine_the_kr270_compliances_as_well_as_twice_as_man
     let p = pool(
         &job,
         random_candidates(&job, &settings).unwrap(),
+        None,
         &Default::default(),
     )
     .unwrap();
@@ -365,7 +366,7 @@ fn the_controllers_choices_are_the_hosts() {
             load_kg: f64::from(LOAD_DKG[g]) * 0.1,
         })
         .collect();
-    let p = pool(&job, candidates, &Default::default()).unwrap();
+    let p = pool(&job, candidates, None, &Default::default()).unwrap();
     assert_eq!(p.parameters(), 9, "{:?} {:?}", p.params, p.notes);
     let host = choose(&p, PICKS, Criterion::D, 0).unwrap().chosen;
     let (c64, _) = sequence(&table(&Kr270::<f64>::new().unwrap()).unwrap()).unwrap();

@@ -447,6 +447,7 @@ def plan(
     load_kg: Sequence[float] = (),
     limits: Optional[Mapping[str, tuple[float, float]]] = None,
     exchange_passes: int = 10,
+    orientation_urad: Optional[float] = None,
 ) -> Plan:
     """``robcal plan --setup SETUP --poses K``: the ``poses`` configurations
     that determine the setup's declared model best, chosen before
@@ -456,7 +457,9 @@ def plan(
     command's ``--pool``), a DataFrame with a ``<joint>_rad``/``_m`` column
     per joint and optionally ``load_kg``, or rows of joint values (n, dof)
     with ``load_kg`` one mass for all or one per row. ``criterion``: ``d``, ``a``, ``i``, ``e`` or
-    ``condition`` (docs/plan.md)."""
+    ``condition`` (docs/plan.md). ``orientation_urad``: a 6-D instrument,
+    each candidate measured as a pose, its orientation's σ per axis [µrad]
+    (the command's ``--orientation-urad``)."""
     job = setup if isinstance(setup, Job) else Job.load(setup)
     dof = len(job.joint_names)
     if pool is not None and candidates is not None:
@@ -492,6 +495,7 @@ def plan(
         load_kg=loads if pool is None else [],
         limits=[(str(k), _number(v[0], f"limits {k!r}"), _number(v[1], f"limits {k!r}")) for k, v in (limits or {}).items()],
         exchange_passes=_int(exchange_passes, "exchange_passes"),
+        orientation_urad=None if orientation_urad is None else _number(orientation_urad, "orientation_urad"),
     )
     return Plan(native, dof)
 

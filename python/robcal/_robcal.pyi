@@ -132,4 +132,5 @@ def plan(
     load_kg: list[float] = ...,
     limits: list[tuple[str, float, float]] = ...,
     exchange_passes: int = ...,
+    orientation_urad: Optional[float] = ...,
 ) -> Plan: ...

@@ -935,7 +935,7 @@ impl Plan {
 #[pyfunction]
 #[pyo3(signature = (job, poses, *, candidates = 1000, pool_q = None, pool_load_kg = None,
     pool_path = None, criterion = "d", seed = 0x706c_616e, load_kg = Vec::new(),
-    limits = Vec::new(), exchange_passes = 10))]
+    limits = Vec::new(), exchange_passes = 10, orientation_urad = None))]
 fn plan(
     py: Python<'_>,
     job: &Job,
@@ -949,6 +949,7 @@ fn plan(
     load_kg: Vec<f64>,
     limits: Vec<(String, f64, f64)>,
     exchange_passes: i64,
+    orientation_urad: Option<f64>,
 ) -> PyResult<Plan> {
     use robcal::calibrate::plan::{self as p, Candidate, Criterion, PlanSettings};
     let range = |v: i64, lo: i64, hi: i64, what: &str| {
@@ -960,6 +961,12 @@ fn plan(
     let poses = range(poses, 1, 100_000, "poses")?;
     let candidates = range(candidates, 1, p::MAX_CANDIDATES as i64, "candidates")?;
     let exchange_passes = range(exchange_passes, 0, 100, "exchange_passes")?;
+    if let Some(s) = orientation_urad.filter(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(PyValueError::new_err(format!(
+            "orientation_urad = {}: a number above 0",
+            short(s)
+        )));
+    }
     let criterion = match criterion {
         "d" => Criterion::D,
         "a" => Criterion::A,
@@ -997,6 +1004,7 @@ fn plan(
         loads_kg: load_kg,
         limits,
         exchange_passes,
+        orientation_sigma_urad: orientation_urad,
     };
     let job = Arc::clone(&job.inner);
     let dof = job.robot.dof();

@@ -250,6 +250,11 @@ def test_the_gil_is_released_while_it_calibrates(repo):
             {"poses": 8, "load_kg": [0.0, 250.0], "criterion": "a", "candidates": 300,
              "limits": {"a2": (-1.2, -0.2)}, "seed": 7},
         ),
+        (
+            "data/kr270/setup-6d.toml",
+            ["--poses", "8", "--candidates", "300", "--orientation-urad", "30"],
+            {"poses": 8, "candidates": 300, "orientation_urad": 30.0},
+        ),
     ],
 )
 def test_a_plan_is_the_commands(cli, repo, tmp_path, setup, args, kwargs):

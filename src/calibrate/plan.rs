@@ -5,11 +5,13 @@
 //! Each candidate is a configuration and a payload mass: its rows are the
 //! ones a measurement there gives the declared model — every marker's
 //! absolute position when the model needs them, and every marker's
-//! deflection under the payload when the mass is not zero — built by the
-//! engine's own rows and design at the nominal robot
-//! ([`crate::calibrate::varied`] does the same for its poses). Each row is
-//! weighted by the instrument's σ (the setup's `σ0`; a deflection's by
-//! `√2 σ0`), and each parameter's column is scaled to unit root mean
+//! deflection under the payload when the mass is not zero; with a 6-D
+//! instrument ([`PlanSettings::orientation_sigma_urad`]) every absolute
+//! position's orientation too — built by the engine's own rows and design
+//! at the nominal robot ([`crate::calibrate::varied`] does the same for its
+//! poses). Each row is weighted by the instrument's σ (the setup's `σ0`; a
+//! deflection's by `√2 σ0`; an orientation's by the 6-D instrument's σ in
+//! rad), and each parameter's column is scaled to unit root mean
 //! square over the pool, so that the criteria compare parameters of
 //! different units. With `Λ` the information of the chosen candidates:
 //!
@@ -111,6 +113,10 @@ pub struct PlanSettings {
     pub limits: Vec<(String, f64, f64)>,
     /// Exchange passes at most after the greedy selection. 0: greedy only.
     pub exchange_passes: usize,
+    /// A 6-D instrument's σ of an orientation per axis \[µrad\]: each
+    /// candidate's absolute positions are measured as poses, their
+    /// orientations' rows beside the points'. `None`: points only.
+    pub orientation_sigma_urad: Option<f64>,
 }
 
 impl Default for PlanSettings {
@@ -123,6 +129,7 @@ impl Default for PlanSettings {
             loads_kg: Vec::new(),
             limits: Vec::new(),
             exchange_passes: 10,
+            orientation_sigma_urad: None,
         }
     }
 }
@@ -349,7 +356,7 @@ pub fn make(
         Some(c) => c,
         None => random_candidates(job, settings)?,
     };
-    let pool = pool(job, candidates, policy)?;
+    let pool = pool(job, candidates, settings.orientation_sigma_urad, policy)?;
     let planned = choose(
         &pool,
         settings.poses,
@@ -406,8 +413,16 @@ pub fn points_csv(job: &Job, pool: &Pool, chosen: &[usize]) -> String {
 pub fn pool(
     job: &Job,
     candidates: Vec<Candidate>,
+    orientation_sigma_urad: Option<f64>,
     policy: &Policy,
 ) -> Result<Pool, CalibrationError> {
+    if let Some(s) = orientation_sigma_urad {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(CalibrationError::Data(format!(
+                "the orientation's sigma: {s} urad, not a positive number"
+            )));
+        }
+    }
     if candidates.is_empty() {
         return Err(CalibrationError::Data(
             "no candidate pose to choose from".into(),
@@ -459,6 +474,13 @@ pub fn pool(
                 .into(),
         ));
     }
+    if orientation_sigma_urad.is_some() && !absolute {
+        notes.push(
+            "orientations: none planned (the model is of deflections alone, and a \
+             deflection's turn is not a row)"
+                .into(),
+        );
+    }
     let dof = job.robot.dof();
     let mut observations = Vec::new();
     let mut deflections = Vec::new();
@@ -478,6 +500,9 @@ pub fn pool(
                 rep: 1,
                 marker: m.id,
                 q: q.clone(),
+                // A pose's orientation: its value is not read (the rows'
+                // columns are), the turn rows are made.
+                r_rad: orientation_sigma_urad.map(|_| [0.0; 3]),
                 ..Observation::default()
             });
             if cand.load_kg > 0.0 {
@@ -593,10 +618,11 @@ pub fn pool(
         // design holds it over √2: its columns back to the deflection's,
         // for the predictions.)
         let root2 = std::f64::consts::SQRT_2;
-        let (b, sigma) = match row.kind {
-            RowKind::Deflection if mixed => (b * root2, sigma0 * root2),
-            RowKind::Deflection => (b, sigma0 * root2),
-            RowKind::Absolute => (b, sigma0),
+        let (b, sigma) = match (row.kind, orientation_sigma_urad) {
+            (RowKind::Absolute, Some(s)) if row.orientation => (b, s * 1e-6),
+            (RowKind::Deflection, _) if mixed => (b * root2, sigma0 * root2),
+            (RowKind::Deflection, _) => (b, sigma0 * root2),
+            (RowKind::Absolute, _) => (b, sigma0),
         };
         per_row.push((row.group(), b, 1.0 / sigma));
     }

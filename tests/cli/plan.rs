@@ -154,6 +154,7 @@ fn the_cores_next_best_pose_is_the_hosts_first_choice() {
     let p = pool(
         &job,
         random_candidates(&job, &s).unwrap(),
+        None,
         &Default::default(),
     )
     .unwrap();
@@ -179,7 +180,7 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
     let out = d.join("plan.csv");
     let o = out.to_str().unwrap();
     // (Exit 2: an argument out of range, as clap says it.)
-    let cases: [(&[&str], i32, &str); 6] = [
+    let cases: [(&[&str], i32, &str); 7] = [
         (&["--poses", "5"], 1, "--load-kg"),
         (
             &["--poses", "50", "--candidates", "20", "--load-kg", "250"],
@@ -198,6 +199,18 @@ fn what_cannot_be_planned_is_one_line_and_nothing_written() {
         ),
         (&["--poses", "5", "--load-kg", "-3"], 2, "a mass from 0"),
         (&["--poses", "5", "--candidates", "100001"], 2, "100001"),
+        (
+            &[
+                "--poses",
+                "5",
+                "--load-kg",
+                "250",
+                "--orientation-urad",
+                "0",
+            ],
+            2,
+            "a number above 0",
+        ),
     ];
     for (args, code, expect) in cases {
         let mut all = vec!["plan", "--setup", "data/kr270/setup.toml"];
@@ -279,5 +292,45 @@ fn positions_and_deflections_together_are_planned() {
     );
     let t = |s: &Value| s["trace_scaled"].as_f64().unwrap();
     assert!(t(&v["plan"]) < t(&v["random"]), "{v}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A 6-D instrument (`--orientation-urad`): on the KR-270 pose job the
+/// tool frame's rotation, which the points of one probe leave out, is
+/// planned for with the orientations.
+#[test]
+fn a_plan_for_a_6d_instrument_determines_the_tool_rotation() {
+    let d = dir("six-d");
+    let out = d.join("plan.csv");
+    let run = |extra: &[&str]| -> Value {
+        let mut args = vec![
+            "plan",
+            "--setup",
+            "data/kr270/setup-6d.toml",
+            "--poses",
+            "8",
+            "--candidates",
+            "300",
+            "--output",
+            out.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let o = robcal(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).expect("JSON")
+    };
+    let names = |v: &Value, key: &str| -> Vec<String> {
+        let list = v[key].as_array().expect(key);
+        list.iter()
+            .map(|p| p.get("name").unwrap_or(p).as_str().unwrap().to_string())
+            .collect()
+    };
+    let points = run(&[]);
+    let poses = run(&["--orientation-urad", "30"]);
+    let (left, planned) = (names(&points, "left_out"), names(&poses, "parameters"));
+    let turns: Vec<&String> = left.iter().filter(|p| p.starts_with("tool.r")).collect();
+    assert!(!turns.is_empty(), "points leave out {left:?}");
+    assert!(turns.iter().all(|p| planned.contains(p)), "{planned:?}");
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -60,6 +60,11 @@ pub struct PlanArgs {
     /// Exchange passes at most after the greedy choice (0: greedy only).
     #[arg(long = "exchange-passes", default_value_t = 10, value_parser = clap::value_parser!(u64).range(0..=100))]
     exchange_passes: u64,
+    /// A 6-D instrument (a tracker's 6-D probe, a motion-capture body):
+    /// each candidate measured as a pose, its orientation's sigma per axis
+    /// [urad] (the points' is the setup's sigma0_um).
+    #[arg(long = "orientation-urad", value_parser = positive)]
+    orientation_urad: Option<f64>,
     /// Write the chosen configurations here (the points CSV: id, load_kg,
     /// the setup's payload centre of mass, one column per joint in rad or
     /// m; all or nothing).
@@ -68,6 +73,14 @@ pub struct PlanArgs {
     /// The plan's report as JSON on stdout.
     #[arg(long)]
     json: bool,
+}
+
+/// Parses a σ: a finite number above 0.
+fn positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s}: a number above 0")),
+    }
 }
 
 /// Parses a payload mass \[kg\]: from 0 to the measurement reader's
@@ -129,6 +142,7 @@ pub fn run_plan(a: &PlanArgs) -> Result<(), String> {
         loads_kg: a.load_kg.clone(),
         limits: a.limit.clone(),
         exchange_passes: a.exchange_passes as usize,
+        orientation_sigma_urad: a.orientation_urad,
     };
     let pool_candidates = match &a.pool {
         None => None,
