@@ -8,7 +8,7 @@
 
 use nalgebra::RealField;
 
-use super::param::{angle_urad, BIN_TOLERANCE_RAD};
+use super::param::{angle_urad, Param, BIN_TOLERANCE_RAD};
 use crate::error::Error;
 
 /// The angle bins of one joint: its distinct angles \[µrad\] over the
@@ -157,4 +157,27 @@ pub fn compensator_eligible(
     min_configs: usize,
 ) -> bool {
     (bins.0..=bins.1).contains(&bin_configs.len()) && bin_configs.iter().all(|&n| n >= min_configs)
+}
+
+/// Whether joint `joint` at value `qj` \[rad\] is in one of the angle bins
+/// ([`super::Param::ComplianceAt`]) among `params`.
+pub fn in_some_bin<'a, T: RealField + Copy>(
+    params: impl IntoIterator<Item = &'a Param>,
+    joint: u8,
+    qj: T,
+) -> bool {
+    params.into_iter().any(|p| match *p {
+        Param::ComplianceAt {
+            joint: j,
+            angle_urad,
+        } => j == joint && in_bin(angle_urad, qj),
+        _ => false,
+    })
+}
+
+/// Whether a joint value `qj` \[rad\] is within [`BIN_TOLERANCE_RAD`] of a
+/// bin's angle \[µrad\] ([`super::Param::ComplianceAt`]).
+pub fn in_bin<T: RealField + Copy>(angle_urad: i32, qj: T) -> bool {
+    let centre: T = nalgebra::convert(f64::from(angle_urad) * 1e-6);
+    (qj - centre).abs() <= nalgebra::convert(BIN_TOLERANCE_RAD)
 }

@@ -74,7 +74,7 @@
 
 use nalgebra::{RealField, Vector3};
 
-use super::layout::in_bin;
+use super::bins::in_bin;
 use super::param::Param;
 use super::sample::Sample;
 use crate::error::Error;

@@ -28,8 +28,9 @@ use nalgebra::allocator::Allocator;
 use nalgebra::storage::StorageMut;
 use nalgebra::{DefaultAllocator, Dim, DimName, Matrix, OMatrix, RealField, Vector3, U3};
 
+use super::bins::{in_bin, in_some_bin};
 use super::columns::turn;
-use super::param::{Param, Unit, BIN_TOLERANCE_RAD};
+use super::param::{Param, Unit};
 use super::sample::Sample;
 use crate::error::Error;
 use crate::robot::{gravity_torques, joint_torques, Chain, Frames, JointKind, PointLoad};
@@ -347,27 +348,4 @@ pub fn column_of(
         param,
         unit: param.unit(joint_kind),
     })
-}
-
-/// Whether joint `joint` at value `qj` \[rad\] is in one of the angle bins
-/// ([`Param::ComplianceAt`]) among `params`.
-pub fn in_some_bin<'a, T: RealField + Copy>(
-    params: impl IntoIterator<Item = &'a Param>,
-    joint: u8,
-    qj: T,
-) -> bool {
-    params.into_iter().any(|p| match *p {
-        Param::ComplianceAt {
-            joint: j,
-            angle_urad,
-        } => j == joint && in_bin(angle_urad, qj),
-        _ => false,
-    })
-}
-
-/// Whether a joint value `qj` \[rad\] is within [`BIN_TOLERANCE_RAD`] of a
-/// bin's angle \[µrad\] ([`Param::ComplianceAt`]).
-pub fn in_bin<T: RealField + Copy>(angle_urad: i32, qj: T) -> bool {
-    let centre: T = nalgebra::convert(f64::from(angle_urad) * 1e-6);
-    (qj - centre).abs() <= nalgebra::convert(BIN_TOLERANCE_RAD)
 }

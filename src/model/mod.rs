@@ -24,11 +24,12 @@ pub mod layout;
 pub mod param;
 pub mod sample;
 
+pub use bins::{in_bin, in_some_bin};
 pub use columns::{
     base_columns, compliance_columns, deflection_m, gravity_basis, gravity_components,
     joint_frame_columns, joint_offset_column, joint_offset_columns, marker_columns, tool_columns,
     turn,
 };
-pub use layout::{column_of, in_bin, in_some_bin, Column, Layout, Marker};
+pub use layout::{column_of, Column, Layout, Marker};
 pub use param::{angle_urad, Param, Unit, BIN_TOLERANCE_RAD, POSE_COMPONENTS, XYZ};
 pub use sample::Sample;
