@@ -202,13 +202,13 @@ impl Row {
 
     /// With the exact model, what joint `j`'s yield does to the row per
     /// unit: the point's twist column, or a pose orientation's turn
-    /// ([`orientation::turn`] of its twists at the point and its probes).
+    /// ([`crate::model::turn`] of its twists at the point and its probes).
     pub fn joint_column(&self, j: usize) -> Vector3<f64> {
         let t = self.twists();
         if self.orientation {
             let n = t.len() / 3;
             match (t.get(j), t.get(n + j), t.get(2 * n + j)) {
-                (Some(a), Some(b), Some(c)) => orientation::turn(a, b, c),
+                (Some(a), Some(b), Some(c)) => crate::model::turn(a, b, c),
                 _ => Vector3::zeros(),
             }
         } else {

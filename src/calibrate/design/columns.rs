@@ -122,7 +122,7 @@ impl<'a> Columns<'a> {
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
             let at = column(p, &sample)?;
             let mut col = match &probes {
-                Some((sx, sy)) => orientation::turn(&at, &column(p, sx)?, &column(p, sy)?),
+                Some((sx, sy)) => crate::model::turn(&at, &column(p, sx)?, &column(p, sy)?),
                 None => at,
             } * si;
             if scale != 1.0 {

@@ -626,7 +626,7 @@ impl Predictor {
     /// bending turning the frame to first order (its turn read from the
     /// bending at the point and at two probes 1 m away, as the
     /// calibration's orientation rows read every column's:
-    /// [`crate::calibrate::rows::orientation::turn`]).
+    /// [`crate::model::turn`]).
     ///
     /// # Errors
     /// As [`Self::predict_marker`].
@@ -662,7 +662,8 @@ impl Predictor {
         q: &[f64],
         payload: Option<&Payload>,
     ) -> Result<nalgebra::Rotation3<f64>, Error> {
-        use crate::calibrate::rows::orientation::{turn, PROBES};
+        use crate::calibrate::rows::orientation::PROBES;
+        use crate::model::turn;
         let (eq, loading) = self.settled(chain, q, payload, true)?;
         let p = eq.frames.point_m(tool_m);
         let bent = |d: Vector3<f64>| self.bending_m(chain, &eq.frames, &(p + d), &loading);

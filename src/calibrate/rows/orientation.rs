@@ -13,8 +13,11 @@
 //! for a rigid motion of the frame (a joint's offset, a frame error, the
 //! base, a compliance's yield, a link's bending) and `W = s I` for a
 //! stretch (thermal expansion), so `ω` is read from the columns at `p`,
-//! `p + eₓ` and `p + e_y` ([`turn`]): a stretch and a marker's position do
-//! not turn the frame. One rule for every effect, present and future.
+//! `p + eₓ` and `p + e_y` ([`crate::model::turn`], the core's rule, which
+//! a device's pose rows use too:
+//! [`crate::model::Layout::orientation_block`]): a stretch and a marker's
+//! position do not turn the frame. One rule for every effect, present and
+//! future.
 //!
 //! A pose's orientation rows are groups of their own in eq. 14's noise per
 //! configuration and axis (a σ in rad, not in m): configuration `c`'s
@@ -24,14 +27,9 @@
 use nalgebra::{Rotation3, Vector3};
 
 /// The points, relative to the marker's, the columns are taken at beside
-/// it for [`turn`] \[m\] (a lever of 1 m: the differences are the turn
-/// itself).
+/// it for [`crate::model::turn`] \[m\] (a lever of 1 m: the differences
+/// are the turn itself).
 pub const PROBES: [Vector3<f64>; 2] = [Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 1.0, 0.0)];
-
-/// The turn of a column from its values at the point and at [`PROBES`]:
-/// the core's rule, which a device's pose rows use too
-/// ([`crate::model::Layout::orientation_block`]).
-pub use crate::model::turn;
 
 /// The rotation left between a measured orientation (rotation vector
 /// `measured_rad`) and the predicted `predicted`, in the measurement frame:
@@ -43,6 +41,7 @@ pub fn residual(measured_rad: &Vector3<f64>, predicted: &Rotation3<f64>) -> Vect
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::turn;
 
     #[test]
     fn the_turn_of_a_rigid_motion_and_of_a_stretch() {
