@@ -717,7 +717,7 @@ impl Engine<'_> {
         let Some(every) = d.identifiability(&[], &all) else {
             return Ok(Vec::new());
         };
-        let points = d.groups.saturating_sub(oriented);
+        let points = self.rows.position_groups();
         let weights: Vec<nalgebra::Vector3<f64>> = (0..d.groups)
             .map(|g| nalgebra::Vector3::repeat(if g < points { 1.0 } else { 0.0 }))
             .collect();
