@@ -141,6 +141,7 @@ impl MocapFile {
                     sigma_m: None,
                     r_rad: None,
                     sigma_rad: None,
+                    scalar: None,
                     line: p.line,
                 });
             }

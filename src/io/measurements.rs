@@ -103,8 +103,53 @@ pub struct Observation {
     /// The instrument's standard deviation of the orientation per axis
     /// \[rad\], when the file has `srx, sry, srz`.
     pub sigma_rad: Option<[f64; 3]>,
+    /// What the row measures when it is not a point (its `x, y, z` empty):
+    /// one number about the marker's point, a plane contact or a distance
+    /// (columns `plane`, `anchor`, `distance`; its σ `sd` is then
+    /// `sigma_m[0]`, the other two 0). `None`: a point (`p_m`).
+    pub scalar: Option<Scalar>,
     /// 1-based line in the file (header is line 1); ignored by the writer.
     pub line: usize,
+}
+
+/// One number measured about a marker's point, in place of the point
+/// (issue 53): what a touch probe, a ballbar or a draw-wire sensor gives
+/// without a tracker. The plane and the anchor are the setup's, fixed in
+/// the measurement frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scalar {
+    /// The point's signed distance `value_m` \[m\] from the setup's
+    /// `[[plane]]` `id` along its unit normal `normal`: `n · p − offset_m`
+    /// (0 for a contact; a probe's radius for a sphere touching it).
+    Plane {
+        /// The plane's id.
+        id: u32,
+        /// Its unit normal \[measurement frame\].
+        normal: [f64; 3],
+        /// `n · p` of its points \[m\].
+        offset_m: f64,
+        /// The measured signed distance \[m\].
+        value_m: f64,
+    },
+    /// The point's distance `value_m` \[m\] from the setup's `[[anchor]]`
+    /// `id` at `anchor_m` \[m, measurement frame\].
+    Distance {
+        /// The anchor's id.
+        id: u32,
+        /// Its position \[m, measurement frame\].
+        anchor_m: [f64; 3],
+        /// The measured distance \[m\].
+        value_m: f64,
+    },
+}
+
+impl Scalar {
+    /// The measured number \[m\].
+    pub fn value_m(&self) -> f64 {
+        match *self {
+            Scalar::Plane { value_m, .. } | Scalar::Distance { value_m, .. } => value_m,
+        }
+    }
 }
 
 /// Joints whose values a row holds inline ([`JointValues`]): a 7-joint arm.
@@ -456,9 +501,17 @@ enum Col {
     Rot(usize),
     /// `srx, sry, srz`: the instrument's σ of the orientation per axis.
     SigmaRot(usize),
+    /// `plane`: the id of the setup's plane the marker touches.
+    Plane,
+    /// `anchor`: the id of the setup's anchor a distance is measured from.
+    Anchor,
+    /// `distance`: the measured distance (from the anchor, or the plane).
+    Distance,
+    /// `sd`: the instrument's σ of that distance.
+    SigmaScalar,
 }
 
-const FIXED: [(&str, Col); 17] = [
+const FIXED: [(&str, Col); 21] = [
     ("config", Col::Config),
     ("rep", Col::Rep),
     ("marker", Col::Marker),
@@ -476,6 +529,10 @@ const FIXED: [(&str, Col); 17] = [
     ("srx", Col::SigmaRot(0)),
     ("sry", Col::SigmaRot(1)),
     ("srz", Col::SigmaRot(2)),
+    ("plane", Col::Plane),
+    ("anchor", Col::Anchor),
+    ("distance", Col::Distance),
+    ("sd", Col::SigmaScalar),
 ];
 
 /// Reads a measurement file for `robot` and `setup` (units, markers, load).

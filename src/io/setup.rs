@@ -16,6 +16,8 @@
 //! | `[[marker]] id` | required in each table; ids unique |
 //! | `[[marker]] xyz` | `[0, 0, 0]` m, in its link |
 //! | `[[marker]] link` | `tip_link`; another link makes the chain end there too, a tree when it is off the path to `tip_link` (data contract 7.1; then no `[load]` and no `tool_frame`) |
+//! | `[[plane]]` | none: a plane fixed in the measurement frame that markers touch (CSV `plane`); `id` required, unique; `normal` required, non-zero (scaled to unit length); `offset_m` `0`: its points' `n · p` in m |
+//! | `[[anchor]]` | none: a point fixed in the measurement frame that distances are measured from (CSV `anchor`, `distance`); `id` required, unique; `xyz` `[0, 0, 0]` m |
 //! | `[load]` | absent: no load (a CSV row with `load_kg > 0` is then an error) |
 //! | `[load] com` | `[0, 0, 0]` m, in `tip_link` |
 //! | `[load] gravity` | `[0, 0, -9.80665]` m/s², base frame |
@@ -80,6 +82,44 @@ pub struct Marker {
     /// chain a tree.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<String>,
+}
+
+/// `[[plane]]`: a plane fixed in the measurement frame that markers touch
+/// (a measurement of one number: the point's distance from it, along its
+/// normal; issue 53). Its points `p` satisfy `n · p = offset`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plane {
+    /// Id used in the CSV's `plane` column.
+    pub id: u32,
+    /// Its normal in the measurement frame (unit length after reading:
+    /// [`Plane::unit_normal`]).
+    pub normal: [f64; 3],
+    /// `n · p` of its points \[m\], `n` the unit normal.
+    #[serde(default)]
+    pub offset_m: f64,
+}
+
+impl Plane {
+    /// The normal scaled to unit length (a zero normal is refused by
+    /// [`Setup::validate`]).
+    pub fn unit_normal(&self) -> [f64; 3] {
+        let [x, y, z] = self.normal;
+        let n = (x * x + y * y + z * z).sqrt();
+        [x / n, y / n, z / n]
+    }
+}
+
+/// `[[anchor]]`: a point fixed in the measurement frame that distances are
+/// measured from (a ballbar's pivot, a draw-wire sensor's exit; issue 53).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Anchor {
+    /// Id used in the CSV's `anchor` column.
+    pub id: u32,
+    /// Its position in the measurement frame \[m\].
+    #[serde(default)]
+    pub xyz: [f64; 3],
 }
 
 /// `[load]`: where the external load hangs.
@@ -264,6 +304,13 @@ pub struct Setup {
     /// joints (absolute positions with compliances) like a URDF's masses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub assumed_link_mass_kg: Option<f64>,
+    /// `[[plane]]` tables: planes markers touch (extension of the contract).
+    #[serde(default, rename = "plane", skip_serializing_if = "Vec::is_empty")]
+    pub planes: Vec<Plane>,
+    /// `[[anchor]]` tables: points distances are measured from (extension
+    /// of the contract).
+    #[serde(default, rename = "anchor", skip_serializing_if = "Vec::is_empty")]
+    pub anchors: Vec<Anchor>,
 }
 
 /// The largest [`Setup::assumed_link_mass_kg`] \[kg\].
@@ -291,6 +338,8 @@ impl Setup {
             model: Model::default(),
             ignore_columns: Vec::new(),
             assumed_link_mass_kg: None,
+            planes: Vec::new(),
+            anchors: Vec::new(),
         }
     }
 
@@ -375,6 +424,63 @@ impl Setup {
                 return err(
                     ErrorKind::Duplicate,
                     format!("marker[{i}].id: marker id {} is also marker[{j}]", m.id),
+                );
+            }
+        }
+        for (i, p) in self.planes.iter().enumerate() {
+            if non_finite(&p.normal) || !p.offset_m.is_finite() {
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("plane[{i}]: non-finite normal or offset_m"),
+                );
+            }
+            if p.normal.iter().map(|v| v * v).sum::<f64>() < 1e-12 {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!("plane[{i}].normal: {:?} has no direction", p.normal),
+                );
+            }
+            if p.offset_m.abs() > crate::io::units::MAX_POSITION_M {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "plane[{i}].offset_m: {} m is more than {} m from the origin",
+                        p.offset_m,
+                        crate::io::units::MAX_POSITION_M
+                    ),
+                );
+            }
+            if let Some(j) = self.planes[..i].iter().position(|o| o.id == p.id) {
+                return err(
+                    ErrorKind::Duplicate,
+                    format!("plane[{i}].id: plane id {} is also plane[{j}]", p.id),
+                );
+            }
+        }
+        for (i, a) in self.anchors.iter().enumerate() {
+            if non_finite(&a.xyz) {
+                return err(
+                    ErrorKind::NonFinite,
+                    format!("anchor[{i}].xyz: non-finite {:?}", a.xyz),
+                );
+            }
+            if a.xyz
+                .iter()
+                .any(|v| v.abs() > crate::io::units::MAX_POSITION_M)
+            {
+                return err(
+                    ErrorKind::InvalidValue,
+                    format!(
+                        "anchor[{i}].xyz: {:?} m is more than {} m from the origin",
+                        a.xyz,
+                        crate::io::units::MAX_POSITION_M
+                    ),
+                );
+            }
+            if let Some(j) = self.anchors[..i].iter().position(|o| o.id == a.id) {
+                return err(
+                    ErrorKind::Duplicate,
+                    format!("anchor[{i}].id: anchor id {} is also anchor[{j}]", a.id),
                 );
             }
         }

@@ -125,6 +125,12 @@ pub fn write_measurements_with(
                 "some rows have a temperature and some do not".into(),
             );
         }
+        if r.scalar.is_some() {
+            return err(
+                ErrorKind::InvalidValue,
+                "a plane contact or a distance: the writer writes points and poses".into(),
+            );
+        }
         if r.sigma_m.is_some() != has_sigma {
             return err(
                 ErrorKind::InvalidValue,

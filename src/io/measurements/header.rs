@@ -136,6 +136,8 @@ impl Header {
             "rep" => true,
             "marker" => one_marker,
             "load_kg" => setup.load.is_none(),
+            // A file of plane contacts or distances alone has no points.
+            "x" | "y" | "z" => header.iter().any(|n| n == "plane" || n == "anchor"),
             _ => false,
         };
         let required = FIXED[..7]
@@ -157,6 +159,19 @@ impl Header {
         let joint_field: Vec<Option<usize>> = (0..robot.dof())
             .map(|j| cols.iter().position(|&c| c == Col::Joint(j)))
             .collect();
+        // `x, y, z` come together (or none, in a file of plane contacts
+        // and distances).
+        let pos_cols = (0..3).filter(|&k| cols.contains(&Col::Pos(k))).count();
+        if pos_cols != 0 && pos_cols != 3 {
+            let missing =
+                ["x", "y", "z"][(0..3).find(|&k| !cols.contains(&Col::Pos(k))).unwrap_or(0)];
+            return Err(cell_err(
+                ErrorKind::MissingColumn,
+                1,
+                missing,
+                "a point comes as three columns x, y, z".into(),
+            ));
+        }
         // `sx, sy, sz` come together (data contract 7.2).
         let sigma_cols = (0..3).filter(|&k| cols.contains(&Col::Sigma(k))).count();
         if sigma_cols != 0 && sigma_cols != 3 {
@@ -189,6 +204,39 @@ impl Header {
                 let missing = names[(0..3).find(|&k| !cols.contains(&col(k))).unwrap_or(0)];
                 return Err(cell_err(ErrorKind::MissingColumn, 1, missing, what.into()));
             }
+        }
+        // `anchor` and `distance` come together; `sd` with one of them.
+        for (have, need, what) in [
+            (
+                Col::Anchor,
+                Col::Distance,
+                "an anchor's rows measure a distance: distance is missing",
+            ),
+            (
+                Col::Distance,
+                Col::Anchor,
+                "distance is from an anchor: anchor is missing",
+            ),
+        ] {
+            if cols.contains(&have) && !cols.contains(&need) {
+                let name = if need == Col::Distance {
+                    "distance"
+                } else {
+                    "anchor"
+                };
+                return Err(cell_err(ErrorKind::MissingColumn, 1, name, what.into()));
+            }
+        }
+        if cols.contains(&Col::SigmaScalar)
+            && !cols.contains(&Col::Plane)
+            && !cols.contains(&Col::Anchor)
+        {
+            return Err(cell_err(
+                ErrorKind::MissingColumn,
+                1,
+                "plane",
+                "sd is the σ of a plane contact or a distance: plane and anchor are missing".into(),
+            ));
         }
         if cols.contains(&Col::SigmaRot(0)) && !cols.contains(&Col::Rot(0)) {
             return Err(cell_err(

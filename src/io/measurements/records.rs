@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::io::cells::{parse_int, parse_real, parse_real_written, Scale};
 use crate::io::measurements::{
-    Col, Observation, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_SIGMA_RAD,
+    Col, Observation, Scalar, Stats, WrittenCells, MAX_LOAD_KG, MAX_POSITION_M, MAX_SIGMA_RAD,
     MAX_TEMPERATURE_C, MAX_TIME_S, MIN_TEMPERATURE_C,
 };
 use crate::io::setup::{AngleUnit, LengthUnit, Setup};
@@ -60,6 +60,10 @@ impl Layout<'_> {
         // Empty orientation cells: all of a row's (a point without its
         // orientation) or none.
         let (mut empty_rot, mut empty_sigma_rot) = (Vec::new(), Vec::new());
+        // Empty point cells (a plane contact's or a distance's row has
+        // none), and the cells of those rows.
+        let (mut empty_point, mut point_cells) = (Vec::new(), Vec::new());
+        let (mut plane, mut anchor, mut distance, mut sd) = (None, None, None, None);
         for ((&cell, &col), name) in record.iter().zip(self.cols).zip(self.header.iter()) {
             let cerr = |kind, message: String| {
                 InputError::new(self.file, kind, message)
@@ -73,9 +77,17 @@ impl Layout<'_> {
                 match col {
                     Col::Rot(_) => empty_rot.push(name),
                     Col::SigmaRot(_) => empty_sigma_rot.push(name),
+                    Col::Pos(_) | Col::Sigma(_) => empty_point.push(name),
+                    Col::Plane | Col::Anchor | Col::Distance | Col::SigmaScalar => {}
                     _ => return Err(cerr(ErrorKind::Syntax, "empty cell".into())),
                 }
                 continue;
+            }
+            if matches!(
+                col,
+                Col::Pos(_) | Col::Sigma(_) | Col::Rot(_) | Col::SigmaRot(_)
+            ) {
+                point_cells.push(name);
             }
             match col {
                 Col::Ignored => {}
@@ -245,7 +257,68 @@ impl Layout<'_> {
                     }
                     o.sigma_rad.get_or_insert([0.0; 3])[k] = v;
                 }
+                Col::Plane | Col::Anchor => {
+                    let id: u32 = cell.parse().map_err(|_| {
+                        cerr(
+                            ErrorKind::Syntax,
+                            format!("'{cell}' is not an id (integer 0 to {})", u32::MAX),
+                        )
+                    })?;
+                    if col == Col::Plane {
+                        plane = Some((id, name));
+                    } else {
+                        anchor = Some((id, name));
+                    }
+                }
+                Col::Distance | Col::SigmaScalar => {
+                    let (written, v) =
+                        parse_real_written(cell, Scale::Length(self.setup.units.length))
+                            .map_err(|(k, m)| cerr(k, m))?;
+                    let what = if col == Col::Distance {
+                        "distance"
+                    } else {
+                        "σ"
+                    };
+                    if v.abs() > MAX_POSITION_M {
+                        return Err(cerr(
+                            ErrorKind::InvalidValue,
+                            format!(
+                                "{what} {v:?} m is more than {MAX_POSITION_M:?} m (another \
+                                 unit, or an overflow?)"
+                            ),
+                        ));
+                    }
+                    if self.setup.units.length == LengthUnit::M && v.abs() > 100.0 {
+                        return Err(cerr(
+                            ErrorKind::Units,
+                            format!(
+                                "{what} {v} m is more than 100 m: is the column in \
+                                 millimetres? ([units] length = \"m\")"
+                            ),
+                        ));
+                    }
+                    if col == Col::Distance {
+                        stats.max_pos_written = stats.max_pos_written.max(written.abs());
+                        distance = Some((v, name));
+                    } else {
+                        if v < 0.0 {
+                            return Err(cerr(
+                                ErrorKind::InvalidValue,
+                                format!("σ {v:?} m: a standard deviation is not negative"),
+                            ));
+                        }
+                        sd = Some(v);
+                    }
+                }
             }
+        }
+        o.scalar = self.scalar(&o, plane, anchor, distance, sd, &point_cells, line)?;
+        if o.scalar.is_some() {
+            o.sigma_m = sd.map(|s| [s, 0.0, 0.0]);
+        } else if let Some(&name) = empty_point.first() {
+            return Err(InputError::new(self.file, ErrorKind::Syntax, "empty cell")
+                .at_line(line)
+                .in_column(name));
         }
         if let Some(&name) = empty_rot.first().filter(|_| o.r_rad.is_some()) {
             return Err(InputError::new(
@@ -315,6 +388,122 @@ impl Layout<'_> {
             );
         }
         Ok(o)
+    }
+}
+
+impl Layout<'_> {
+    /// The row's plane contact or distance, from its `plane`, `anchor`,
+    /// `distance` and `sd` cells (none given: `None`, a point); `point`
+    /// names its non-empty point and orientation cells, which such a row
+    /// may not have.
+    ///
+    /// # Errors
+    /// A plane or an anchor the setup does not declare, both on one row, an
+    /// anchor without a distance (or the reverse), a negative distance
+    /// from an anchor, point cells on the row, a loaded row.
+    #[allow(clippy::too_many_arguments)]
+    fn scalar(
+        &self,
+        o: &Observation,
+        plane: Option<(u32, &str)>,
+        anchor: Option<(u32, &str)>,
+        distance: Option<(f64, &str)>,
+        sd: Option<f64>,
+        point: &[&str],
+        line: usize,
+    ) -> Result<Option<Scalar>, InputError> {
+        let err = |kind, column: &str, message: String| {
+            InputError::new(self.file, kind, message)
+                .at_line(line)
+                .in_column(column)
+        };
+        let scalar = match (plane, anchor) {
+            (None, None) => {
+                if let Some((_, name)) = distance {
+                    return Err(err(
+                        ErrorKind::InvalidValue,
+                        name,
+                        "a distance without an anchor (or a plane) it is from".into(),
+                    ));
+                }
+                if sd.is_some() {
+                    return Err(err(
+                        ErrorKind::InvalidValue,
+                        "sd",
+                        "sd without a plane contact or a distance on the row".into(),
+                    ));
+                }
+                return Ok(None);
+            }
+            (Some(_), Some((_, name))) => {
+                return Err(err(
+                    ErrorKind::InvalidValue,
+                    name,
+                    "a row touches a plane or measures a distance from an anchor, not both".into(),
+                ))
+            }
+            (Some((id, name)), None) => {
+                let Some(p) = self.setup.planes.iter().find(|p| p.id == id) else {
+                    return Err(err(
+                        ErrorKind::InvalidValue,
+                        name,
+                        format!("plane {id} is not declared in the setup ([[plane]])"),
+                    ));
+                };
+                Scalar::Plane {
+                    id,
+                    normal: p.unit_normal(),
+                    offset_m: p.offset_m,
+                    value_m: distance.map_or(0.0, |(v, _)| v),
+                }
+            }
+            (None, Some((id, name))) => {
+                let Some(a) = self.setup.anchors.iter().find(|a| a.id == id) else {
+                    return Err(err(
+                        ErrorKind::InvalidValue,
+                        name,
+                        format!("anchor {id} is not declared in the setup ([[anchor]])"),
+                    ));
+                };
+                let Some((value_m, column)) = distance else {
+                    return Err(err(
+                        ErrorKind::Syntax,
+                        "distance",
+                        "empty cell: a row with an anchor measures a distance".into(),
+                    ));
+                };
+                if value_m < 0.0 {
+                    return Err(err(
+                        ErrorKind::InvalidValue,
+                        column,
+                        format!("a distance of {value_m:?} m: a distance is not negative"),
+                    ));
+                }
+                Scalar::Distance {
+                    id,
+                    anchor_m: a.xyz,
+                    value_m,
+                }
+            }
+        };
+        if let Some(&name) = point.first() {
+            return Err(err(
+                ErrorKind::InvalidValue,
+                name,
+                "a plane contact or a distance measures one number, not a point: its x, y, z \
+                 (and sx, sy, sz, rx, ry, rz) are empty"
+                    .into(),
+            ));
+        }
+        if !o.is_unloaded() {
+            return Err(err(
+                ErrorKind::InvalidValue,
+                "load_kg",
+                "a plane contact or a distance on a loaded row: a deflection is of points only"
+                    .into(),
+            ));
+        }
+        Ok(Some(scalar))
     }
 }
 
