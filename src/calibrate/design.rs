@@ -56,6 +56,33 @@ pub struct Design {
     /// bit for bit the sums they would make). `None` for a design built
     /// otherwise, and to be set to `None` by whoever changes `b` or `y`.
     pub unit_sums: Option<Accumulator<f64, Dyn>>,
+    /// The groups whose rows are one equation each, on axis 0 (a distance
+    /// or a plane contact: [`crate::calibrate::rows::Scalar`]); their
+    /// other two axes are zero and not equations: weight 0 in every sum,
+    /// no rows in their cells of eq. 14's σ. Empty: none.
+    pub scalar_groups: std::ops::Range<usize>,
+    /// The runs of groups whose small groups' σ pool together (eq. 14's
+    /// [`crate::estimate::pool_small_groups`]): the points', the plane
+    /// contacts' and distances', the orientations' — each a quantity of
+    /// its own (µm of a point, of a distance, µrad). Empty: every group.
+    pub pools: Vec<std::ops::Range<usize>>,
+}
+
+/// [`crate::estimate::pool_small_groups`] within each of `pools`
+/// ([`Design::pools`]; empty: over every group).
+pub(crate) fn pool(
+    pools: &[std::ops::Range<usize>],
+    sigma: &mut [Vector3<f64>],
+    dof: &mut [Vector3<f64>],
+) {
+    if pools.is_empty() {
+        crate::estimate::pool_small_groups(sigma, dof);
+    }
+    for r in pools {
+        if let (Some(s), Some(d)) = (sigma.get_mut(r.clone()), dof.get_mut(r.clone())) {
+            crate::estimate::pool_small_groups(s, d);
+        }
+    }
 }
 
 impl Design {
@@ -63,6 +90,22 @@ impl Design {
     /// row's group is not below [`Design::groups`].
     pub fn group_rows(&self) -> Option<GroupRows> {
         GroupRows::new(&self.group, self.groups)
+    }
+
+    /// Which axes of group `g`'s rows are equations: `1` or `0` per axis
+    /// (`0` for the second and third axis of [`Design::scalar_groups`]).
+    pub fn live(&self, g: usize) -> Vector3<f64> {
+        if self.scalar_groups.contains(&g) {
+            Vector3::new(1.0, 0.0, 0.0)
+        } else {
+            Vector3::repeat(1.0)
+        }
+    }
+
+    /// Whether axis `a` of group `g`'s rows is an equation
+    /// ([`Design::live`]).
+    pub fn is_live(&self, g: usize, a: usize) -> bool {
+        a == 0 || !self.scalar_groups.contains(&g)
     }
 
     /// Number of rows.

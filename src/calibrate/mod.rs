@@ -16,7 +16,7 @@
 //! |---|---|
 //! | [`params`] | what a parameter is called, and the model's value the rows are evaluated at: [`Names`], [`Geometry`] (Gauss–Newton's current robot), [`Linearisation`] (the joint law; the exact or first-order deflection model) |
 //! | [`settings`] | [`Settings`] (what the user sets), [`Policy`] (every decision constant), [`CalibrationError`] |
-//! | [`rows`] | the measurements as [`Row`]s (deflections, absolute positions; configurations as groups), recomputed at the current geometry |
+//! | [`rows`] | the measurements as [`Row`]s (deflections, absolute positions, a pose's orientation, a plane contact or a distance; configurations as groups), recomputed at the current geometry |
 //! | [`effects`] | which parameters: the setup's declared model, and the effect library's candidates with their physical limits |
 //! | [`design`] | the columns of some parameters at every row (`B` of eq. 4), held or computed again from the rows, and their sums in the core's order (`view`) |
 //! | [`fit`] | the core's OLS, WLS and IRLS on a design (eq. 6, 10, 14), the nested test, the held-out predictions, the residuals' RMS and lack of fit |

@@ -28,10 +28,12 @@ mod noise;
 pub mod orientation;
 mod points;
 mod runs;
+pub mod scalar;
 mod values;
 pub use noise::{noise_scale, row_scale, scaled_y};
 pub(crate) use points::{lhs, marker_m};
 pub use runs::run_length;
+pub use scalar::Scalar;
 use values::Values;
 
 /// Which kinds of rows there are: the core's, for its candidate rule.
@@ -142,6 +144,10 @@ pub struct RowExtra {
     /// which its frames alone do not give; `None` for the first-order
     /// model's.
     pub y: Option<Vector3<f64>>,
+    /// What the row measures when it is a plane contact or a distance (one
+    /// number, on axis 0 of `measured`: module [`scalar`]); `None`: a
+    /// point or an orientation.
+    pub scalar: Option<Scalar>,
     /// The factor `√w` the row enters the design with, from a robust loss
     /// ([`crate::calibrate::robust`]; `w` its weight in `(0, 1]`), on top
     /// of the kind's ([`noise_scale`]); none: 1.
@@ -193,6 +199,22 @@ impl Row {
     /// [`RowExtra::load`].
     pub fn load(&self) -> Option<Wrench<f64>> {
         self.extra.as_ref().and_then(|e| e.load)
+    }
+
+    /// [`RowExtra::scalar`].
+    pub fn scalar(&self) -> Option<&Scalar> {
+        self.extra.as_ref().and_then(|e| e.scalar.as_ref())
+    }
+
+    /// Which of the row's three axes are equations: all three, or axis 0
+    /// alone for a plane contact or a distance
+    /// ([`crate::calibrate::design::Design::live`]).
+    pub fn live(&self) -> [f64; 3] {
+        if self.scalar().is_some() {
+            [1.0, 0.0, 0.0]
+        } else {
+            [1.0; 3]
+        }
     }
 
     /// [`RowExtra::twists`].
@@ -379,11 +401,15 @@ pub struct Rows {
     /// The rows: deflections first, then absolute positions, in file order.
     pub rows: Vec<Row>,
     /// Configuration ids, one per group: the positions' groups, sorted,
+    /// then the plane contacts' and distances' (module [`scalar`]), sorted,
     /// then the poses' orientations' groups, sorted (a configuration with
     /// a measured orientation is listed twice: module [`orientation`]).
     pub configs: Vec<i64>,
     /// How many of the last [`Rows::configs`] are the orientations' groups.
     pub orientation_groups: usize,
+    /// How many of [`Rows::configs`], before the orientations', are the
+    /// plane contacts' and distances' groups ([`Rows::scalar_range`]).
+    pub scalar_groups: usize,
     /// What kinds of rows there are.
     pub kinds: DataKinds,
     /// Distinct angles \[µrad\] of each joint, in order of first appearance
@@ -650,6 +676,8 @@ impl Rows {
                             &row.measured,
                             &(eq.frames.tip().rotation.to_rotation_matrix() * tool),
                         ) + linear
+                    } else if let Some(s) = row.scalar() {
+                        s.lhs(&p, &linear)
                     } else if absolute {
                         row.measured - p + linear
                     } else {
@@ -729,20 +757,69 @@ pub(crate) fn revolute(names: &Names, j: usize) -> bool {
 
 impl Rows {
     /// The rows of points (deflections and absolute positions): the first
-    /// ones, before every pose's orientation (module [`orientation`]).
+    /// ones, before every plane contact, distance (module [`scalar`]) and
+    /// pose's orientation (module [`orientation`]).
     pub fn positions(&self) -> usize {
-        if self.orientation_groups == 0 {
+        if self.orientation_groups == 0 && self.scalar_groups == 0 {
             return self.rows.len();
         }
         self.rows
             .iter()
-            .position(|r| r.orientation)
+            .position(|r| r.orientation || r.scalar().is_some())
             .unwrap_or(self.rows.len())
     }
 
-    /// The configurations of points: the groups before the orientations'.
+    /// The configurations of points: the groups before the plane
+    /// contacts' and distances', and the orientations'.
     pub fn position_groups(&self) -> usize {
-        self.configs.len() - self.orientation_groups
+        self.configs.len() - self.orientation_groups - self.scalar_groups
+    }
+
+    /// The first rows, whose errors are reported in µm (RMS, held-out,
+    /// per row): the points, or in data of plane contacts and distances
+    /// alone, those (module [`scalar`]; then the first rows).
+    pub fn error_rows(&self) -> usize {
+        match self.positions() {
+            0 => self.scalar_rows().end,
+            n => n,
+        }
+    }
+
+    /// The groups of [`Rows::error_rows`]: the first ones.
+    pub fn error_groups(&self) -> usize {
+        match self.position_groups() {
+            0 => self.scalar_groups,
+            n => n,
+        }
+    }
+
+    /// The groups of the plane contacts and distances (module [`scalar`]):
+    /// after the points', before the orientations'.
+    pub fn scalar_range(&self) -> std::ops::Range<usize> {
+        let start = self.position_groups();
+        start..start + self.scalar_groups
+    }
+
+    /// The runs of groups of one quantity, whose σ pool apart
+    /// ([`crate::calibrate::design::Design::pools`]): the points', the
+    /// plane contacts' and distances', the orientations' (those there are).
+    pub fn pools(&self) -> Vec<std::ops::Range<usize>> {
+        let s = self.scalar_range();
+        [0..s.start, s.clone(), s.end..self.configs.len()]
+            .into_iter()
+            .filter(|r| !r.is_empty())
+            .collect()
+    }
+
+    /// The rows of the plane contacts and distances: after the points,
+    /// before the orientations.
+    pub fn scalar_rows(&self) -> std::ops::Range<usize> {
+        let start = self.positions();
+        let n = self.rows[start..]
+            .iter()
+            .take_while(|r| r.scalar().is_some())
+            .count();
+        start..start + n
     }
 
     /// The groups a configuration left out takes with it (the held-out
@@ -751,12 +828,17 @@ impl Rows {
     /// the same configuration, measured by the same instrument in the same
     /// pose. A group past the points' is its own fold.
     pub fn fold(&self, g: usize) -> Vec<usize> {
-        let points = self.position_groups();
-        let orientation = (g < points)
-            .then(|| self.configs.get(g))
-            .flatten()
-            .and_then(|c| self.configs[points..].binary_search(c).ok())
-            .map(|k| points + k);
-        core::iter::once(g).chain(orientation).collect()
+        let (points, scalars) = (self.position_groups(), self.scalar_range());
+        let Some(c) = (g < points).then(|| self.configs.get(g)).flatten() else {
+            return vec![g];
+        };
+        let found = |r: std::ops::Range<usize>| {
+            let start = r.start;
+            self.configs[r].binary_search(c).ok().map(|k| start + k)
+        };
+        core::iter::once(g)
+            .chain(found(scalars.clone()))
+            .chain(found(scalars.end..self.configs.len()))
+            .collect()
     }
 }

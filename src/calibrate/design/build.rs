@@ -311,7 +311,7 @@ impl Design {
                     Some(piece) => {
                         columns.write(row, frames, g, piece, k)?;
                         if let Some(sums) = sums {
-                            sums.add(n, |c, a| piece[c][3 * k + a], k, y);
+                            sums.add(n, |c, a| piece[c][3 * k + a], k, y, row.live());
                         }
                     }
                     None => {
@@ -319,7 +319,7 @@ impl Design {
                             one[3 * c..3 * c + 3].copy_from_slice(col.as_slice());
                         })?;
                         if let Some(sums) = sums {
-                            sums.add(n, |c, a| one[3 * c + a], k, y);
+                            sums.add(n, |c, a| one[3 * c + a], k, y, row.live());
                         }
                     }
                 }
@@ -425,6 +425,8 @@ impl Design {
             groups,
             instrument_sigma,
             unit_sums: None,
+            scalar_groups: all.scalar_range(),
+            pools: all.pools(),
         }
     }
 }

@@ -121,9 +121,12 @@ impl<'a> Columns<'a> {
         });
         for (c, (p, &si)) in self.params.iter().zip(self.si.iter()).enumerate() {
             let at = column(p, &sample)?;
-            let mut col = match &probes {
-                Some((sx, sy)) => crate::model::turn(&at, &column(p, sx)?, &column(p, sy)?),
-                None => at,
+            let mut col = match (&probes, row.scalar()) {
+                (Some((sx, sy)), _) => crate::model::turn(&at, &column(p, sx)?, &column(p, sy)?),
+                // A plane contact or a distance: the point's column
+                // projected on the number's gradient (`rows::scalar`).
+                (None, Some(s)) => s.column(&point, &at),
+                (None, None) => at,
             } * si;
             if scale != 1.0 {
                 col *= scale;

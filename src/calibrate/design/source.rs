@@ -108,6 +108,8 @@ impl Design {
             groups,
             instrument_sigma,
             unit_sums: None,
+            scalar_groups: 0..0,
+            pools: Vec::new(),
         }
     }
 

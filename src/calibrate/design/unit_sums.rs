@@ -21,6 +21,8 @@ pub(super) struct RunSums {
     /// The block's rows' `Δp`, scaled as the design's
     /// ([`crate::calibrate::rows::noise_scale`]).
     y: Vec<[f64; 3]>,
+    /// The block's rows' axes that are equations (1) or not (0).
+    live: Vec<[f64; 3]>,
     /// The run's blocks' sums, in order.
     sums: Vec<Sums>,
 }
@@ -32,38 +34,46 @@ impl RunSums {
             len,
             b: Vec::new(),
             y: Vec::new(),
+            live: Vec::new(),
             sums: Vec::new(),
         }
     }
 
     /// Row `k` of the run, axis `a` of its column `c` `at(c, a)` (of `n`
-    /// columns), its `Δp` `y` as the design's.
+    /// columns), its `Δp` `y` as the design's, `live` its axes that are
+    /// equations ([`crate::calibrate::design::Design::live`]).
     pub(super) fn add(
         &mut self,
         n: usize,
         at: impl Fn(usize, usize) -> f64,
         k: usize,
         y: [f64; 3],
+        live: [f64; 3],
     ) {
         for a in 0..3 {
             self.b.extend((0..n).map(|c| at(c, a)));
         }
         self.y.push(y);
+        self.live.push(live);
         if self.y.len() == BLOCK_ROWS || k + 1 == self.len {
             let b = &self.b;
-            let terms = self.y.iter().enumerate().map(|(r, &y)| Term {
-                b: [0, 1, 2].map(|a| &b[(3 * r + a) * n..(3 * r + a + 1) * n]),
-                k: [1.0; 3],
-                y,
-            });
+            let terms = (self.y.iter().zip(&self.live))
+                .enumerate()
+                .map(|(r, (&y, &k))| Term {
+                    b: [0, 1, 2].map(|a| &b[(3 * r + a) * n..(3 * r + a + 1) * n]),
+                    k,
+                    y,
+                });
             self.sums.push(block_sums(n, terms, 0..n, true));
             self.b.clear();
             self.y.clear();
+            self.live.clear();
             if k + 1 == self.len {
                 // The run's last block: its room goes back (1.5 MB a run of
                 // 15 columns, 16 runs at 10⁶ rows).
                 self.b = Vec::new();
                 self.y = Vec::new();
+                self.live = Vec::new();
             }
         }
     }
@@ -116,7 +126,7 @@ mod tests {
                     for k in 0..len {
                         let i = first + k;
                         let y = [d.y[3 * i], d.y[3 * i + 1], d.y[3 * i + 2]];
-                        sums.add(n, |c, a| piece[c][3 * k + a], k, y);
+                        sums.add(n, |c, a| piece[c][3 * k + a], k, y, [1.0; 3]);
                     }
                     sums
                 })

@@ -40,8 +40,8 @@ mod terms;
 use crate::error::Error;
 use crate::estimate::accumulator::symmetric;
 use crate::estimate::{
-    group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Block, Fit, Noise,
-    Reweightable, RobustWeight, Solution,
+    group_dof, group_sigma, robust_weights, Accumulator, Block, Fit, Noise, Reweightable,
+    RobustWeight, Solution,
 };
 pub(in crate::calibrate) use terms::Term;
 use terms::{add_terms, leverage3_rows, LANES};
@@ -224,6 +224,20 @@ impl<'a> View<'a> {
         self
     }
 
+    /// The weights of group `g` as they enter the sums: `weights[g]`, zero
+    /// on the axes that are no equations ([`Design::live`]).
+    fn w(&self, weights: &[Vector3<f64>], g: usize) -> Vector3<f64> {
+        weights[g].component_mul(&self.d.live(g))
+    }
+
+    /// The σ of group `g` as they enter the middle term: `noise`'s, 1 on
+    /// the axes that are no equations (their weight is 0 there: any
+    /// positive σ gives the same sums, and the core takes none other).
+    fn s(&self, noise: Noise<'_, f64>, weights: &[Vector3<f64>], g: usize) -> Vector3<f64> {
+        let s = noise.sigma(g, &weights[g]);
+        Vector3::from_fn(|a, _| if self.d.is_live(g, a) { s[a] } else { 1.0 })
+    }
+
     /// `Δp` of design row `i`.
     fn y(&self, i: usize) -> [f64; 3] {
         [self.d.y[3 * i], self.d.y[3 * i + 1], self.d.y[3 * i + 2]]
@@ -259,8 +273,8 @@ impl<'a> View<'a> {
                 }
             }
             block.dp = Vector3::from(self.y(i));
-            block.w = weights[g];
-            block.sigma = noise.map(|n| n.sigma(g, &weights[g]));
+            block.w = self.w(weights, g);
+            block.sigma = noise.map(|n| self.s(n, weights, g));
             acc.update(&block)?;
         }
         Ok(acc)
@@ -283,7 +297,7 @@ impl<'a> View<'a> {
         // `Δpᵀ W² Δp` and counts the equations.
         let blocks = self.by_blocks(|t, rows, b, columns| {
             let terms = rows.iter().enumerate().map(|(k, &i)| {
-                let w = weights[self.d.group[i]];
+                let w = self.w(weights, self.d.group[i]);
                 Term {
                     b: self.row_of(b, k),
                     k: [w[0] * w[0], w[1] * w[1], w[2] * w[2]],
@@ -327,7 +341,7 @@ impl<'a> View<'a> {
         let mut m = DMatrix::<f64>::zeros(n, n);
         let ok = self.rows.iter().all(|&i| {
             let g = self.d.group[i];
-            let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+            let (w, s) = (weights[g], self.s(noise, weights, g));
             w.iter().all(|w| *w >= 0.0 && w.is_finite())
                 && s.iter().all(|s| *s > 0.0 && s.is_finite())
         });
@@ -337,7 +351,7 @@ impl<'a> View<'a> {
                 let mut terms = Vec::with_capacity(rows.len());
                 for (r, &i) in rows.iter().enumerate() {
                     let g = self.d.group[i];
-                    let (w, s) = (weights[g], noise.sigma(g, &weights[g]));
+                    let (w, s) = (self.w(weights, g), self.s(noise, weights, g));
                     let k = |a: usize| {
                         let w2 = w[a] * w[a];
                         w2 * w2 * s[a] * s[a]
@@ -391,7 +405,7 @@ impl<'a> View<'a> {
     ) -> Result<Fit<f64, Dyn>, Error> {
         let solution = self.weighted(weights, None)?.solve_active(active)?;
         self.residual_sigma_into(&solution, weights, sigma, dof)?;
-        pool_small_groups(sigma, dof);
+        crate::calibrate::design::pool(&self.d.pools, sigma, dof);
         let noise = Noise {
             sigma,
             estimated_from: estimated.then_some(&*dof),
@@ -505,19 +519,28 @@ impl Reweightable<f64, Dyn> for View<'_> {
                 }
                 let g = self.d.group[i];
                 ss[g] += r.component_mul(&r);
+                let w = self.w(weights, g);
                 for a in 0..3 {
-                    h[g][a] += weights[g][a] * weights[g][a] * q[a];
+                    h[g][a] += w[a] * w[a] * q[a];
                 }
                 n[g] += 1;
             }
         }
         for g in 0..groups {
-            let (ss, h, n) = (sigma[g], dof[g], n[g] as usize);
-            sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[a], n, h[a]));
+            let (ss, h) = (sigma[g], dof[g]);
+            // A scalar row's second and third axes are no equations.
+            let n = |a: usize| {
+                if self.d.is_live(g, a) {
+                    n[g] as usize
+                } else {
+                    0
+                }
+            };
+            sigma[g] = Vector3::from_fn(|a, _| group_sigma(ss[a], n(a), h[a]));
             if let Some(floor) = self.floor.and_then(|f| f.get(g)) {
                 sigma[g] = sigma[g].sup(floor);
             }
-            dof[g] = Vector3::from_fn(|a, _| group_dof(n, h[a]));
+            dof[g] = Vector3::from_fn(|a, _| group_dof(n(a), h[a]));
         }
         if let (Some(slot), Some(kept)) = (&self.captured, kept) {
             if let Ok(mut slot) = slot.lock() {

@@ -24,8 +24,8 @@ use crate::calibrate::design::Design;
 use crate::error::Error;
 use crate::estimate::accumulator::symmetric;
 use crate::estimate::{
-    group_dof, group_sigma, pool_small_groups, robust_weights, Accumulator, Fit, Noise,
-    Reweightable, RobustWeight, Solution,
+    group_dof, group_sigma, robust_weights, Accumulator, Fit, Noise, Reweightable, RobustWeight,
+    Solution,
 };
 
 mod kernels;
@@ -48,6 +48,9 @@ pub struct DesignMoments {
     yy: Vec<f64>,
     /// Rows per cell.
     rows: Vec<usize>,
+    /// The design's runs of groups whose σ pool together
+    /// ([`Design::pools`]).
+    pools: Vec<std::ops::Range<usize>>,
 }
 
 /// `n(n+1)/2`.
@@ -66,6 +69,7 @@ impl DesignMoments {
             u: vec![0.0; cells * n],
             yy: vec![0.0; cells],
             rows: vec![0; cells],
+            pools: d.pools.clone(),
         };
         let mut row = Vec::new();
         for (i, &g) in d.group.iter().enumerate() {
@@ -73,7 +77,8 @@ impl DesignMoments {
                 continue;
             }
             d.rows_into(&[i], cols, &mut row);
-            for a in 0..3 {
+            // (A scalar row's other axes are no equations: `Design::live`.)
+            for a in (0..3).filter(|&a| d.is_live(g, a)) {
                 let (r, cell) = (3 * i + a, 3 * g + a);
                 let b = &row[a * n..(a + 1) * n];
                 let y = d.y[r];
@@ -321,7 +326,7 @@ impl<'a> Folded<'a> {
         }
         let solution = Solution::new(&unpack(&upper, n), &eta, yy, equations, active)?;
         self.residual_sigma_into(&solution, weights, sigma, dof)?;
-        pool_small_groups(sigma, dof);
+        crate::calibrate::design::pool(&m.pools, sigma, dof);
         let noise = Noise {
             sigma,
             estimated_from: estimated.then_some(&*dof),

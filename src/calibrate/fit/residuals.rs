@@ -119,9 +119,15 @@ pub fn lack_of_fit(
     };
     let mut sum = vec![Vector3::<f64>::zeros(); n_cells];
     let mut count = vec![0usize; n_cells];
+    // Equations per row of each cell: 3, or 1 for a plane contact or a
+    // distance (`rows::scalar`; a cell is of one group, all of one kind).
+    let mut axes = vec![3usize; n_cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
         sum[c] += weighted(row, r);
         count[c] += 1;
+        if row.scalar().is_some() {
+            axes[c] = 1;
+        }
     }
     let mean: Vec<Vector3<f64>> = sum.iter().zip(&count).map(|(s, &n)| s / n as f64).collect();
     let mut pe = vec![0.0_f64; n_cells];
@@ -132,9 +138,9 @@ pub fn lack_of_fit(
     for c in 0..n_cells {
         ss_lof += count[c] as f64 * mean[c].norm_squared();
         ss_pe += pe[c];
-        df_pe += 3 * (count[c] - 1);
+        df_pe += axes[c] * (count[c] - 1);
     }
-    let df_lof = (3 * n_cells).checked_sub(params)?;
+    let df_lof = axes.iter().sum::<usize>().checked_sub(params)?;
     LackOfFit::new(ss_lof, df_lof, ss_pe, df_pe)
 }
 
@@ -204,7 +210,11 @@ fn variables(rows: &Rows, names: &Names) -> Vec<Variable> {
 /// powers 1–3 otherwise) against a mean, pooled over the three axes.
 /// Smaller is stronger. Functions the rank test
 /// ([`crate::estimate::rank`]) finds dependent on the others are left out.
-fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
+///
+/// `live` says per residual which axes are equations (a plane contact's or
+/// a distance's first alone, [`crate::calibrate::rows::Row::live`]): the
+/// others weigh 0, and an axis no residual has is not regressed.
+fn follow_p_value(v: &Variable, res: &[Vector3<f64>], live: &[Vector3<f64>]) -> f64 {
     let n = v.values.len();
     let mean = v.values.iter().sum::<f64>() / n.max(1) as f64;
     let sd = (v.values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n.max(1) as f64).sqrt();
@@ -240,23 +250,28 @@ fn follow_p_value(v: &Variable, res: &[Vector3<f64>]) -> f64 {
     if k == 0 || n <= k + 1 || !rank.kept[0] {
         return 1.0;
     }
-    // Per axis a mean and the kept functions: a block-diagonal design of
-    // 3 (k + 1) columns, the means first.
-    let p = 3 * (k + 1);
+    // Per axis with equations a mean and the kept functions: a
+    // block-diagonal design of L (k + 1) columns, the means first.
+    let axes: Vec<usize> = (0..3)
+        .filter(|&a| live.iter().any(|l| l[a] > 0.0))
+        .collect();
+    let l = axes.len();
+    let p = l * (k + 1);
     let mut acc = Accumulator::<f64, Dyn>::zeros(Dyn(p));
     let mut b = Block::new(OMatrix::<f64, U3, Dyn>::zeros(p), Vector3::zeros());
-    for (&x, r) in v.values.iter().zip(res) {
+    for ((&x, r), w) in v.values.iter().zip(res).zip(live) {
         let fx = features(x);
-        for a in 0..3 {
-            b.b[(a, a)] = 1.0;
+        for (ia, &a) in axes.iter().enumerate() {
+            b.b[(a, ia)] = 1.0;
             for (i, &c) in kept.iter().enumerate() {
-                b.b[(a, 3 + 3 * i + a)] = fx[c];
+                b.b[(a, l + l * i + ia)] = fx[c];
             }
         }
         b.dp = *r;
+        b.w = *w;
         let _ = acc.update(&b);
     }
-    let model: Vec<bool> = (0..p).map(|i| i < 3).collect();
+    let model: Vec<bool> = (0..p).map(|i| i < l).collect();
     let candidate: Vec<bool> = model.iter().map(|m| !m).collect();
     let test = acc
         .solve_active(&model)
@@ -281,9 +296,11 @@ pub fn most_followed(
     let (cell, cells) = cells(rows);
     let mut count = vec![0.0; cells];
     let mut res = vec![Vector3::<f64>::zeros(); cells];
+    let mut live = vec![Vector3::<f64>::zeros(); cells];
     for ((row, r), &c) in rows.rows.iter().zip(residuals).zip(&cell) {
         res[c] += r.component_mul(&weights[row.group()]) * rows.noise_scale(row);
         count[c] += 1.0;
+        live[c] = Vector3::from(row.live());
     }
     for (r, n) in res.iter_mut().zip(&count) {
         *r /= *n;
@@ -296,7 +313,7 @@ pub fn most_followed(
                 values[c] += x / count[c];
             }
             let v = Variable { values, ..v };
-            let s = follow_p_value(&v, &res);
+            let s = follow_p_value(&v, &res, &live);
             (v.name, s)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))

@@ -7,7 +7,7 @@ use std::borrow::Cow;
 use nalgebra::Vector3;
 
 use crate::calibrate::params::names::Names;
-use crate::calibrate::rows::{DataKinds, Row, RowExtra, RowKind, Rows};
+use crate::calibrate::rows::{DataKinds, Row, RowExtra, RowKind, Rows, Scalar};
 use crate::calibrate::settings::{CalibrationError, Policy};
 use crate::io::{job::Job, measurements::Measurements};
 use crate::model::bins::{by_first_appearance, clusters};
@@ -70,9 +70,26 @@ impl Rows {
         let com = setup
             .load
             .map_or(Vector3::zeros(), |l| Vector3::from(l.com));
-        let mut configs: Vec<i64> = data.observations.iter().map(|o| o.config).collect();
+        // The points' configurations (a plane contact's or a distance's
+        // are groups of their own: module `scalar`).
+        let mut configs: Vec<i64> = (data.observations.iter())
+            .filter(|o| o.scalar.is_none())
+            .map(|o| o.config)
+            .collect();
         configs.sort_unstable();
         configs.dedup();
+        // The configurations with a plane contact or a distance: each its
+        // group after every position group.
+        let mut scalared: Vec<i64> = if use_absolute {
+            (data.observations.iter())
+                .filter(|o| o.scalar.is_some() && o.is_unloaded())
+                .map(|o| o.config)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        scalared.sort_unstable();
+        scalared.dedup();
         // The configurations with a measured orientation: each its group
         // after every position group (module `orientation`).
         let mut oriented: Vec<i64> = if use_absolute {
@@ -181,13 +198,16 @@ impl Rows {
                    line: usize,
                    sigma: Option<[f64; 3]>,
                    orientation: bool,
+                   scalar: Option<Scalar>,
                    hint: &mut usize| Row {
             kind,
             marker: index_of(marker),
             orientation,
             chain: 0,
             group: u32::try_from(if orientation {
-                configs.len() + group_of(&oriented, config, hint)
+                configs.len() + scalared.len() + group_of(&oriented, config, hint)
+            } else if scalar.is_some() {
+                configs.len() + group_of(&scalared, config, hint)
             } else {
                 group_of(&configs, config, hint)
             })
@@ -195,17 +215,21 @@ impl Rows {
             q: q.into(),
             measured: Vector3::from(measured),
             line: u32::try_from(line).unwrap_or(u32::MAX),
-            extra: (load_kg != 0.0 || dt.is_some() || dtemp_k.is_some() || sigma.is_some()).then(
-                || {
-                    Box::new(RowExtra {
-                        load_kg,
-                        dt,
-                        dtemp_k,
-                        sigma: sigma.map(Vector3::from),
-                        ..RowExtra::default()
-                    })
-                },
-            ),
+            extra: (load_kg != 0.0
+                || dt.is_some()
+                || dtemp_k.is_some()
+                || sigma.is_some()
+                || scalar.is_some())
+            .then(|| {
+                Box::new(RowExtra {
+                    load_kg,
+                    dt,
+                    dtemp_k,
+                    sigma: sigma.map(Vector3::from),
+                    scalar,
+                    ..RowExtra::default()
+                })
+            }),
         };
         // An unloaded observation's row: its point (`measured` the point,
         // `sigma` the point's σ) or a pose's orientation (the rotation
@@ -214,6 +238,7 @@ impl Rows {
                         measured: [f64; 3],
                         sigma: Option<[f64; 3]>,
                         orientation: bool,
+                        scalar: Option<Scalar>,
                         hint: &mut usize| {
             row(
                 RowKind::Absolute,
@@ -227,14 +252,28 @@ impl Rows {
                 o.line,
                 sigma,
                 orientation,
+                scalar,
                 hint,
             )
         };
         let absolute_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
-            observed(o, o.p_m, o.sigma_m, false, hint)
+            observed(o, o.p_m, o.sigma_m, false, None, hint)
         };
         let orientation_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
-            observed(o, o.r_rad.unwrap_or_default(), o.sigma_rad, true, hint)
+            observed(
+                o,
+                o.r_rad.unwrap_or_default(),
+                o.sigma_rad,
+                true,
+                None,
+                hint,
+            )
+        };
+        // A plane contact's or a distance's row: its number on axis 0
+        // (module `scalar`).
+        let scalar_row = |o: &crate::io::measurements::Observation, hint: &mut usize| {
+            let value = o.scalar.map_or(0.0, |s| s.value_m());
+            observed(o, [value, 0.0, 0.0], o.sigma_m, false, o.scalar, hint)
         };
         // The deflections first: runs of rows on worker threads, joined in
         // order (one thread built a million rows in 0.3 s).
@@ -257,11 +296,14 @@ impl Rows {
                     .zip(unloaded.sigma_m)
                     .map(|(a, b)| [0, 1, 2].map(|k| a[k].hypot(b[k]))),
                 false,
+                None,
                 hint,
             )
         };
+        let point =
+            |o: &crate::io::measurements::Observation| o.is_unloaded() && o.scalar.is_none();
         let unloaded = if use_absolute {
-            data.unloaded().count()
+            data.observations.iter().filter(|o| point(o)).count()
         } else {
             0
         };
@@ -283,6 +325,7 @@ impl Rows {
         // observations taken, each chunk is freed once its rows are made.
         let threads = crate::parallel::for_rows(unloaded);
         let mut orientations: Vec<Row> = Vec::new();
+        let mut scalars: Vec<Row> = Vec::new();
         let mut end = if use_absolute {
             data.observations.len()
         } else {
@@ -296,7 +339,7 @@ impl Rows {
                 let mut hint = 0;
                 chunk[t * per..((t + 1) * per).min(chunk.len())]
                     .iter()
-                    .filter(|o| o.is_unloaded())
+                    .filter(|o| point(o))
                     .map(|o| absolute_row(o, &mut hint))
                     .collect::<Vec<Row>>()
             });
@@ -313,13 +356,27 @@ impl Rows {
                         .map(|o| orientation_row(o, &mut hint)),
                 );
             }
+            if !scalared.is_empty() {
+                let mut hint = 0;
+                scalars.extend(
+                    chunk
+                        .iter()
+                        .rev()
+                        .filter(|o| o.is_unloaded() && o.scalar.is_some())
+                        .map(|o| scalar_row(o, &mut hint)),
+                );
+            }
             release_from(&mut source, start);
             end = start;
         }
         rows[deflections..].reverse();
-        // The orientations after every position, in file order.
+        // The plane contacts and distances after every position, then the
+        // orientations, each in file order.
+        scalars.reverse();
+        rows.append(&mut scalars);
         orientations.reverse();
         rows.append(&mut orientations);
+        configs.extend(scalared.iter().copied());
         configs.extend(oriented.iter().copied());
         let data = &*source;
         if rows.is_empty() {
@@ -339,6 +396,7 @@ impl Rows {
         Ok(Self {
             rows,
             orientation_groups: oriented.len(),
+            scalar_groups: scalared.len(),
             configs,
             kinds,
             bins,

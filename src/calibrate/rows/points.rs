@@ -157,8 +157,9 @@ pub(crate) fn lhs(
 }
 
 /// An absolute row's left-hand side at `frames`, no joint law: the
-/// measured point minus the predicted, or a pose's orientation left
-/// ([`super::orientation::residual`], \[rad\]).
+/// measured point minus the predicted, a pose's orientation left
+/// ([`super::orientation::residual`], \[rad\]), or a plane contact's or a
+/// distance's number left ([`super::scalar`], on axis 0).
 fn rigid_y(
     markers: &[Vector3<f64>],
     tool: &Rotation3<f64>,
@@ -168,6 +169,8 @@ fn rigid_y(
     if row.orientation {
         let predicted = frames.tip().rotation.to_rotation_matrix() * tool;
         super::orientation::residual(&row.measured, &predicted)
+    } else if let Some(s) = row.scalar() {
+        s.lhs(&frames.point_m(&marker_m(markers, row)), &Vector3::zeros())
     } else {
         row.measured - frames.point_m(&marker_m(markers, row))
     }
