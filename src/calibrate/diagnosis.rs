@@ -443,8 +443,14 @@ pub fn run(
             .rigid_lhs_at(&g)
             .map_err(|err| CalibrationError::Core("forward kinematics", err))?,
     };
-    // The points' in µm; a pose's orientations (the last rows) apart, in rad.
-    let turned_nominal = nominal_um.split_off(e.rows.positions().min(nominal_um.len()));
+    // The points' in µm; the plane contacts and distances beside points
+    // apart, in m (in data of those alone they are the points'); a pose's
+    // orientations (the last rows) apart, in rad.
+    let (errors, scalar) = (e.rows.error_rows(), e.rows.scalar_rows());
+    let len = nominal_um.len();
+    let scalar_nominal = nominal_um[scalar.start.min(len)..scalar.end.min(len)].to_vec();
+    let turned_nominal = nominal_um.split_off(scalar.end.max(errors).min(len));
+    nominal_um.truncate(errors);
     for y in &mut nominal_um {
         *y *= 1e6;
     }
@@ -502,7 +508,7 @@ pub fn run(
     // taken over (`report/per_row.rs`).
     // The points' rows and configurations; a pose's orientation (the
     // last rows and groups) in its own statistics, in rad.
-    let (points, point_groups) = (e.rows.positions(), e.rows.position_groups());
+    let (points, point_groups) = (errors, e.rows.error_groups());
     let configs: std::sync::Arc<[i64]> = e.rows.configs[..point_groups].into();
     let mut sigma = std::mem::take(&mut current.fit.sigma);
     let mut weights = std::mem::take(&mut current.fit.weights);
@@ -510,7 +516,13 @@ pub fn run(
     weights.truncate(point_groups);
     let noise = ConfigNoises::new(configs.clone(), sigma, weights);
     let mut residuals = std::mem::take(&mut current.residuals);
-    let turned = residuals.split_off(points.min(residuals.len()));
+    let len = residuals.len();
+    let scalars = crate::calibrate::report::ScalarErrors::of(
+        &scalar_nominal,
+        &residuals[scalar.start.min(len)..scalar.end.min(len)],
+    );
+    let turned = residuals.split_off(scalar.end.max(points).min(len));
+    residuals.truncate(points);
     let mut orientation = crate::calibrate::report::OrientationErrors::of(&turned_nominal, &turned);
     if let Some(o) = &mut orientation {
         o.identified = e.identified_by_orientations(&current.params)?;
@@ -552,10 +564,12 @@ pub fn run(
         left_out,
         near_dependent,
         rows: e.rows.rows.len(),
-        configurations: e.rows.position_groups(),
+        equations: 3 * e.rows.rows.len() - 2 * e.rows.scalar_rows().len(),
+        configurations: point_groups,
         plots,
         row_errors,
         orientation,
+        scalars,
         model,
         notes,
         rigid,

@@ -300,8 +300,11 @@ impl Engine<'_> {
             .rows
             .rows
             .iter()
-            .filter(|r| r.kind == RowKind::Absolute && !r.orientation)
+            .filter(|r| r.kind == RowKind::Absolute && !r.orientation && r.scalar().is_none())
             .collect();
+        // (Plane contacts and distances alone: the base starts at the
+        // nominal one, the planes and anchors given near the robot's base
+        // frame.)
         if !model.iter().any(|p| matches!(p, Param::Base { .. })) || absolute.len() < 3 {
             return Ok(());
         }
@@ -523,8 +526,9 @@ impl Engine<'_> {
             };
             let fitted = Fitted {
                 params: params.to_vec(),
-                // Of the points: a pose's orientation is in rad.
-                rms_um: rms_um(&residuals[..self.rows.positions()]),
+                // Of the points: a pose's orientation is in rad (and a
+                // plane contact or a distance one number, apart).
+                rms_um: rms_um(&residuals[..self.rows.error_rows()]),
                 converged: settled && out.converged,
                 fit: out,
                 geometry: self.geometry.clone(),

@@ -326,6 +326,56 @@ impl fmt::Display for OrientationErrors {
     }
 }
 
+/// The error of the plane contacts and distances (module
+/// [`crate::calibrate::rows::scalar`]): each row's number left \[µm\],
+/// before calibration (the nominal robot, as [`Nominal`]) and after. Beside
+/// points, the points' errors ([`Nominal`], [`Report::rms_um`]) leave them
+/// out; in data of those alone, they are those errors too.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ScalarErrors {
+    /// Plane contacts and distances.
+    pub rows: usize,
+    /// RMS before calibration \[µm\].
+    pub nominal_rms_um: f64,
+    /// RMS after \[µm\].
+    pub rms_um: f64,
+    /// Mean of the absolute values after \[µm\].
+    pub mean_um: f64,
+    /// Largest after \[µm\].
+    pub max_um: f64,
+}
+
+impl ScalarErrors {
+    /// Of the rows' numbers left before (`nominal`) and after (`fitted`)
+    /// \[m, on axis 0\]; `None` without any.
+    pub fn of(
+        nominal: &[nalgebra::Vector3<f64>],
+        fitted: &[nalgebra::Vector3<f64>],
+    ) -> Option<Self> {
+        if fitted.is_empty() {
+            return None;
+        }
+        let (n, a) = (Nominal::of(nominal), Nominal::of(fitted));
+        Some(Self {
+            rows: fitted.len(),
+            nominal_rms_um: n.rms_um,
+            rms_um: a.rms_um,
+            mean_um: a.mean_um,
+            max_um: a.max_um,
+        })
+    }
+}
+
+impl fmt::Display for ScalarErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} rows: RMS {:.1} um before, {:.1} um after (mean {:.1}, max {:.1} um)",
+            self.rows, self.nominal_rms_um, self.rms_um, self.mean_um, self.max_um
+        )
+    }
+}
+
 impl fmt::Display for Nominal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
@@ -411,8 +461,10 @@ pub struct Report {
     /// (variance inflation at least
     /// [`crate::calibrate::settings::Policy::max_variance_inflation`]), largest first.
     pub near_dependent: Vec<NearDependent>,
-    /// Rows (3 equations each).
+    /// Rows (3 equations each, a plane contact or a distance 1).
     pub rows: usize,
+    /// Equations: 3 a row, 1 a plane contact or a distance.
+    pub equations: usize,
     /// Configurations.
     pub configurations: usize,
     /// Plot data.
@@ -422,6 +474,8 @@ pub struct Report {
     pub row_errors: RowErrors,
     /// The measured poses' orientations' errors, when the data have them.
     pub orientation: Option<OrientationErrors>,
+    /// The plane contacts' and distances' errors, when the data have them.
+    pub scalars: Option<ScalarErrors>,
     /// The calibrated model (for validation and prediction).
     pub model: CalibratedModel,
     /// What the run changed on its own and why (e.g. IRLS → OLS when a
@@ -539,11 +593,11 @@ fn about(s: &EffectStep) -> String {
 pub fn weights_line(w: &str) -> &'static str {
     match w {
         "instrument" => {
-            "eq. 14 at the instrument's sigma (sx, sy, sz), known in advance: one weighted fit"
+            "eq. 14 at the instrument's sigma (sx, sy, sz; sd), known in advance: one weighted fit"
         }
         "both" => {
             "eq. 14 at the estimated sigma per configuration and axis, never below the \
-             instrument's (sx, sy, sz), iterated"
+             instrument's (sx, sy, sz; sd), iterated"
         }
         "none" => "none (OLS)",
         _ => "eq. 14 at the sigma estimated per configuration and axis, iterated",
@@ -554,13 +608,16 @@ impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "robcal calibrate: {} rows (3 equations each), {} configurations, method {}",
-            self.rows, self.configurations, self.method
+            "robcal calibrate: {} rows ({} equations), {} configurations, method {}",
+            self.rows, self.equations, self.configurations, self.method
         )?;
         if self.weights != "estimated" && self.weights != "none" {
             writeln!(f, "weights: {}", weights_line(self.weights))?;
         }
         writeln!(f, "nominal (before calibration): {}", self.nominal)?;
+        if let Some(s) = &self.scalars {
+            writeln!(f, "plane contacts and distances: {s}")?;
+        }
         if let Some(o) = &self.orientation {
             writeln!(f, "orientation of the measured poses: {o}")?;
         }

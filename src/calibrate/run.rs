@@ -65,6 +65,13 @@ fn robustly(
     let mut fits = 0;
     loop {
         let (mut rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), policy)?;
+        if rows.scalar_groups > 0 {
+            return Err(CalibrationError::Data(format!(
+                "{}: --robust does not take plane contacts or distances yet (rows with a \
+                 plane or an anchor); fit them without it",
+                data.file.display()
+            )));
+        }
         let noise = robust::noise_of(&rows, &names);
         if let Some(w) = &used {
             let scales: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
@@ -308,7 +315,7 @@ fn calibrate_rows(
     // (The rows keep no left-hand side: computed from their frames.)
     let nominal_y = e.lhs()?;
     // Of the points (a pose's orientation: `Report::orientation`).
-    let nominal = Nominal::of(&nominal_y[..e.rows.positions()]);
+    let nominal = Nominal::of(&nominal_y[..e.rows.error_rows()]);
     // Each row's, for the report: computed again at the end where the
     // nominal robot needed no equilibrium (`diagnosis::NominalRows`).
     let exact = (e.rows.rows.iter()).any(|r| r.extra.as_ref().is_some_and(|x| x.y.is_some()));
@@ -392,7 +399,7 @@ fn calibrate_rows(
         if let Some(note) = diagnosis::weighting_fallback(&e, settings.method) {
             if e.fit_settings.weighting == fit::Weighting::Both {
                 let note = format!(
-                    "{note}: weighted by the instrument's sigma alone (sx, sy, sz), one weighted fit"
+                    "{note}: weighted by the instrument's sigma alone (sx, sy, sz; sd), one weighted fit"
                 );
                 (e.progress)(&note);
                 notes.push(note);

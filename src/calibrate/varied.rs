@@ -15,7 +15,9 @@
 //! tested again, at the nominal robot, on [`Policy::varied_poses`]
 //! configurations drawn within the joint limits (the URDF's; a joint
 //! without limits: a revolute over a turn, a prismatic over the data's
-//! range) with every marker, unloaded. A parameter left out on the data
+//! range) with every marker, unloaded, measured as the data are (points;
+//! or in data of plane contacts and distances alone, each of their planes
+//! and anchors). A parameter left out on the data
 //! but kept there is the data's dependence: a warning names it and how far
 //! off its nominal value could show — each unit of error, with the
 //! absorbing parameters' share taken as the data take it, moves the points
@@ -123,6 +125,27 @@ pub fn varied(
         })
         .map(|j| names.joint(j as u8).to_string())
         .collect();
+    // Measured as the data are: points, or in data of plane contacts and
+    // distances alone, those of each of the data's planes and anchors (a
+    // plane never tells a shift along it, whatever the pose).
+    let mut targets: Vec<Option<crate::io::measurements::Scalar>> = Vec::new();
+    if rows.positions() == 0 {
+        for r in &rows.rows {
+            let t = r.scalar().copied().map(|mut t| {
+                match &mut t {
+                    crate::io::measurements::Scalar::Plane { value_m, .. }
+                    | crate::io::measurements::Scalar::Distance { value_m, .. } => *value_m = 0.0,
+                }
+                t
+            });
+            if t.is_some() && !targets.contains(&t) {
+                targets.push(t);
+            }
+        }
+    }
+    if targets.is_empty() {
+        targets.push(None);
+    }
     let mut next = uniform(0x5eed_0f7a_21ed);
     let mut observations = Vec::new();
     for config in 0..policy.varied_poses {
@@ -131,13 +154,16 @@ pub fn varied(
             .map(|&(lo, hi)| lo + (hi - lo) * next())
             .collect();
         for m in &job.setup.markers {
-            observations.push(Observation {
-                config: config as i64,
-                rep: 1,
-                marker: m.id,
-                q: q.clone(),
-                ..Observation::default()
-            });
+            for &scalar in &targets {
+                observations.push(Observation {
+                    config: config as i64,
+                    rep: 1,
+                    marker: m.id,
+                    q: q.clone(),
+                    scalar,
+                    ..Observation::default()
+                });
+            }
         }
     }
     let poses = Measurements {

@@ -121,7 +121,7 @@ fn job(h: &mut String, r: &Report, info: &JobInfo<'_>) {
         "<section id=\"job\"><h2>The job</h2><table>\
          <tr><td>robot</td><td>{} (<code>{}</code>), chain {} → {}, {} joints: {}</td></tr>\
          <tr><td>setup</td><td><code>{}</code>, {} marker(s){}</td></tr>\
-         <tr><td>data</td><td><code>{}</code>: {} rows (3 equations each), {} configurations</td></tr>\
+         <tr><td>data</td><td><code>{}</code>: {} rows ({} equations), {} configurations</td></tr>\
          <tr><td>method</td><td>{} (λ = {} of eq. 14), {} deflection model, {} iterations, {}, \
          {} Gauss–Newton relinearisation(s)</td></tr>",
         esc(&robot.name),
@@ -132,9 +132,12 @@ fn job(h: &mut String, r: &Report, info: &JobInfo<'_>) {
         esc(&robot.joint_names.join(", ")),
         esc(&j.setup_path.display().to_string()),
         s.markers.len(),
-        s.load.as_ref().map_or_else(String::new, |_| ", a payload ([load])".into()),
+        s.load
+            .as_ref()
+            .map_or_else(String::new, |_| ", a payload ([load])".into()),
         esc(&info.data.display().to_string()),
         r.rows,
+        r.equations,
         r.configurations,
         r.method,
         g(info.lambda),
@@ -296,10 +299,10 @@ fn closed_loop(h: &mut String, r: &Report) {
     h.push_str("</section>\n");
 }
 
-/// `(ν, t₀.₉₇₅(ν))`: the residual degrees of freedom of the fit (three
-/// equations per row less the parameters) and Student's quantile.
+/// `(ν, t₀.₉₇₅(ν))`: the residual degrees of freedom of the fit (the
+/// equations less the parameters) and Student's quantile.
 pub fn t975(r: &Report) -> (usize, f64) {
-    let nu = (3 * r.rows).saturating_sub(r.parameters.len()).max(1);
+    let nu = r.equations.saturating_sub(r.parameters.len()).max(1);
     let t = StudentsT::new(0.0, 1.0, nu as f64).map_or(1.959_964, |t| t.inverse_cdf(0.975));
     (nu, t)
 }
@@ -330,9 +333,9 @@ fn parameters(h: &mut String, r: &Report) {
     let _ = write!(
         h,
         "</table><p>σ from the sandwich covariance (eq. 8, 11); 95 % interval = value ± \
-         t<sub>0.975</sub>(ν) σ with ν = 3 × {} rows − {} parameters = {nu}, \
+         t<sub>0.975</sub>(ν) σ with ν = {} equations − {} parameters = {nu}, \
          t<sub>0.975</sub> = {t975:.4}.</p></section>",
-        r.rows,
+        r.equations,
         r.parameters.len()
     );
 }

@@ -30,6 +30,10 @@ pub struct ReportJson<'a> {
     /// absent for points alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     orientation: Option<OrientationJson<'a>>,
+    /// The plane contacts and distances (`plane`, `anchor`; an
+    /// extension): absent without them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scalars: Option<ScalarsJson>,
     parameters: Vec<ParameterJson<'a>>,
     rms_um: f64,
     heldout_rms_um: Option<f64>,
@@ -80,6 +84,15 @@ struct OrientationJson<'a> {
     /// The parameters the points alone would leave out and the
     /// orientations determine.
     identified: &'a [String],
+}
+
+#[derive(Serialize)]
+struct ScalarsJson {
+    rows: usize,
+    nominal_rms_um: f64,
+    rms_um: f64,
+    mean_um: f64,
+    max_um: f64,
 }
 
 #[derive(Serialize)]
@@ -197,6 +210,13 @@ impl<'a> ReportJson<'a> {
                 mean_urad: o.mean_urad,
                 max_urad: o.max_urad,
                 identified: &o.identified,
+            }),
+            scalars: r.scalars.as_ref().map(|s| ScalarsJson {
+                rows: s.rows,
+                nominal_rms_um: s.nominal_rms_um,
+                rms_um: s.rms_um,
+                mean_um: s.mean_um,
+                max_um: s.max_um,
             }),
             parameters: r
                 .parameters

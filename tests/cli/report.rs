@@ -125,7 +125,7 @@ fn the_page_has_every_section_and_the_json_numbers() {
     // (independent of statrs) is 1.96292.
     let z: f64 = 1.959_964;
     let t = z + (z.powi(3) + z) / (4.0 * 801.0);
-    assert!(page.contains("ν = 3 × 270 rows − 9 parameters = 801"));
+    assert!(page.contains("ν = 810 equations − 9 parameters = 801"));
     assert!(page.contains(&format!("t<sub>0.975</sub> = {t:.4}")), "{t}");
     for p in v["parameters"].as_array().unwrap() {
         let (name, x, sd) = (

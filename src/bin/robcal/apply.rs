@@ -443,6 +443,14 @@ fn measured_points(
         ));
     }
     let m = job.read_measurements(data).map_err(|e| e.to_string())?;
+    if let Some(o) = m.observations.iter().find(|o| o.scalar.is_some()) {
+        return Err(format!(
+            "{}:{}: robcal check compares points: plane contacts and distances are not \
+             checked yet",
+            data.display(),
+            o.line
+        ));
+    }
     let com = job.setup.load.map_or([0.0; 3], |l| l.com);
     Ok(m.observations
         .iter()

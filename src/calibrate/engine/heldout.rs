@@ -41,7 +41,7 @@ impl Engine<'_> {
         let mut res = SquareSum::default();
         (self.progress)(&format!(
             "held-out RMS: {} fits, one without each configuration",
-            self.rows.position_groups()
+            self.rows.error_groups()
         ));
         // OLS: the closed form of `heldout` (exact at one linearisation);
         // a group no other can replace, and weighted fits, are refitted.
@@ -52,7 +52,9 @@ impl Engine<'_> {
         // A pose's fold leaves out two groups (its points' and its
         // orientations'): OLS then downdates the unit-weight sums of both
         // (`FixedFolds` at weight 1), not the one group's closed form.
-        let poses = self.rows.orientation_groups > 0;
+        // (So do a configuration's plane contacts and distances beside its
+        // points.)
+        let poses = self.rows.orientation_groups > 0 || self.rows.scalar_groups > 0;
         let fast = (ols && !poses)
             .then(|| ols_heldout(&d, &cols, fitted.information.as_ref()))
             .flatten();
@@ -67,8 +69,10 @@ impl Engine<'_> {
         // is too small for threads to pay.
         let groups = self.rows.configs.len();
         // The points' configurations: a pose's orientation (a group of its
-        // own, after them) is not predicted here, in µm.
-        let points = self.rows.position_groups();
+        // own, after them) is not predicted here, in µm, nor a plane
+        // contact or a distance beside points (in data of those alone,
+        // their groups: `Rows::error_groups`).
+        let points = self.rows.error_groups();
         let settings = self.fit_settings;
         // Residuals in metres again ([`Rows::unscaled`]).
         let rows = &self.rows;

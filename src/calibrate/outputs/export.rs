@@ -154,10 +154,12 @@ pub fn final_geometry(model: &CalibratedModel) -> Geometry {
     g
 }
 
-/// RMS \[µm\] of `residuals` over the absolute rows of `e`.
+/// RMS \[µm\] of `residuals` over the absolute rows of `e` whose errors
+/// are reported ([`crate::calibrate::rows::Rows::error_rows`]).
 fn absolute_rms_um(e: &Engine<'_>, residuals: &[nalgebra::Vector3<f64>]) -> f64 {
     let mut sum = SquareSum::default();
-    for (r, res) in e.rows.rows.iter().zip(residuals) {
+    let rows = &e.rows.rows[..e.rows.error_rows()];
+    for (r, res) in rows.iter().zip(residuals) {
         if r.kind == RowKind::Absolute && !r.orientation {
             sum.extend(&[*res]);
         }

@@ -85,6 +85,14 @@ pub fn validate_with(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
+    if let Some(r) = rows.rows.iter().find(|r| r.scalar().is_some()) {
+        return Err(CalibrationError::Data(format!(
+            "{}:{}: a validation is of points (and poses): plane contacts and distances are \
+             not validated yet",
+            data.file.display(),
+            r.line()
+        )));
+    }
     // The points; a pose's orientation apart (module `rows::orientation`),
     // when the calibration took absolute rows.
     let poses: Vec<_> = (rows.rows.iter())

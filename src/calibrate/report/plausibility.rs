@@ -191,10 +191,12 @@ pub fn check_units(
 ) -> Result<Vec<String>, CalibrationError> {
     let mut warnings = Vec::new();
     let cap = policy.unit_check_points.max(1);
-    let stride = data.unloaded().count().div_ceil(cap);
+    // The points (a plane contact or a distance has none).
+    let points = || data.unloaded().filter(|o| o.scalar.is_none());
+    let stride = points().count().div_ceil(cap);
     // Every `stride`-th unloaded observation, picked once (each pass over
     // a million observations was ~30 ms, and there is one per joint).
-    let checked: Vec<&Observation> = data.unloaded().step_by(stride.max(1)).collect();
+    let checked: Vec<&Observation> = points().step_by(stride.max(1)).collect();
     let base = pairs(job, &checked, None);
     let predicted = spread(base.iter().map(|p| p.0));
     if base.len() < 4 {
