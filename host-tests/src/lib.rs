@@ -40,6 +40,7 @@ use robcal::{Accumulator, Block};
 pub use robcal_paper::rng::SplitMix64 as Rng;
 
 pub mod arms;
+pub mod contacts;
 pub mod coverage;
 pub mod exact;
 pub mod fuzz_io;

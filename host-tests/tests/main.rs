@@ -25,6 +25,7 @@ mod accumulator_errors;
 mod accumulator_props;
 mod calibrated_urdf;
 mod compensate;
+mod contacts;
 mod coverage_base;
 mod coverage_kr270;
 mod coverage_mixed;
