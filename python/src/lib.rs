@@ -304,7 +304,11 @@ impl Job {
                     }
                     match c {
                         Cells::Text(v) => text.push_str(&robcal::io::writer::csv_cell(&v[r])),
-                        // Rust's shortest representation: the same f64 read back.
+                        // A NaN is pandas' missing value: an empty cell (a
+                        // point's empty plane cells, a pose's empty
+                        // orientation). Else Rust's shortest representation:
+                        // the same f64 read back.
+                        Cells::Floats(v) if v[r].is_nan() => {}
                         Cells::Floats(v) => {
                             let _ = write!(text, "{}", v[r]);
                         }

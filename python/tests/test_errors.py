@@ -323,6 +323,10 @@ def test_non_finite_value_names_line_and_column(tmp_path, bad, via):
         calibrate(setup, data, via)
     if via == "path":
         message(e, f"data.csv:5: column 'y': non-finite value '{bad}'")
+    elif bad == "nan":
+        # pandas' missing value: an empty cell (as a point's empty plane
+        # cells in a frame of points and plane contacts).
+        message(e, "data.csv:5: column 'y': empty cell")
     else:
         message(e, "data.csv:5: column 'y': non-finite value '")
 

@@ -40,6 +40,22 @@ def test_the_json_is_the_commands(cli, repo, setup, args, kwargs):
     assert np.allclose(np.sqrt(np.diag(got.covariance)), got.std, rtol=1e-12, atol=0)
 
 
+def test_plane_contacts_from_a_frame_are_the_commands(cli, repo):
+    """The README's plane-contact job: the command's JSON, from the path
+    and from a DataFrame (pandas reads the empty x, y, z cells as NaN:
+    empty cells again)."""
+    setup, data = "data/kr270/setup-contacts.toml", "data/kr270/contacts.csv"
+    want = run(cli, "calibrate", "--setup", setup, "--data", data, "--json")
+    assert robcal.calibrate(repo / setup, repo / data).json() == want
+    frame = pd.read_csv(repo / data)
+    assert frame["anchor"].isna().all()
+    assert robcal.calibrate(repo / setup, frame).json() == want
+    import json
+
+    scalars = json.loads(want)["scalars"]
+    assert scalars["rows"] == len(frame)
+
+
 def test_every_output_file_is_the_commands(cli, repo, tmp_path, monkeypatch):
     out = tmp_path / "out"
     run(cli, "calibrate", "--setup", KR270, "--data", KR270_DATA, "--output", str(out))
