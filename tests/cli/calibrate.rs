@@ -296,6 +296,68 @@ fn six_d_poses_identify_the_tool_frame() {
     );
 }
 
+/// The README's command without a tracker: the KR-270's probe touching
+/// the floor and two walls of a corner (generated with joint zeros off and
+/// the base 2.7 mm and 0.6 mrad off its nominal place;
+/// `generate_kr270_contacts` prints the truth). The contacts' errors are
+/// reported (`scalars`, one equation a contact); the estimates are the
+/// truth's within 3 σ, the first joint's zero left out as the base's turn
+/// (its truth 0); the outputs are written.
+#[test]
+fn plane_contacts_identify_the_base_and_the_joint_zeros() {
+    let dir = temp_dir("contacts");
+    let v = json(&robcal(&[
+        "calibrate",
+        "--setup",
+        "data/kr270/setup-contacts.toml",
+        "--data",
+        "data/kr270/contacts.csv",
+        "--json",
+        "--output",
+        dir.to_str().unwrap(),
+    ]));
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("(60 equations)"), "equations in the report");
+    assert!(dir.join("robot.urdf").exists() && dir.join("model.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+    let s = &v["scalars"];
+    assert_eq!(s["rows"], 60);
+    let rms = s["rms_um"].as_f64().unwrap();
+    assert!(rms > 5.0 && rms < 15.0, "{s}");
+    assert_eq!(v["rms_um"], s["rms_um"], "no points: the contacts' RMS");
+    let heldout = v["heldout_rms_um"].as_f64().unwrap();
+    assert!(heldout > rms && heldout < 2.0 * rms, "{heldout}");
+    // The truth the generator printed (mm, mrad).
+    let truth = [
+        ("base.tx", 2.0),
+        ("base.ty", -1.5),
+        ("base.tz", 0.8),
+        ("base.rx", 0.3),
+        ("base.ry", -0.2),
+        ("base.rz", 0.5),
+        ("a2.offset", -0.136_201),
+        ("a3.offset", 0.599_677),
+        ("a4.offset", -0.915_232),
+        ("a5.offset", 0.567_333),
+        ("a6.offset", 0.0),
+    ];
+    let params = v["parameters"].as_array().unwrap();
+    assert_eq!(params.len(), truth.len(), "{params:?}");
+    for (name, t) in truth {
+        let p = params
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        let z = (p["value"].as_f64().unwrap() - t) / p["std"].as_f64().unwrap();
+        assert!(z.abs() < 3.0, "{name}: {p}");
+    }
+    assert!(
+        v["identifiability"].to_string().contains("a1.offset"),
+        "{}",
+        v["identifiability"]
+    );
+}
+
 #[test]
 fn no_diagnose_ols_fits_the_declared_model_only() {
     let mut args = NAIVE.to_vec();
