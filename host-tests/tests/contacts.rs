@@ -86,30 +86,51 @@ fn truth_of(arm: &Arm, truth: &Truth, name: &str) -> f64 {
         .unwrap_or_else(|| panic!("no truth for {name}"))
 }
 
+/// The estimates of many jobs against their truths.
+#[derive(Default)]
+struct Tally {
+    /// Estimates within ±3 σ of the truth.
+    inside: usize,
+    /// Estimates.
+    total: usize,
+    /// Σ ((estimate − truth)/σ)².
+    z2: f64,
+}
+
+impl Tally {
+    /// Adds the estimates of `r`, a job of the truth `truth`.
+    fn add(&mut self, arm: &Arm, truth: &Truth, r: &Report) {
+        assert!(r.failure.is_none(), "{:?}", r.failure);
+        for p in &r.parameters {
+            let z = (p.value - truth_of(arm, truth, &p.name)) / p.std;
+            self.z2 += z * z;
+            self.total += 1;
+            self.inside += usize::from(z.abs() <= 3.0);
+        }
+    }
+
+    /// The share within ±3 σ and the RMS of (estimate − truth)/σ.
+    fn of(&self) -> (f64, f64) {
+        let n = self.total as f64;
+        (self.inside as f64 / n, (self.z2 / n).sqrt())
+    }
+}
+
 /// Over `jobs` jobs of `n` rows: the share of estimates within ±3 σ of
 /// the truth, the RMS of (estimate − truth)/σ, and the last job's report.
 fn coverage(targets: &[Target], n: usize, jobs: usize, seed: u64) -> (f64, f64, Report) {
     let (arm, job) = kr270(targets);
     let mut rng = Rng::new(seed);
-    let (mut inside, mut total, mut z2) = (0usize, 0usize, 0.0);
+    let mut tally = Tally::default();
     let mut last = None;
     for _ in 0..jobs {
         let truth = truth(&mut rng);
         let r = fit(&job, &csv(&arm, &truth, targets, SIGMA_M, n, &mut rng));
-        assert!(r.failure.is_none(), "{:?}", r.failure);
-        for p in &r.parameters {
-            let z = (p.value - truth_of(&arm, &truth, &p.name)) / p.std;
-            z2 += z * z;
-            total += 1;
-            inside += usize::from(z.abs() <= 3.0);
-        }
+        tally.add(&arm, &truth, &r);
         last = Some(r);
     }
-    (
-        inside as f64 / total as f64,
-        (z2 / total as f64).sqrt(),
-        last.expect("a job"),
-    )
+    let (share, rms_z) = tally.of();
+    (share, rms_z, last.expect("a job"))
 }
 
 fn left_out(r: &Report) -> Vec<String> {
@@ -253,7 +274,7 @@ fn contacts_mixed_with_points_cover_the_truth() {
         sigma_m: 20e-6,
         sigma_rad: 0.0,
     };
-    let (mut inside, mut total, mut z2) = (0usize, 0usize, 0.0);
+    let mut tally = Tally::default();
     let mut last = None;
     for _ in 0..200 {
         let truth = truth(&mut rng);
@@ -281,16 +302,10 @@ fn contacts_mixed_with_points_cover_the_truth() {
             );
         }
         let r = fit(&job, &text);
-        assert!(r.failure.is_none(), "{:?}", r.failure);
-        for p in &r.parameters {
-            let z = (p.value - truth_of(&arm, &truth, &p.name)) / p.std;
-            z2 += z * z;
-            total += 1;
-            inside += usize::from(z.abs() <= 3.0);
-        }
+        tally.add(&arm, &truth, &r);
         last = Some(r);
     }
-    let (share, rms_z) = (inside as f64 / total as f64, (z2 / total as f64).sqrt());
+    let (share, rms_z) = tally.of();
     let r = last.expect("a job");
     eprintln!(
         "contacts: with points: {:.2} % within 3 sigma over 200 jobs, RMS z {rms_z:.3}; {} \
