@@ -422,3 +422,76 @@ fn hostile_contact_files() {
         assert!(e.contains(want), "{want}: {e}");
     }
 }
+
+/// `--validate` on plane contacts: the calibrated model's point's number
+/// against each measured one. On the calibration's own contacts it gives
+/// the report's error; on 200 new contacts of the same robot, the
+/// instrument's noise (10 µm) and what the estimates' σ add; in a file
+/// with points, the points are the validation's errors and the contacts
+/// apart.
+#[test]
+fn validation_of_contacts() {
+    let targets = [
+        Target::Plane(1, Vector3::z(), 0.4),
+        Target::Plane(2, Vector3::x(), 1.6),
+        Target::Plane(3, Vector3::y(), 1.0),
+    ];
+    let (arm, job) = kr270(&targets);
+    let mut rng = Rng::new(0x7661_6c69);
+    let truth = truth(&mut rng);
+    let parse = |text: &str| {
+        parse_measurements(text.as_bytes(), "contacts.csv", &job.robot, &job.setup).expect("parse")
+    };
+    let training = csv(&arm, &truth, &targets, SIGMA_M, 60, &mut rng);
+    let r = fit(&job, &training);
+    let fitted = r.scalars.as_ref().expect("the contacts' errors").rms_um;
+    let own = calibrate::validate(&r.model, &job, &parse(&training)).expect("validate");
+    let s = own.scalars.expect("contacts validated");
+    eprintln!("contacts: validation on the training contacts {s:?}, the fit's RMS {fitted:.3} um");
+    assert_eq!((s.rows, own.points), (60, 60));
+    assert!(
+        (s.rms_um / fitted - 1.0).abs() < 0.01,
+        "{} vs {fitted}",
+        s.rms_um
+    );
+    assert!(
+        (own.rms_mm * 1e3 - s.rms_um).abs() < 1e-9,
+        "no points: they are the errors"
+    );
+    assert!(own.reregistration.is_none());
+    let new = csv(&arm, &truth, &targets, SIGMA_M, 200, &mut rng);
+    let v = calibrate::validate(&r.model, &job, &parse(&new)).expect("validate");
+    let s = v.scalars.expect("contacts validated");
+    eprintln!("contacts: validation on 200 new contacts {s:?}");
+    assert_eq!(s.rows, 200);
+    assert!((9.0..13.0).contains(&s.rms_um), "{s:?}");
+    // Beside points: the points are the errors, the contacts apart.
+    let instrument = host_tests::poses::Instrument {
+        sigma_m: 20e-6,
+        sigma_rad: 0.0,
+    };
+    let points = host_tests::poses::csv(&arm, &truth, instrument, 10, false, &mut rng);
+    let mut text = format!(
+        "config,{},x,y,z,sx,sy,sz,plane,anchor,distance,sd\n",
+        arm.joints.join(",")
+    );
+    for line in points.lines().skip(1) {
+        text += &format!("{line},,,,\n");
+    }
+    for line in new.lines().skip(1).take(20) {
+        let (config, rest) = line.split_once(',').expect("config");
+        let cells: Vec<&str> = rest.split(',').collect();
+        let (q, contact) = cells.split_at(6);
+        let config: usize = config.parse().expect("config");
+        text += &format!(
+            "{},{},,,,,,,{}\n",
+            config + 100,
+            q.join(","),
+            contact.join(",")
+        );
+    }
+    let v = calibrate::validate(&r.model, &job, &parse(&text)).expect("validate");
+    assert_eq!(v.points, 10);
+    assert_eq!(v.scalars.map(|s| s.rows), Some(20));
+    assert!(v.rms_mm > 0.015 && v.rms_mm < 0.06, "{}", v.rms_mm);
+}

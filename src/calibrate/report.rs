@@ -164,6 +164,10 @@ pub struct Validation {
     /// the model's, as measured (a re-registration moves the points);
     /// `None` without orientations.
     pub orientation: Option<OrientationValidation>,
+    /// The file's plane contacts and distances against the calibrated
+    /// model (in a file of those alone, also the errors above: its
+    /// `points` are they); `None` without them.
+    pub scalars: Option<ScalarValidation>,
 }
 
 /// A validation file's measured orientations against the calibrated
@@ -180,6 +184,23 @@ pub struct OrientationValidation {
     pub mean_urad: f64,
     /// Largest \[µrad\].
     pub max_urad: f64,
+}
+
+/// A validation file's plane contacts and distances against the
+/// calibrated model (module [`crate::calibrate::rows::scalar`]): each row's
+/// measured number against the one of the model's point
+/// ([`crate::calibrate::outputs::predict::Predictor::predict_marker`]),
+/// as measured \[µm\].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ScalarValidation {
+    /// Plane contacts and distances.
+    pub rows: usize,
+    /// RMS \[µm\].
+    pub rms_um: f64,
+    /// Mean of the absolute values \[µm\].
+    pub mean_um: f64,
+    /// Largest \[µm\].
+    pub max_um: f64,
 }
 
 /// The measurement frame of a validation file re-fitted, everything of the
@@ -851,6 +872,14 @@ impl fmt::Display for Report {
                     "validation: orientation of {} poses: RMS {:.1} urad, mean {:.1} urad, \
                      max {:.1} urad",
                     o.poses, o.rms_urad, o.mean_urad, o.max_urad
+                )?;
+            }
+            if let Some(s) = &v.scalars {
+                writeln!(
+                    f,
+                    "validation: plane contacts and distances of {} rows: RMS {:.1} um, mean \
+                     {:.1} um, max {:.1} um",
+                    s.rows, s.rms_um, s.mean_um, s.max_um
                 )?;
             }
             if v.interpolated_points > 0 {

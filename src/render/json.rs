@@ -146,6 +146,18 @@ struct ValidationJson<'a> {
     /// model's, µrad; absent without `rx, ry, rz`.
     #[serde(skip_serializing_if = "Option::is_none")]
     orientation: Option<ValidationOrientationJson>,
+    /// (An extension.) The file's plane contacts and distances against the
+    /// calibrated model; absent without them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scalars: Option<ValidationScalarsJson>,
+}
+
+#[derive(Serialize)]
+struct ValidationScalarsJson {
+    rows: usize,
+    rms_um: f64,
+    mean_um: f64,
+    max_um: f64,
 }
 
 #[derive(Serialize)]
@@ -311,6 +323,12 @@ impl<'a> ValidationJson<'a> {
                 rms_urad: o.rms_urad,
                 mean_urad: o.mean_urad,
                 max_urad: o.max_urad,
+            }),
+            scalars: v.scalars.map(|s| ValidationScalarsJson {
+                rows: s.rows,
+                rms_um: s.rms_um,
+                mean_um: s.mean_um,
+                max_um: s.max_um,
             }),
         }
     }

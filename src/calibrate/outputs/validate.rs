@@ -17,7 +17,11 @@
 //! orientation is validated apart, in µrad
 //! ([`crate::calibrate::report::OrientationValidation`]): the frame
 //! [`Predictor::predict_marker_rotation`] predicts against the measured
-//! one, as measured.
+//! one, as measured. A plane contact's or a distance's number is
+//! validated apart too, in µm
+//! ([`crate::calibrate::report::ScalarValidation`]): the measured number
+//! against the one of the model's point (in a file of those alone they are
+//! the validation's errors, and nothing is re-registered).
 //!
 //! **Re-registration.** A file measured with the tracker set up elsewhere
 //! differs from the calibration's frame by a rigid transform, which moves
@@ -43,7 +47,9 @@ use crate::calibrate::fit::residuals::rms_um;
 use crate::calibrate::outputs::predict::{Payload, Predictor};
 use crate::calibrate::params::geometry::{Geometry, J};
 use crate::calibrate::report::calibrated::CalibratedModel;
-use crate::calibrate::report::{Nominal, OrientationValidation, Reregistration, Validation};
+use crate::calibrate::report::{
+    Nominal, OrientationValidation, Reregistration, ScalarValidation, Validation,
+};
 use crate::calibrate::rows::{RowKind, Rows};
 use crate::calibrate::settings::CalibrationError;
 use crate::error::Error;
@@ -85,23 +91,23 @@ pub fn validate_with(
 ) -> Result<Validation, CalibrationError> {
     let mut names = model.names.clone();
     let mut rows = Rows::new(job, data, needs_absolute(job), &mut names, &model.policy)?;
-    if let Some(r) = rows.rows.iter().find(|r| r.scalar().is_some()) {
-        return Err(CalibrationError::Data(format!(
-            "{}:{}: a validation is of points (and poses): plane contacts and distances are \
-             not validated yet",
-            data.file.display(),
-            r.line()
-        )));
-    }
     // The points; a pose's orientation apart (module `rows::orientation`),
-    // when the calibration took absolute rows.
+    // and a plane contact or a distance (module `rows::scalar`), when the
+    // calibration took absolute rows.
     let poses: Vec<_> = (rows.rows.iter())
         .filter(|r| r.orientation && model.kinds.absolute)
         .map(|r| (usize::from(r.marker), r.q.clone(), r.measured, r.line()))
         .collect();
+    let numbers: Vec<_> = (rows.rows.iter())
+        .filter(|_| model.kinds.absolute)
+        .filter_map(|r| {
+            let s = r.scalar().copied()?;
+            Some((s, r.marker, r.q.clone(), r.line(), r.dtemp_k()))
+        })
+        .collect();
     rows.rows.retain(|r| match r.kind {
         RowKind::Deflection => model.kinds.deflections,
-        RowKind::Absolute => model.kinds.absolute && !r.orientation,
+        RowKind::Absolute => model.kinds.absolute && !r.orientation && r.scalar().is_none(),
     });
     // A compensator table answers between its calibrated angles by linear
     // interpolation (Linearisation::compliance_at); count those points.
@@ -160,6 +166,42 @@ pub fn validate_with(
             row.measured,
         ));
     }
+    // Each plane contact's or distance's number left [m, on axis 0]: the
+    // measured against the model's point's, as measured.
+    let left = (numbers.iter())
+        .map(|(s, marker, q, line, dtemp_k)| {
+            // With a thermal expansion, at its temperature (as a point).
+            let warm = match (robot.thermal_expansion(), &rows.temperature_ref_c, dtemp_k) {
+                (Some(_), Some((_, mean)), Some(dt)) => Some(robot.at_temperature(mean + dt)?),
+                _ => None,
+            };
+            let p = (warm.as_ref().unwrap_or(&robot))
+                .predict_marker(usize::from(*marker), q, None)
+                .map_err(|e| {
+                    CalibrationError::NoEquilibrium(format!(
+                        "{}:{line}: the calibrated model cannot predict this point ({e})",
+                        data.file.display(),
+                    ))
+                })?;
+            Ok((*marker, Vector3::new(s.value_m() - s.of(&p), 0.0, 0.0)))
+        })
+        .collect::<Result<Vec<_>, CalibrationError>>()?;
+    let scalars = (!left.is_empty()).then(|| {
+        let n = Nominal::of(&left.iter().map(|l| l.1).collect::<Vec<_>>());
+        ScalarValidation {
+            rows: left.len(),
+            rms_um: n.rms_um,
+            mean_um: n.mean_um,
+            max_um: n.max_um,
+        }
+    });
+    // In a file of those alone, they are the errors.
+    if all.is_empty() {
+        for (marker, r) in &left {
+            all.push(*r);
+            per.entry(names.marker_id(*marker)).or_default().push(*r);
+        }
+    }
     if all.is_empty() {
         return Err(CalibrationError::Data(format!(
             "{}: no point to validate on (no row of the kinds the calibration used: {})",
@@ -209,6 +251,7 @@ pub fn validate_with(
         reregistration,
         reregistered: false,
         orientation,
+        scalars,
     };
     if let (true, Some(g)) = (reregister, &v.reregistration) {
         v.rms_mm = g.rms_mm;
