@@ -364,6 +364,9 @@ pub struct ScalarErrors {
     pub mean_um: f64,
     /// Largest after \[µm\].
     pub max_um: f64,
+    /// Each row's number left after calibration \[µm, on axis 0\], in
+    /// row order (what `--robust` weighs them by).
+    pub residuals_um: Vec<nalgebra::Vector3<f64>>,
 }
 
 impl ScalarErrors {
@@ -383,6 +386,7 @@ impl ScalarErrors {
             rms_um: a.rms_um,
             mean_um: a.mean_um,
             max_um: a.max_um,
+            residuals_um: fitted.iter().map(|r| r * 1e6).collect(),
         })
     }
 }

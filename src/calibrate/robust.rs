@@ -40,15 +40,18 @@
 //! The σ the report gives are the sandwich's of the weighted fit (eq. 8,
 //! 11) with these weights held: the rows weighted down count for less.
 //!
-//! The kinds are three: absolute positions, deflections, and a 6-D pose's
+//! The kinds are four: absolute positions, deflections, a 6-D pose's
 //! orientations (their residuals in µrad, their σ in rad: a pose's point
 //! and its orientation are weighted each by its own residual, so that an
-//! orientation the instrument lost does not take its good point with it).
+//! orientation the instrument lost does not take its good point with it),
+//! and plane contacts and distances (one number each, standardised on its
+//! axis alone against the one-axis threshold that keeps the same share of
+//! normal rows, `k · √(χ²₁/χ²₃)` at 99 %: 2.576 for 3.37).
 
 use nalgebra::Vector3;
 
 use crate::calibrate::params::names::Names;
-use crate::calibrate::report::{OrientationErrors, RowErrors};
+use crate::calibrate::report::{OrientationErrors, RowErrors, ScalarErrors};
 use crate::calibrate::rows::{RowKind, Rows};
 
 /// The consistency factor of the median absolute deviation for a normal
@@ -79,6 +82,8 @@ pub enum NoiseKind {
     Deflection = 1,
     /// A 6-D pose's orientation.
     Orientation = 2,
+    /// A plane contact or a distance: one number, on axis 0.
+    Scalar = 3,
 }
 
 impl NoiseKind {
@@ -88,16 +93,39 @@ impl NoiseKind {
             NoiseKind::Position => "position",
             NoiseKind::Deflection => "deflection",
             NoiseKind::Orientation => "orientation",
+            NoiseKind::Scalar => "contact or distance",
+        }
+    }
+
+    /// The axes its residuals have: 3, or 1 for a plane contact or a
+    /// distance (its number on axis 0).
+    fn axes(self) -> usize {
+        if self == NoiseKind::Scalar {
+            1
+        } else {
+            3
         }
     }
 }
 
 /// The kinds, in [`NoiseKind`]'s order.
-const KINDS: [NoiseKind; 3] = [
+const KINDS: [NoiseKind; 4] = [
     NoiseKind::Position,
     NoiseKind::Deflection,
     NoiseKind::Orientation,
+    NoiseKind::Scalar,
 ];
+
+/// Huber's threshold on one axis for `k` on three: the same share of
+/// normal rows kept at weight 1 (at the default `k = 3.37 = √χ²₃(0.99)`,
+/// `√χ²₁(0.99) = 2.576`).
+fn one_axis(k: f64) -> f64 {
+    k * CHI1_99.sqrt() / CHI3_99.sqrt()
+}
+
+/// The 99 % quantiles of χ² with one and three degrees of freedom.
+const CHI1_99: f64 = 6.634_896_601_021_214;
+const CHI3_99: f64 = 11.344_866_730_144_373;
 
 /// [`RowNoise`] of every row of `rows` (markers named by `names`), in row
 /// order.
@@ -110,6 +138,7 @@ pub fn noise_of(rows: &Rows, names: &Names) -> Vec<RowNoise> {
             kind: match (r.orientation, r.kind) {
                 (true, _) => NoiseKind::Orientation,
                 (false, RowKind::Deflection) => NoiseKind::Deflection,
+                (false, RowKind::Absolute) if r.scalar().is_some() => NoiseKind::Scalar,
                 (false, RowKind::Absolute) => NoiseKind::Position,
             },
             sigma_m: r.sigma(),
@@ -143,13 +172,22 @@ fn scale(r: &[Vector3<f64>]) -> Vector3<f64> {
 }
 
 /// The final residuals of every row (µm; an orientation's µrad), in row
-/// order: the points' ([`RowErrors`]), then the poses' orientations'
+/// order: the points' ([`RowErrors`]), then the plane contacts' and
+/// distances' when reported apart from points (`apart`:
+/// [`ScalarErrors::residuals_um`]; in data of those alone they are the
+/// [`RowErrors`]), then the poses' orientations'
 /// ([`OrientationErrors::residuals_urad`]).
-pub fn residuals(errors: &RowErrors, orientation: Option<&OrientationErrors>) -> Vec<Vector3<f64>> {
+pub fn residuals(
+    errors: &RowErrors,
+    apart: Option<&ScalarErrors>,
+    orientation: Option<&OrientationErrors>,
+) -> Vec<Vector3<f64>> {
+    let numbers = apart.map_or(&[][..], |s| &s.residuals_um[..]);
     let turned = orientation.map_or(&[][..], |o| &o.residuals_urad[..]);
     errors
         .iter()
         .map(|e| e.final_um)
+        .chain(numbers.iter().copied())
         .chain(turned.iter().copied())
         .collect()
 }
@@ -164,10 +202,20 @@ pub fn residuals(errors: &RowErrors, orientation: Option<&OrientationErrors>) ->
 pub fn huber(noise: &[RowNoise], res: &[Vector3<f64>], k: f64, group_rows: usize) -> Vec<f64> {
     let of_kind = |kind: NoiseKind| (noise.iter().zip(res)).filter(move |(n, _)| n.kind == kind);
     let scales = KINDS.map(|kind| scale(&of_kind(kind).map(|(_, r)| *r).collect::<Vec<_>>()));
-    // Per kind, the robust scale of the residuals over the instrument's σ.
+    // Per kind, the robust scale of the residuals over the instrument's σ
+    // (a number's on its axis alone).
     let levels = KINDS.map(|kind| {
         let z: Vec<Vector3<f64>> = of_kind(kind)
-            .filter_map(|(n, r)| n.sigma_m.map(|s| r.component_div(&(s * 1e6))))
+            .filter_map(|(n, r)| {
+                let s = n.sigma_m? * 1e6;
+                Some(Vector3::from_fn(|a, _| {
+                    if a < kind.axes() {
+                        r[a] / s[a]
+                    } else {
+                        0.0
+                    }
+                }))
+            })
             .collect();
         scale(&z)
     });
@@ -192,10 +240,14 @@ pub fn huber(noise: &[RowNoise], res: &[Vector3<f64>], k: f64, group_rows: usize
                 }
                 _ => scales[n.kind as usize],
             };
-            if !s.iter().all(|&x| x > 0.0 && x.is_finite()) {
+            // A number is standardised on its axis alone, against the
+            // one-axis threshold.
+            let axes = n.kind.axes();
+            if !s.iter().take(axes).all(|&x| x > 0.0 && x.is_finite()) {
                 return 1.0;
             }
-            let d = r.component_div(&s).norm();
+            let d = (0..axes).map(|a| (r[a] / s[a]).powi(2)).sum::<f64>().sqrt();
+            let k = if axes == 1 { one_axis(k) } else { k };
             if d.is_finite() && d > k {
                 (k / d).max(f64::MIN_POSITIVE)
             } else {
@@ -258,7 +310,7 @@ mod tests {
             })
             .collect();
         let errors = RowErrors::new(configs, vec![1], (0..12).map(|i| (i, 0u8, false)), res);
-        let w = huber(&noise, &residuals(&errors, None), 3.37, 4);
+        let w = huber(&noise, &residuals(&errors, None, None), 3.37, 4);
         let d: f64 = Vector3::new(1.0_f64, 4000.0, 1.0).norm() / MAD_NORMAL;
         assert!(
             (w[3] - 3.37 / d).abs() < 1e-9 * w[3],

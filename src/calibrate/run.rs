@@ -65,13 +65,9 @@ fn robustly(
     let mut fits = 0;
     loop {
         let (mut rows, names, warnings) = prepare(job, std::borrow::Cow::Borrowed(data), policy)?;
-        if rows.scalar_groups > 0 {
-            return Err(CalibrationError::Data(format!(
-                "{}: --robust does not take plane contacts or distances yet (rows with a \
-                 plane or an anchor); fit them without it",
-                data.file.display()
-            )));
-        }
+        // Plane contacts and distances beside points are reported apart
+        // (alone, they are the report's rows).
+        let apart = rows.positions() > 0;
         let noise = robust::noise_of(&rows, &names);
         if let Some(w) = &used {
             let scales: Vec<f64> = w.iter().map(|w| w.sqrt()).collect();
@@ -80,7 +76,11 @@ fn robustly(
         let mut report =
             calibrate_rows(job, &data.file, rows, names, warnings, settings, progress)?;
         fits += 1;
-        let res = robust::residuals(&report.row_errors, report.orientation.as_ref());
+        let res = robust::residuals(
+            &report.row_errors,
+            report.scalars.as_ref().filter(|_| apart),
+            report.orientation.as_ref(),
+        );
         let next = robust::huber(&noise, &res, policy.huber_k, policy.robust_group_rows);
         let change = match &used {
             Some(w) => (w.iter().zip(&next)).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs())),
