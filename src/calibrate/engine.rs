@@ -721,7 +721,9 @@ impl Engine<'_> {
         let Some(every) = d.identifiability(&[], &all) else {
             return Ok(Vec::new());
         };
-        let points = self.rows.position_groups();
+        // The points' groups and the plane contacts' and distances' (the
+        // orientations' are the last).
+        let points = self.rows.scalar_range().end;
         let weights: Vec<nalgebra::Vector3<f64>> = (0..d.groups)
             .map(|g| nalgebra::Vector3::repeat(if g < points { 1.0 } else { 0.0 }))
             .collect();
