@@ -98,3 +98,57 @@ pub fn csv(
     }
     out
 }
+
+/// `n` rows of the true robot held at a pivot `c` \[m, the robot's base
+/// frame\] (a ball in a fixed cup): each a random pose moved by Newton's
+/// method on the first three joints until the true point is
+/// `c + N(0, σ)` per axis, written as the point `c` (units m and rad).
+pub fn pivot_csv(
+    arm: &Arm,
+    truth: &Truth,
+    c: Vector3<f64>,
+    sigma_m: f64,
+    n: usize,
+    rng: &mut SplitMix64,
+) -> String {
+    let mut out = format!("config,{},x,y,z\n", arm.joints.join(","));
+    let mut row = 0;
+    while row < n {
+        let mut q: Vec<f64> = arm
+            .ranges
+            .iter()
+            .map(|&(lo, hi)| rng.range(lo, hi))
+            .collect();
+        let target = c + Vector3::from_fn(|_, _| rng.normal() * sigma_m);
+        let mut ok = false;
+        for _ in 0..100 {
+            let e = point(arm, truth, &q) - target;
+            if e.norm() < 1e-13 {
+                ok = true;
+                break;
+            }
+            let h = 1e-6;
+            let jac = nalgebra::Matrix3::from_fn(|a, j| {
+                let (mut u, mut d) = (q.clone(), q.clone());
+                u[j] += h;
+                d[j] -= h;
+                (point(arm, truth, &u)[a] - point(arm, truth, &d)[a]) / (2.0 * h)
+            });
+            let Some(step) = jac.try_inverse().map(|inv| inv * e) else {
+                break;
+            };
+            let scale = (0.3 / step.amax()).min(1.0);
+            for (qj, s) in q.iter_mut().zip(step.iter()) {
+                *qj -= s * scale;
+            }
+        }
+        let inside = (0..3).all(|j| arm.ranges[j].0 <= q[j] && q[j] <= arm.ranges[j].1);
+        if !ok || !inside {
+            continue;
+        }
+        let qs: Vec<String> = q.iter().map(|v| format!("{v:.12}")).collect();
+        out += &format!("{},{},{},{},{}\n", row + 1, qs.join(","), c.x, c.y, c.z);
+        row += 1;
+    }
+    out
+}

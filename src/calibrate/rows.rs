@@ -793,6 +793,23 @@ impl Rows {
         }
     }
 
+    /// Whether the points are a pivot's: at least three absolute points,
+    /// each marker's all measured at one place
+    /// ([`crate::calibrate::report::plausibility::PIVOT_M`]) — a point held
+    /// still while the robot turns about it.
+    pub fn pivot(&self) -> bool {
+        let mut first: Vec<Option<Vector3<f64>>> = vec![None; usize::from(u8::MAX) + 1];
+        let mut n = 0;
+        for r in (self.rows[..self.positions()].iter()).filter(|r| r.kind == RowKind::Absolute) {
+            let f = first[usize::from(r.marker)].get_or_insert(r.measured);
+            if (r.measured - *f).norm() >= crate::calibrate::report::plausibility::PIVOT_M {
+                return false;
+            }
+            n += 1;
+        }
+        n >= 3
+    }
+
     /// The groups of the plane contacts and distances (module [`scalar`]):
     /// after the points', before the orientations'.
     pub fn scalar_range(&self) -> std::ops::Range<usize> {

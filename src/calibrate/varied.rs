@@ -85,7 +85,9 @@ pub fn varied(
 ) -> Result<Option<Varied>, CalibrationError> {
     let (rows, names, policy) = (&*data.rows, &data.names, &data.policy);
     let params: Vec<Param> = model.iter().copied().filter(Param::is_geometric).collect();
-    if params.is_empty() || policy.varied_poses == 0 {
+    // (A pivot's points cannot be measured at varied poses: a pivot holds
+    // the robot's point still.)
+    if params.is_empty() || policy.varied_poses == 0 || rows.pivot() {
         return Ok(None);
     }
     let chain = &job.robot.chain;

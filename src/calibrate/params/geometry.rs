@@ -141,6 +141,17 @@ impl Geometry {
         }
         let ca = predicted[..n].iter().sum::<Vector3<f64>>() / n as f64;
         let cb = measured[..n].iter().sum::<Vector3<f64>>() / n as f64;
+        // Measured at one place (a pivot): no turn to fit; the base is
+        // moved, not turned.
+        let spread = measured[..n]
+            .iter()
+            .map(|b| (b - cb).norm())
+            .fold(0.0, f64::max);
+        if spread < crate::calibrate::report::plausibility::PIVOT_M {
+            let rot = self.base.rotation;
+            self.base = Isometry3::from_parts(Translation3::from(cb - rot * ca), rot);
+            return;
+        }
         let mut h = Matrix3::zeros();
         for (a, b) in predicted.iter().zip(measured) {
             h += (a - ca) * (b - cb).transpose();

@@ -176,6 +176,10 @@ fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
         .sqrt()
 }
 
+/// Measured points within this of one another \[m\] are one place: a
+/// pivot ([`crate::calibrate::rows::Rows::pivot`]).
+pub const PIVOT_M: f64 = 1e-9;
+
 /// The scale of the positions and the unit of each angle column against
 /// the nominal robot (unloaded rows, at most [`Policy::unit_check_points`]
 /// of them; needs 4 points spread over [`Policy::min_spread_m`]).
@@ -200,6 +204,12 @@ pub fn check_units(
     let base = pairs(job, &checked, None);
     let predicted = spread(base.iter().map(|p| p.0));
     if base.len() < 4 {
+        return Ok(warnings);
+    }
+    // A pivot (every point measured at one place, the robot's predicted
+    // ones within `min_spread_m` of one another): points that barely move
+    // are what it is, and there is no spread to compare.
+    if spread(base.iter().map(|p| p.1)) < PIVOT_M && predicted < policy.min_spread_m {
         return Ok(warnings);
     }
     warnings.extend(spread::barely_moved(
