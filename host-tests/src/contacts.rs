@@ -30,6 +30,14 @@ pub fn point(arm: &Arm, truth: &Truth, q: &[f64]) -> Vector3<f64> {
     p + r * (truth.tool_t + Rotation3::new(truth.tool_r) * arm.marker_m)
 }
 
+/// Joint values drawn within `arm`'s ranges \[rad\].
+fn draw(arm: &Arm, rng: &mut SplitMix64) -> Vec<f64> {
+    arm.ranges
+        .iter()
+        .map(|&(lo, hi)| rng.range(lo, hi))
+        .collect()
+}
+
 /// `n` rows of the true robot as a measurement CSV (units m and rad): each
 /// a random pose, the targets in turn. A plane's row is a contact: the
 /// commanded pose moved by Newton's method on the joint that moves the
@@ -47,11 +55,7 @@ pub fn csv(
     let mut out = format!("config,{},plane,anchor,distance,sd\n", arm.joints.join(","));
     let mut row = 0;
     while row < n {
-        let mut q: Vec<f64> = arm
-            .ranges
-            .iter()
-            .map(|&(lo, hi)| rng.range(lo, hi))
-            .collect();
+        let mut q = draw(arm, rng);
         let target = targets[row % targets.len()];
         let cells = match target {
             Target::Plane(id, normal, d) => {
@@ -114,11 +118,7 @@ pub fn pivot_csv(
     let mut out = format!("config,{},x,y,z\n", arm.joints.join(","));
     let mut row = 0;
     while row < n {
-        let mut q: Vec<f64> = arm
-            .ranges
-            .iter()
-            .map(|&(lo, hi)| rng.range(lo, hi))
-            .collect();
+        let mut q = draw(arm, rng);
         let target = c + Vector3::from_fn(|_, _| rng.normal() * sigma_m);
         let mut ok = false;
         for _ in 0..100 {

@@ -133,6 +133,42 @@ fn coverage(targets: &[Target], n: usize, jobs: usize, seed: u64) -> (f64, f64, 
     (share, rms_z, last.expect("a job"))
 }
 
+/// The floor and two walls of a corner.
+fn corner() -> [Target; 3] {
+    [
+        Target::Plane(1, Vector3::z(), 0.4),
+        Target::Plane(2, Vector3::x(), 1.6),
+        Target::Plane(3, Vector3::y(), 1.0),
+    ]
+}
+
+/// One file of the points of `points` (`host_tests::poses::csv`, without
+/// orientations) and the first `contacts` rows of `text` (`csv`): a
+/// point's contact cells empty, a contact's point cells empty, the
+/// contacts' configurations after the points'.
+fn beside_points(arm: &Arm, points: &str, text: &str, contacts: usize) -> String {
+    let mut out = format!(
+        "config,{},x,y,z,sx,sy,sz,plane,anchor,distance,sd\n",
+        arm.joints.join(",")
+    );
+    for line in points.lines().skip(1) {
+        out += &format!("{line},,,,\n");
+    }
+    for line in text.lines().skip(1).take(contacts) {
+        let (config, rest) = line.split_once(',').expect("config");
+        let cells: Vec<&str> = rest.split(',').collect();
+        let (q, contact) = cells.split_at(6);
+        let config: usize = config.parse().expect("config");
+        out += &format!(
+            "{},{},,,,,,,{}\n",
+            config + 100,
+            q.join(","),
+            contact.join(",")
+        );
+    }
+    out
+}
+
 fn left_out(r: &Report) -> Vec<String> {
     let mut v: Vec<String> = r.left_out.iter().map(|l| l.name.clone()).collect();
     v.sort();
@@ -263,11 +299,7 @@ fn heldout_of_distances_is_the_refits_without_each() {
 /// the points, the contacts' reported apart.
 #[test]
 fn contacts_mixed_with_points_cover_the_truth() {
-    let targets = [
-        Target::Plane(1, Vector3::z(), 0.4),
-        Target::Plane(2, Vector3::x(), 1.6),
-        Target::Plane(3, Vector3::y(), 1.0),
-    ];
+    let targets = corner();
     let (arm, job) = kr270(&targets);
     let mut rng = Rng::new(0x6d69_7865);
     let instrument = host_tests::poses::Instrument {
@@ -280,28 +312,7 @@ fn contacts_mixed_with_points_cover_the_truth() {
         let truth = truth(&mut rng);
         let points = host_tests::poses::csv(&arm, &truth, instrument, 15, false, &mut rng);
         let contacts = csv(&arm, &truth, &targets, SIGMA_M, 45, &mut rng);
-        // One header for both: a point's contact cells empty, a contact's
-        // point cells empty; the contacts' configurations after the points'.
-        let mut text = format!(
-            "config,{},x,y,z,sx,sy,sz,plane,anchor,distance,sd\n",
-            arm.joints.join(",")
-        );
-        for line in points.lines().skip(1) {
-            text += &format!("{line},,,,\n");
-        }
-        for line in contacts.lines().skip(1) {
-            let (config, rest) = line.split_once(',').expect("config");
-            let cells: Vec<&str> = rest.split(',').collect();
-            let (q, contact) = cells.split_at(6);
-            let config: usize = config.parse().expect("config");
-            text += &format!(
-                "{},{},,,,,,,{}\n",
-                config + 100,
-                q.join(","),
-                contact.join(",")
-            );
-        }
-        let r = fit(&job, &text);
+        let r = fit(&job, &beside_points(&arm, &points, &contacts, 45));
         tally.add(&arm, &truth, &r);
         last = Some(r);
     }
@@ -439,11 +450,7 @@ fn hostile_contact_files() {
 /// apart.
 #[test]
 fn validation_of_contacts() {
-    let targets = [
-        Target::Plane(1, Vector3::z(), 0.4),
-        Target::Plane(2, Vector3::x(), 1.6),
-        Target::Plane(3, Vector3::y(), 1.0),
-    ];
+    let targets = corner();
     let (arm, job) = kr270(&targets);
     let mut rng = Rng::new(0x7661_6c69);
     let truth = truth(&mut rng);
@@ -479,25 +486,7 @@ fn validation_of_contacts() {
         sigma_rad: 0.0,
     };
     let points = host_tests::poses::csv(&arm, &truth, instrument, 10, false, &mut rng);
-    let mut text = format!(
-        "config,{},x,y,z,sx,sy,sz,plane,anchor,distance,sd\n",
-        arm.joints.join(",")
-    );
-    for line in points.lines().skip(1) {
-        text += &format!("{line},,,,\n");
-    }
-    for line in new.lines().skip(1).take(20) {
-        let (config, rest) = line.split_once(',').expect("config");
-        let cells: Vec<&str> = rest.split(',').collect();
-        let (q, contact) = cells.split_at(6);
-        let config: usize = config.parse().expect("config");
-        text += &format!(
-            "{},{},,,,,,,{}\n",
-            config + 100,
-            q.join(","),
-            contact.join(",")
-        );
-    }
+    let text = beside_points(&arm, &points, &new, 20);
     let v = calibrate::validate(&r.model, &job, &parse(&text)).expect("validate");
     assert_eq!(v.points, 10);
     assert_eq!(v.scalars.map(|s| s.rows), Some(20));
@@ -511,11 +500,7 @@ fn validation_of_contacts() {
 /// fit's, which the misfire widens.
 #[test]
 fn the_robust_loss_weighs_a_misfired_contact_down() {
-    let targets = [
-        Target::Plane(1, Vector3::z(), 0.4),
-        Target::Plane(2, Vector3::x(), 1.6),
-        Target::Plane(3, Vector3::y(), 1.0),
-    ];
+    let targets = corner();
     let (arm, job) = kr270(&targets);
     let mut rng = Rng::new(0x6d69_7366);
     let truth = truth(&mut rng);
