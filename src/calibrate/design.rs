@@ -96,7 +96,7 @@ impl Design {
     /// (`0` for the second and third axis of [`Design::scalar_groups`]).
     pub fn live(&self, g: usize) -> Vector3<f64> {
         if self.scalar_groups.contains(&g) {
-            Vector3::new(1.0, 0.0, 0.0)
+            Vector3::from(crate::calibrate::rows::scalar::LIVE)
         } else {
             Vector3::repeat(1.0)
         }
@@ -105,7 +105,7 @@ impl Design {
     /// Whether axis `a` of group `g`'s rows is an equation
     /// ([`Design::live`]).
     pub fn is_live(&self, g: usize, a: usize) -> bool {
-        a == 0 || !self.scalar_groups.contains(&g)
+        self.live(g)[a] > 0.0
     }
 
     /// Number of rows.

@@ -564,7 +564,7 @@ pub fn run(
         left_out,
         near_dependent,
         rows: e.rows.rows.len(),
-        equations: 3 * e.rows.rows.len() - 2 * e.rows.scalar_rows().len(),
+        equations: e.rows.equations(),
         configurations: point_groups,
         plots,
         row_errors,

@@ -211,7 +211,7 @@ impl Row {
     /// ([`crate::calibrate::design::Design::live`]).
     pub fn live(&self) -> [f64; 3] {
         if self.scalar().is_some() {
-            [1.0, 0.0, 0.0]
+            scalar::LIVE
         } else {
             [1.0; 3]
         }
@@ -795,14 +795,14 @@ impl Rows {
 
     /// Whether the points are a pivot's: at least three absolute points,
     /// each marker's all measured at one place
-    /// ([`crate::calibrate::report::plausibility::PIVOT_M`]) — a point held
+    /// ([`crate::calibrate::params::geometry::PIVOT_M`]) — a point held
     /// still while the robot turns about it.
     pub fn pivot(&self) -> bool {
         let mut first: Vec<Option<Vector3<f64>>> = vec![None; usize::from(u8::MAX) + 1];
         let mut n = 0;
         for r in (self.rows[..self.positions()].iter()).filter(|r| r.kind == RowKind::Absolute) {
             let f = first[usize::from(r.marker)].get_or_insert(r.measured);
-            if (r.measured - *f).norm() >= crate::calibrate::report::plausibility::PIVOT_M {
+            if (r.measured - *f).norm() >= crate::calibrate::params::geometry::PIVOT_M {
                 return false;
             }
             n += 1;
@@ -826,6 +826,12 @@ impl Rows {
             .into_iter()
             .filter(|r| !r.is_empty())
             .collect()
+    }
+
+    /// The equations of the rows: three a row, one a plane contact or a
+    /// distance (module [`scalar`]).
+    pub fn equations(&self) -> usize {
+        3 * self.rows.len() - 2 * self.scalar_rows().len()
     }
 
     /// The rows of the plane contacts and distances: after the points,

@@ -384,8 +384,7 @@ fn calibrate_rows(
     // As many identifiable parameters as equations: the fit reproduces
     // every measurement, and no residual is left to estimate the noise
     // from (eq. 14; the estimator's error was "sigma must be positive").
-    // (A plane contact or a distance is one equation.)
-    let equations = 3 * e.rows.rows.len() - 2 * e.rows.scalar_rows().len();
+    let equations = e.rows.equations();
     if equations <= declared.len() {
         return Err(CalibrationError::Data(format!(
             "{}: too few measurements for the declared model: {} row(s) give {equations} \

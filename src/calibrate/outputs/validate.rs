@@ -118,6 +118,16 @@ pub fn validate_with(
         .count();
     let robot = Predictor::new(model, job);
     let payload_com = rows.com + robot.load_com_shift_m();
+    // With a thermal expansion, the robot at the temperature of an
+    // absolute row `dtemp_k` over the reference (none: `robot` itself).
+    let warm = |dtemp_k: Option<f64>| match (
+        robot.thermal_expansion(),
+        &rows.temperature_ref_c,
+        dtemp_k,
+    ) {
+        (Some(_), Some((_, mean)), Some(dt)) => robot.at_temperature(mean + dt).map(Some),
+        _ => Ok(None),
+    };
     let mut all = Vec::new();
     let mut per: BTreeMap<u32, Vec<Vector3<f64>>> = BTreeMap::new();
     // Each point: its kind, marker id, prediction and measurement [m].
@@ -131,19 +141,8 @@ pub fn validate_with(
             ))
         };
         let m = usize::from(row.marker);
-        // With a thermal expansion, an absolute point at its temperature.
-        let warm = match (
-            robot.thermal_expansion(),
-            &rows.temperature_ref_c,
-            row.dtemp_k(),
-        ) {
-            (Some(_), Some((_, mean)), Some(dt)) if row.kind == RowKind::Absolute => {
-                Some(robot.at_temperature(mean + dt)?)
-            }
-            _ => None,
-        };
         let predicted = match row.kind {
-            RowKind::Absolute => warm
+            RowKind::Absolute => warm(row.dtemp_k())?
                 .as_ref()
                 .unwrap_or(&robot)
                 .predict_marker(m, &row.q, None),
@@ -170,12 +169,7 @@ pub fn validate_with(
     // measured against the model's point's, as measured.
     let left = (numbers.iter())
         .map(|(s, marker, q, line, dtemp_k)| {
-            // With a thermal expansion, at its temperature (as a point).
-            let warm = match (robot.thermal_expansion(), &rows.temperature_ref_c, dtemp_k) {
-                (Some(_), Some((_, mean)), Some(dt)) => Some(robot.at_temperature(mean + dt)?),
-                _ => None,
-            };
-            let p = (warm.as_ref().unwrap_or(&robot))
+            let p = (warm(*dtemp_k)?.as_ref().unwrap_or(&robot))
                 .predict_marker(usize::from(*marker), q, None)
                 .map_err(|e| {
                     CalibrationError::NoEquilibrium(format!(

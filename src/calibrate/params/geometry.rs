@@ -41,6 +41,11 @@ use crate::robot::{Chain, End};
 /// Joint capacity of the host chain ([`crate::io::urdf::MAX_JOINTS`]).
 pub(crate) const J: usize = crate::io::urdf::MAX_JOINTS;
 
+/// Measured points within this of one another \[m\] are one place, a
+/// pivot: [`Geometry::register`] moves the base without turning it, and
+/// the rows are a pivot's ([`crate::calibrate::rows::Rows::pivot`]).
+pub const PIVOT_M: f64 = 1e-9;
+
 /// The current model: chain, base pose, markers, and what has been applied.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Geometry {
@@ -147,7 +152,7 @@ impl Geometry {
             .iter()
             .map(|b| (b - cb).norm())
             .fold(0.0, f64::max);
-        if spread < crate::calibrate::report::plausibility::PIVOT_M {
+        if spread < PIVOT_M {
             let rot = self.base.rotation;
             self.base = Isometry3::from_parts(Translation3::from(cb - rot * ca), rot);
             return;

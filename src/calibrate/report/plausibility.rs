@@ -176,10 +176,6 @@ fn registered_rms(job: &Job, pairs: &[(Vector3<f64>, Vector3<f64>)]) -> f64 {
         .sqrt()
 }
 
-/// Measured points within this of one another \[m\] are one place: a
-/// pivot ([`crate::calibrate::rows::Rows::pivot`]).
-pub const PIVOT_M: f64 = 1e-9;
-
 /// The scale of the positions and the unit of each angle column against
 /// the nominal robot (unloaded rows, at most [`Policy::unit_check_points`]
 /// of them; needs 4 points spread over [`Policy::min_spread_m`]).
@@ -209,7 +205,9 @@ pub fn check_units(
     // A pivot (every point measured at one place, the robot's predicted
     // ones within `min_spread_m` of one another): points that barely move
     // are what it is, and there is no spread to compare.
-    if spread(base.iter().map(|p| p.1)) < PIVOT_M && predicted < policy.min_spread_m {
+    if spread(base.iter().map(|p| p.1)) < crate::calibrate::params::geometry::PIVOT_M
+        && predicted < policy.min_spread_m
+    {
         return Ok(warnings);
     }
     warnings.extend(spread::barely_moved(

@@ -28,6 +28,9 @@ use nalgebra::Vector3;
 
 pub use crate::io::measurements::Scalar;
 
+/// Which axes of such a row are equations: its number's, axis 0.
+pub const LIVE: [f64; 3] = [1.0, 0.0, 0.0];
+
 impl Scalar {
     /// The number predicted for the point `p_m` \[m, measurement frame\]:
     /// `n · p − d`, or `|p − c|`.
